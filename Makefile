@@ -1,0 +1,36 @@
+# The two commands a new user needs: `make demo` and `make test` (each sets itself up first).
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+DEMO_OUT := out/demo
+
+.PHONY: setup demo test test-fast bench repeatability covariance clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test]'
+	touch $(STAMP)
+
+## match the demo pair shipped in data/ and write its outputs to out/demo/
+demo: $(STAMP)
+	$(BIN)/scalematch data/demo_low.png data/demo_high.png --out-dir $(DEMO_OUT) --json $(DEMO_OUT)/result.json; \
+	  code=$$?; echo "exit code $$code (0 = matched, 1 = no reliable match); outputs in $(DEMO_OUT)/"; test $$code -le 1
+
+## run the test suite (tests needing ../shared skip when it is absent)
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
+bench: $(STAMP)
+	$(BIN)/scalematch bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
+
+## the repeatability study of issue 2 (needs ../shared)
+repeatability: $(STAMP)
+	$(BIN)/scalematch repeatability --out-dir docs
+
+clean:
+	rm -rf $(VENV) out bench-out

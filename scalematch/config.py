@@ -1,0 +1,56 @@
+"""One configuration object for a whole match, with every tunable number named and sourced.
+
+Stage parameters live in small frozen dataclasses next to the stage that uses them; ``Config``
+gathers them and is recorded with every result (``MatchResult.config``, the JSON ``config``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Tuple
+
+from .detector import HarrisParams, PAPER_SCALES
+
+#: Models the robust estimator can fit (paper section 5 and "Further examples").
+MODELS = ("similarity", "affine", "homography", "fundamental")
+#: "default": the improved pipeline; "paper": jets + Mahalanobis + semi-local constraints.
+MODES = ("default", "paper")
+
+
+def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float, ...]:
+    """Scales lo .. hi spaced by 2^(1/steps_per_octave), rounded to 3 decimals."""
+    out = []
+    k = 0
+    while True:
+        s = lo * 2.0 ** (k / steps_per_octave)
+        if s > hi * (1 + 1e-9):
+            break
+        out.append(round(s, 3))
+        k += 1
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper."""
+
+    mode: str = "default"  #: "default" or "paper" (see MODES)
+    model: str = "similarity"  #: similarity | affine | homography | fundamental
+    #: scales s of the high-resolution image to try; default 1..12 by quarter octaves
+    #: (the paper: 1..8 in unit steps, PAPER_SCALES; ratios up to 10 need scales past 8)
+    scales: Tuple[float, ...] = geometric_scales(1.0, 12.0, 4)
+    seed: int = 0  #: the one seed for all randomness (RANSAC)
+    harris: HarrisParams = field(default_factory=HarrisParams)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        if not self.scales or min(self.scales) < 1.0:
+            raise ValueError("scales must be a non-empty list of values >= 1")
+
+    @staticmethod
+    def paper(**changes) -> "Config":
+        """The paper's method as published: scales 1..8, jets, Mahalanobis, constraints."""
+        return replace(Config(mode="paper", scales=PAPER_SCALES), **changes)
