@@ -1,0 +1,147 @@
+"""imageio: every layout gives the same grey, EXIF orientation is applied, bad files say why."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, header_size, read_grey,
+                                read_image, to_bgr8)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bgr() -> np.ndarray:
+    """A 120x160 colour crop of the raccoon photo (non-square, so rotations show)."""
+    img = cv2.imread(str(ROOT / "data" / "raccoon.jpg"), cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(img[300:420, 400:560])
+
+
+def exif_app1(orientation: int, little_endian: bool = False) -> bytes:
+    """A minimal EXIF APP1 segment holding only the Orientation tag, built by hand."""
+    e = "<" if little_endian else ">"
+    tiff = (b"II*\x00" if little_endian else b"MM\x00*") + struct.pack(e + "I", 8)
+    tiff += struct.pack(e + "H", 1) + struct.pack(e + "HHIHH", 0x0112, 3, 1, orientation, 0)
+    tiff += struct.pack(e + "I", 0)
+    payload = b"Exif\x00\x00" + tiff
+    return b"\xff\xe1" + struct.pack(">H", len(payload) + 2) + payload
+
+
+def jpeg_bytes(img: np.ndarray, orientation: int = 0, little_endian: bool = False) -> bytes:
+    data = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
+    if orientation:
+        data = data[:2] + exif_app1(orientation, little_endian) + data[2:]
+    return data
+
+
+def write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+def test_grey_colour_rgba_16bit_agree(tmp_path, bgr):
+    ref = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    colour = tmp_path / "colour.png"
+    cv2.imwrite(str(colour), bgr)
+    grey = tmp_path / "grey.png"
+    cv2.imwrite(str(grey), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+    rgba = tmp_path / "rgba.png"
+    alpha = np.full(bgr.shape[:2] + (1,), 37, np.uint8)  # alpha is ignored
+    cv2.imwrite(str(rgba), np.concatenate([bgr, alpha], axis=2))
+    deep = tmp_path / "deep.png"
+    cv2.imwrite(str(deep), bgr.astype(np.uint16) * 257)
+    deep_tif = tmp_path / "deep.tif"
+    cv2.imwrite(str(deep_tif), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.uint16) * 257)
+    assert read_image(deep).dtype == np.uint16
+    for path in (colour, grey, rgba, deep, deep_tif):
+        g = read_grey(path)
+        assert g.dtype == np.float32 and g.shape == ref.shape, path.name
+        np.testing.assert_allclose(g, ref, atol=1.0, err_msg=path.name)
+
+
+@pytest.mark.parametrize("little_endian", [False, True])
+def test_exif_orientation_6_is_rotated_upright(tmp_path, bgr, little_endian):
+    plain = read_grey(write(tmp_path / "plain.jpg", jpeg_bytes(bgr)))
+    rotated = read_grey(write(tmp_path / "rot.jpg", jpeg_bytes(bgr, 6, little_endian)))
+    assert rotated.shape == (bgr.shape[1], bgr.shape[0])
+    # orientation 6: the stored picture must be turned 90 degrees clockwise to show upright
+    np.testing.assert_allclose(rotated, np.rot90(plain, k=-1), atol=0.5)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_exif_orientations_agree_with_opencv(tmp_path, bgr, orientation):
+    data = jpeg_bytes(bgr, orientation)
+    ours = read_image(write(tmp_path / "o.jpg", data))
+    theirs = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if theirs.shape == bgr.shape and orientation >= 5:
+        pytest.skip("this OpenCV build does not apply EXIF orientation in imdecode")
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_header_size_before_decoding(tmp_path, bgr):
+    for ext in (".png", ".jpg", ".bmp", ".tif", ".webp"):
+        data = cv2.imencode(ext, bgr)[1].tobytes()
+        assert header_size(data) == (160, 120), ext
+
+
+def test_pixel_limit_names_size_limit_and_option(tmp_path, bgr):
+    path = tmp_path / "big.png"
+    cv2.imwrite(str(path), bgr)
+    with pytest.raises(ImageError) as err:
+        read_grey(path, max_pixels=10_000)
+    msg = str(err.value)
+    assert "160x120" in msg and "0.01 MP" in msg and "--max-pixels" in msg and "\n" not in msg
+    assert read_grey(path, max_pixels=DEFAULT_MAX_PIXELS).shape == (120, 160)
+
+
+def test_pixel_limit_checked_from_header_without_decoding(tmp_path):
+    # a PNG header claiming 50000 x 50000 followed by garbage: refused for its size, not decoded
+    ihdr = struct.pack(">IIBBBBB", 50000, 50000, 8, 0, 0, 0, 0)
+    data = b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr + b"\0" * 4 + b"x" * 100
+    with pytest.raises(ImageError, match="50000x50000 = 2500.0 MP, above the limit of 100 MP"):
+        read_grey(write(tmp_path / "bomb.png", data))
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("missing", "no such file"),
+    ("directory", "is a directory"),
+    ("empty", "file is empty"),
+    ("text", "not an image"),
+    ("truncated_png", "truncated"),
+    ("truncated_jpg", "truncated"),
+    ("tiny", "too small"),
+])
+def test_bad_files_raise_one_line_image_error(tmp_path, bgr, case, needle):
+    path = tmp_path / "img.png"
+    if case == "directory":
+        path.mkdir()
+    elif case == "empty":
+        path.write_bytes(b"")
+    elif case == "text":
+        path.write_text("this is not an image\n")
+    elif case == "truncated_png":
+        data = cv2.imencode(".png", bgr)[1].tobytes()
+        path.write_bytes(data[: len(data) // 2])
+    elif case == "truncated_jpg":
+        path = tmp_path / "img.jpg"
+        data = jpeg_bytes(bgr)
+        path.write_bytes(data[: len(data) // 2])
+    elif case == "tiny":
+        cv2.imwrite(str(path), bgr[:20, :100])
+    with pytest.raises(ImageError) as err:
+        read_grey(path)
+    msg = str(err.value)
+    assert needle in msg and "\n" not in msg and str(path) in msg
+
+
+def test_to_bgr8_layouts(bgr):
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    for img in (bgr, grey, grey.astype(np.float32), bgr.astype(np.uint16) * 257,
+                np.dstack([bgr, np.zeros(bgr.shape[:2], np.uint8)])):
+        out = to_bgr8(img)
+        assert out.dtype == np.uint8 and out.shape == bgr.shape
