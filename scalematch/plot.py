@@ -1,0 +1,504 @@
+"""Small charts drawn with OpenCV only: a line chart and a bar chart, as BGR images.
+
+The project's figures (the per-scale table of a match, the benchmark, the repeatability study)
+are drawn here so that no plotting library is needed. Each chart is a white canvas with axes,
+ticks with numeric labels, grid lines, axis titles, a title and, for line charts, one colour and
+marker per series with a legend. Lines and text are anti-aliased (``cv2.LINE_AA``).
+
+Empty series and NaN/inf values are not errors: a line is broken at a missing value, a bar with a
+missing value is not drawn, and a chart with no finite value at all says "no data".
+
+Pixel convention: OpenCV's, x to the right, y down; data y grows upwards on the canvas.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple, Union
+
+import cv2
+import numpy as np
+
+#: Default canvas (width, height), px: readable on a screen and in a Markdown page.
+DEFAULT_SIZE = (900, 600)
+#: Series colours, BGR: the Tableau-10 palette (matplotlib's default cycle), distinct in hue.
+PALETTE = (
+    (180, 119, 31),   # blue
+    (14, 127, 255),   # orange
+    (44, 160, 44),    # green
+    (40, 39, 214),    # red
+    (189, 103, 148),  # purple
+    (75, 86, 140),    # brown
+    (194, 119, 227),  # pink
+    (127, 127, 127),  # grey
+    (34, 189, 188),   # olive
+    (207, 190, 23),   # cyan
+)
+#: Marker shapes cycled with the colours (a second cue for readers who do not see colour).
+MARKERS = ("circle", "square", "triangle", "diamond", "cross", "x", "star")
+#: Bar colours, BGR: ordinary bars and the highlighted (winning) bar.
+BAR_COLOUR = (200, 170, 130)
+HIGHLIGHT_COLOUR = (40, 39, 214)
+WHITE = (255, 255, 255)
+BLACK = (0, 0, 0)
+GRID = (225, 225, 225)
+TEXT = (40, 40, 40)
+FONT = cv2.FONT_HERSHEY_SIMPLEX
+#: Target number of ticks per axis for ``nice_ticks``.
+N_TICKS = 6
+
+Series = Dict[str, Tuple[Sequence[float], Sequence[float]]]
+PathLike = Union[str, Path]
+
+
+# --------------------------------------------------------------------------------------------
+# Pure helpers: tick placement, number formatting, the data -> pixel mapping
+# --------------------------------------------------------------------------------------------
+
+def nice_ticks(lo: float, hi: float, n: int = N_TICKS) -> np.ndarray:
+    """About ``n`` round tick values (steps 1, 2, 2.5 or 5 x 10^k) covering [lo, hi].
+
+    Parameters
+    ----------
+    lo, hi : float
+        The data range; ``lo == hi`` is widened by one unit; non-finite gives [0, 1].
+    n : int
+        Target number of intervals.
+
+    Returns
+    -------
+    (K,) float64 array
+        Increasing ticks with ``ticks[0] <= lo`` and ``ticks[-1] >= hi``.
+    """
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = 0.0, 1.0
+    if hi < lo:
+        lo, hi = hi, lo
+    if hi - lo < 1e-12 * max(abs(lo), abs(hi), 1.0):
+        lo, hi = lo - 0.5, hi + 0.5
+    raw = (hi - lo) / max(n, 1)
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw * (1 - 1e-9))
+    first = math.floor(lo / step + 1e-9) * step
+    last = math.ceil(hi / step - 1e-9) * step
+    k = int(round((last - first) / step))
+    return first + step * np.arange(k + 1)
+
+
+def format_tick(value: float, step: float) -> str:
+    """``value`` with just enough decimals for ticks ``step`` apart ("0.25", "2", "1e+04")."""
+    if not math.isfinite(value):
+        return ""
+    if abs(value) < 1e-9 * max(abs(step), 1e-300):
+        value = 0.0
+    if abs(value) >= 1e5 or (value != 0 and abs(value) < 1e-3):
+        return f"{value:.3g}"
+    decimals = 0
+    if step > 0:
+        while decimals < 6 and abs(round(step, decimals) - step) > 1e-9 * abs(step):
+            decimals += 1
+    return f"{value:.{decimals}f}"
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The plot area on the canvas and the data ranges it shows (data -> pixel mapping)."""
+
+    left: int  #: plot area, canvas px
+    top: int
+    right: int
+    bottom: int
+    xlim: Tuple[float, float]  #: data x at left and right
+    ylim: Tuple[float, float]  #: data y at bottom and top
+
+    def px(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Data (N,) x and y -> (N, 2) canvas px (float)."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        u = self.left + (x - self.xlim[0]) / (self.xlim[1] - self.xlim[0]) * (self.right - self.left)
+        v = self.bottom - (y - self.ylim[0]) / (self.ylim[1] - self.ylim[0]) * (self.bottom - self.top)
+        return np.stack([u, v], axis=-1)
+
+
+def finite_runs(x: np.ndarray, y: np.ndarray) -> List[np.ndarray]:
+    """Indices of the maximal runs of consecutive points where both x and y are finite."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    runs: List[np.ndarray] = []
+    start = None
+    for i, good in enumerate(ok):
+        if good and start is None:
+            start = i
+        elif not good and start is not None:
+            runs.append(np.arange(start, i))
+            start = None
+    if start is not None:
+        runs.append(np.arange(start, len(ok)))
+    return runs
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    values = np.asarray(values, dtype=np.float64).ravel()
+    return values[np.isfinite(values)]
+
+
+def _as_xy(pair: Tuple[Sequence[float], Sequence[float]], name: str) -> Tuple[np.ndarray, np.ndarray]:
+    if len(pair) != 2:
+        raise ValueError(f"series {name!r} must be a pair (xs, ys), got {len(pair)} items")
+    x = np.asarray(pair[0], dtype=np.float64).ravel()
+    y = np.asarray(pair[1], dtype=np.float64).ravel()
+    if x.shape != y.shape:
+        raise ValueError(f"series {name!r}: xs has {x.size} values but ys has {y.size}")
+    return x, y
+
+
+# --------------------------------------------------------------------------------------------
+# Drawing primitives (they draw on the canvas they are given)
+# --------------------------------------------------------------------------------------------
+
+def _font_scale(size: Tuple[int, int]) -> float:
+    """Font size factor: 1 at the default 900x600 canvas."""
+    return max(0.5, min(size[0] / DEFAULT_SIZE[0], size[1] / DEFAULT_SIZE[1]))
+
+
+def _text(img: np.ndarray, text: str, org: Tuple[float, float], scale: float,
+          colour=TEXT, thickness: int = 1, anchor: str = "left") -> None:
+    """Put ``text`` with its baseline at org[1]; anchor 'left', 'centre' or 'right' in x."""
+    (tw, _), _ = cv2.getTextSize(text, FONT, scale, thickness)
+    x = org[0] - (tw / 2 if anchor == "centre" else tw if anchor == "right" else 0)
+    cv2.putText(img, text, (int(round(x)), int(round(org[1]))), FONT, scale, colour, thickness,
+                cv2.LINE_AA)
+
+
+def _text_size(text: str, scale: float, thickness: int = 1) -> Tuple[int, int]:
+    (tw, th), base = cv2.getTextSize(text, FONT, scale, thickness)
+    return tw, th + base
+
+
+def _vertical_text(img: np.ndarray, text: str, centre: Tuple[float, float], scale: float) -> None:
+    """Text turned 90 degrees counter-clockwise (reading upwards), centred on ``centre``."""
+    if not text:
+        return
+    (tw, th), base = cv2.getTextSize(text, FONT, scale, 1)
+    patch = np.full((th + base + 4, tw + 4, 3), 255, np.uint8)
+    _text(patch, text, (2, 2 + th), scale)
+    patch = cv2.rotate(patch, cv2.ROTATE_90_COUNTERCLOCKWISE)
+    ph, pw = patch.shape[:2]
+    x0 = int(round(centre[0] - pw / 2))
+    y0 = int(round(centre[1] - ph / 2))
+    h, w = img.shape[:2]
+    xa, ya = max(x0, 0), max(y0, 0)
+    xb, yb = min(x0 + pw, w), min(y0 + ph, h)
+    if xb > xa and yb > ya:
+        region = img[ya:yb, xa:xb]
+        sub = patch[ya - y0:yb - y0, xa - x0:xb - x0]
+        np.minimum(region, sub, out=region)  # dark text over a white background
+
+
+def _marker(img: np.ndarray, centre: Tuple[float, float], kind: str, colour, size: int) -> None:
+    """One marker of ``kind`` (see MARKERS), about ``size`` px across."""
+    c = (int(round(centre[0])), int(round(centre[1])))
+    r = max(size // 2, 2)
+    if kind == "circle":
+        cv2.circle(img, c, r, colour, -1, cv2.LINE_AA)
+    elif kind == "square":
+        cv2.rectangle(img, (c[0] - r + 1, c[1] - r + 1), (c[0] + r - 1, c[1] + r - 1), colour, -1,
+                      cv2.LINE_AA)
+    elif kind == "triangle":
+        pts = np.array([[c[0], c[1] - r - 1], [c[0] - r, c[1] + r - 1], [c[0] + r, c[1] + r - 1]],
+                       np.int32)
+        cv2.fillPoly(img, [pts], colour, cv2.LINE_AA)
+    elif kind == "diamond":
+        pts = np.array([[c[0], c[1] - r - 1], [c[0] + r + 1, c[1]], [c[0], c[1] + r + 1],
+                        [c[0] - r - 1, c[1]]], np.int32)
+        cv2.fillPoly(img, [pts], colour, cv2.LINE_AA)
+    elif kind == "cross":
+        cv2.drawMarker(img, c, colour, cv2.MARKER_CROSS, 2 * r + 2, 2, cv2.LINE_AA)
+    elif kind == "x":
+        cv2.drawMarker(img, c, colour, cv2.MARKER_TILTED_CROSS, 2 * r + 2, 2, cv2.LINE_AA)
+    else:
+        cv2.drawMarker(img, c, colour, cv2.MARKER_STAR, 2 * r + 4, 1, cv2.LINE_AA)
+
+
+def _frame(size: Tuple[int, int], f: float, has_title: bool, has_xlabel: bool,
+           has_ylabel: bool, ytick_width: int, xlim, ylim) -> Frame:
+    w, h = size
+    left = int(ytick_width + 18 * f + (30 * f if has_ylabel else 0))
+    top = int((55 if has_title else 25) * f)
+    bottom = int(h - (70 if has_xlabel else 45) * f)
+    right = int(w - 30 * f)
+    if right - left < 20 or bottom - top < 20:
+        raise ValueError(f"canvas {w}x{h} is too small for a chart; use at least 300x200")
+    return Frame(left, top, right, bottom, tuple(map(float, xlim)), tuple(map(float, ylim)))
+
+
+def _axes(img: np.ndarray, fr: Frame, xticks: Sequence[float], xtick_labels: Sequence[str],
+          yticks: Sequence[float], ytick_labels: Sequence[str], f: float, title: str,
+          xlabel: str, ylabel: str, vertical_grid: bool = True) -> None:
+    """Grid, frame, ticks with labels, axis titles and the chart title."""
+    fs = 0.5 * f
+    tick = max(int(5 * f), 3)
+    for y in yticks:
+        v = int(round(fr.px(fr.xlim[0], y)[1]))
+        cv2.line(img, (fr.left, v), (fr.right, v), GRID, 1, cv2.LINE_AA)
+    if vertical_grid:
+        for x in xticks:
+            u = int(round(fr.px(x, fr.ylim[0])[0]))
+            cv2.line(img, (u, fr.top), (u, fr.bottom), GRID, 1, cv2.LINE_AA)
+    cv2.rectangle(img, (fr.left, fr.top), (fr.right, fr.bottom), BLACK, 1, cv2.LINE_AA)
+    _, th = _text_size("0", fs)
+    for y, lab in zip(yticks, ytick_labels):
+        v = int(round(fr.px(fr.xlim[0], y)[1]))
+        cv2.line(img, (fr.left - tick, v), (fr.left, v), BLACK, 1, cv2.LINE_AA)
+        _text(img, lab, (fr.left - tick - 4, v + th / 2 - 2), fs, anchor="right")
+    for x, lab in zip(xticks, xtick_labels):
+        u = int(round(fr.px(x, fr.ylim[0])[0]))
+        cv2.line(img, (u, fr.bottom), (u, fr.bottom + tick), BLACK, 1, cv2.LINE_AA)
+        _text(img, lab, (u, fr.bottom + tick + th + 3), fs, anchor="centre")
+    w = img.shape[1]
+    if title:
+        ts = 0.7 * f
+        while ts > 0.35 and _text_size(title, ts, 2)[0] > w - 20:
+            ts *= 0.9
+        _text(img, title, (w / 2, 35 * f), ts, BLACK, 2 if f >= 0.8 else 1, anchor="centre")
+    if xlabel:
+        _text(img, xlabel, ((fr.left + fr.right) / 2, fr.bottom + tick + 2 * th + 22 * f),
+              0.55 * f, anchor="centre")
+    if ylabel:
+        _vertical_text(img, ylabel, (16 * f, (fr.top + fr.bottom) / 2), 0.55 * f)
+
+
+def _no_data(img: np.ndarray, fr: Frame, f: float) -> None:
+    _text(img, "no data", ((fr.left + fr.right) / 2, (fr.top + fr.bottom) / 2), 0.8 * f,
+          (150, 150, 150), 1, anchor="centre")
+
+
+def _legend(img: np.ndarray, fr: Frame, entries: List[Tuple[str, tuple, str]],
+            points: np.ndarray, f: float) -> None:
+    """A boxed legend in the plot corner that hides the fewest data points."""
+    if not entries:
+        return
+    fs = 0.5 * f
+    line_h = int(22 * f)
+    swatch = int(28 * f)
+    width = max(_text_size(name, fs)[0] for name, _, _ in entries) + swatch + int(24 * f)
+    height = line_h * len(entries) + int(10 * f)
+    pad = int(10 * f)
+    corners = [(fr.right - pad - width, fr.top + pad), (fr.left + pad, fr.top + pad),
+               (fr.right - pad - width, fr.bottom - pad - height),
+               (fr.left + pad, fr.bottom - pad - height)]
+
+    def hidden(corner):
+        x0, y0 = corner
+        if points.size == 0:
+            return 0
+        inside = ((points[:, 0] >= x0 - 8) & (points[:, 0] <= x0 + width + 8)
+                  & (points[:, 1] >= y0 - 8) & (points[:, 1] <= y0 + height + 8))
+        return int(inside.sum())
+
+    x0, y0 = min(corners, key=hidden)  # first corner wins ties: top right
+    sub = img[y0:y0 + height, x0:x0 + width]
+    sub[:] = (0.15 * sub + 0.85 * 255).astype(np.uint8)  # light box, grid faintly visible
+    cv2.rectangle(img, (x0, y0), (x0 + width, y0 + height), (160, 160, 160), 1, cv2.LINE_AA)
+    _, th = _text_size("Ag", fs)
+    for i, (name, colour, marker) in enumerate(entries):
+        yc = y0 + int(5 * f) + line_h * i + line_h // 2
+        xa, xb = x0 + int(8 * f), x0 + int(8 * f) + swatch
+        cv2.line(img, (xa, yc), (xb, yc), colour, max(int(2 * f), 2), cv2.LINE_AA)
+        _marker(img, ((xa + xb) / 2, yc), marker, colour, max(int(8 * f), 5))
+        _text(img, name, (xb + 8 * f, yc + th / 2 - 3), fs)
+
+
+def save(image: np.ndarray, path: Optional[PathLike]) -> None:
+    """Write ``image`` to ``path`` (format from the extension); nothing when path is None."""
+    if path is None:
+        return
+    p = Path(path)
+    if p.parent and not p.parent.exists():
+        p.parent.mkdir(parents=True, exist_ok=True)
+    ok, buf = cv2.imencode(p.suffix or ".png", image)
+    if not ok:
+        raise ValueError(f"{p}: OpenCV cannot write this format; use .png or .jpg")
+    buf.tofile(str(p))
+
+
+# --------------------------------------------------------------------------------------------
+# Charts
+# --------------------------------------------------------------------------------------------
+
+def line_chart(series: Series, path: Optional[PathLike] = None, title: str = "",
+               xlabel: str = "", ylabel: str = "",
+               ylim: Optional[Tuple[float, float]] = None,
+               xticks: Optional[Sequence[float]] = None,
+               size: Tuple[int, int] = DEFAULT_SIZE) -> np.ndarray:
+    """A line chart of several series, one colour and marker each, with a legend.
+
+    Parameters
+    ----------
+    series : dict name -> (xs, ys)
+        Each a pair of equal-length sequences of float; NaN/inf values break the line there.
+        Series are drawn (and listed in the legend) in dict order.
+    path : str or Path, optional
+        Where to write the image (PNG or JPEG by extension); None writes nothing.
+    title, xlabel, ylabel : str
+    ylim : (float, float), optional
+        The y range shown; default the data range with round ticks.
+    xticks : sequence of float, optional
+        Positions of the x ticks (e.g. the factors measured); default round ticks.
+    size : (int, int)
+        Canvas (width, height), px.
+
+    Returns
+    -------
+    (H, W, 3) uint8 array
+        The chart, BGR.
+    """
+    data = [(str(name), *_as_xy(pair, str(name))) for name, pair in series.items()]
+    w, h = int(size[0]), int(size[1])
+    f = _font_scale((w, h))
+    img = np.full((h, w, 3), 255, np.uint8)
+    xs = np.concatenate([_finite(x[np.isfinite(y)]) for _, x, y in data]) if data else np.zeros(0)
+    ys = np.concatenate([_finite(y[np.isfinite(x)]) for _, x, y in data]) if data else np.zeros(0)
+
+    if xticks is not None and len(_finite(np.asarray(xticks, float))):
+        xt = np.unique(_finite(np.asarray(xticks, float)))
+        lo, hi = float(xt.min()), float(xt.max())
+        if xs.size:
+            lo, hi = min(lo, float(xs.min())), max(hi, float(xs.max()))
+        span = hi - lo if hi > lo else 1.0
+        xlim = (lo - 0.03 * span, hi + 0.03 * span)
+        xstep = float(np.min(np.diff(xt))) if xt.size > 1 else 1.0
+    else:
+        xt = nice_ticks(float(xs.min()), float(xs.max())) if xs.size else nice_ticks(0.0, 1.0)
+        xlim = (float(xt[0]), float(xt[-1]))
+        xstep = float(xt[1] - xt[0]) if xt.size > 1 else 1.0
+
+    if ylim is not None:
+        ylo, yhi = float(ylim[0]), float(ylim[1])
+        if not (math.isfinite(ylo) and math.isfinite(yhi)) or yhi <= ylo:
+            raise ValueError(f"ylim must be two finite values, low < high; got {ylim}")
+        yt = nice_ticks(ylo, yhi)
+        yt = yt[(yt >= ylo - 1e-9 * (yhi - ylo)) & (yt <= yhi + 1e-9 * (yhi - ylo))]
+        y_range = (ylo, yhi)
+    else:
+        yt = nice_ticks(float(ys.min()), float(ys.max())) if ys.size else nice_ticks(0.0, 1.0)
+        y_range = (float(yt[0]), float(yt[-1]))
+    ystep = float(yt[1] - yt[0]) if yt.size > 1 else 1.0
+    ylabels = [format_tick(v, ystep) for v in yt]
+    xlabels = [format_tick(v, xstep) for v in xt]
+
+    ytw = max((_text_size(s, 0.5 * f)[0] for s in ylabels), default=0)
+    fr = _frame((w, h), f, bool(title), bool(xlabel), bool(ylabel), ytw, xlim, y_range)
+    _axes(img, fr, xt, xlabels, yt, ylabels, f, title, xlabel, ylabel)
+
+    plot_area = img[fr.top + 1:fr.bottom, fr.left + 1:fr.right]
+    canvas = img.copy()
+    entries = []
+    all_px = []
+    thick = max(int(round(2 * f)), 2)
+    for i, (name, x, y) in enumerate(data):
+        colour = PALETTE[i % len(PALETTE)]
+        marker = MARKERS[i % len(MARKERS)]
+        entries.append((name, colour, marker))
+        for run in finite_runs(x, y):
+            p = fr.px(x[run], y[run])
+            all_px.append(p)
+            pts = np.round(p * 16).astype(np.int32).reshape(-1, 1, 2)  # 4 fractional bits
+            if len(run) > 1:
+                cv2.polylines(canvas, [pts], False, colour, thick, cv2.LINE_AA, shift=4)
+            for q in p:
+                _marker(canvas, (q[0], q[1]), marker, colour, max(int(9 * f), 5))
+    # data outside ylim is clipped to the plot area
+    plot_area[:] = canvas[fr.top + 1:fr.bottom, fr.left + 1:fr.right]
+    if not ys.size:
+        _no_data(img, fr, f)
+    pts_all = np.concatenate(all_px) if all_px else np.zeros((0, 2))
+    _legend(img, fr, entries, pts_all, f)
+    save(img, path)
+    return img
+
+
+def bar_chart(labels: Sequence[object], values: Sequence[float],
+              path: Optional[PathLike] = None, title: str = "", xlabel: str = "",
+              ylabel: str = "", highlight: Optional[int] = None,
+              size: Tuple[int, int] = DEFAULT_SIZE, annotate: bool = True) -> np.ndarray:
+    """A bar chart over categories (e.g. inliers against scale), one bar optionally highlighted.
+
+    Parameters
+    ----------
+    labels : sequence
+        One label per bar (numbers are shown with ``str``, floats with ``:g``).
+    values : sequence of float
+        Bar heights; NaN/inf draws no bar ("-" above the slot).
+    path : str or Path, optional
+        Where to write the image; None writes nothing.
+    title, xlabel, ylabel : str
+    highlight : int, optional
+        Index (into ``labels``) of the bar drawn in the highlight colour, e.g. the winning scale;
+        None or out of range highlights nothing.
+    size : (int, int)
+        Canvas (width, height), px.
+    annotate : bool
+        Write each bar's value above it.
+
+    Returns
+    -------
+    (H, W, 3) uint8 array
+        The chart, BGR.
+    """
+    vals = np.asarray(values, dtype=np.float64).ravel()
+    labs = [f"{v:g}" if isinstance(v, (float, np.floating)) else str(v) for v in labels]
+    if len(labs) != vals.size:
+        raise ValueError(f"bar_chart: {len(labs)} labels but {vals.size} values")
+    w, h = int(size[0]), int(size[1])
+    f = _font_scale((w, h))
+    img = np.full((h, w, 3), 255, np.uint8)
+    fin = _finite(vals)
+    lo = min(0.0, float(fin.min())) if fin.size else 0.0
+    hi = max(0.0, float(fin.max())) if fin.size else 1.0
+    if hi <= lo:
+        hi = lo + 1.0
+    yt = nice_ticks(lo, hi * (1.08 if annotate and hi > 0 else 1.0))
+    ystep = float(yt[1] - yt[0]) if yt.size > 1 else 1.0
+    ylabels = [format_tick(v, ystep) for v in yt]
+    n = len(labs)
+    xlim = (-0.5, n - 0.5) if n else (-0.5, 0.5)
+    ytw = max((_text_size(s, 0.5 * f)[0] for s in ylabels), default=0)
+    fr = _frame((w, h), f, bool(title), bool(xlabel), bool(ylabel), ytw, xlim,
+                (float(yt[0]), float(yt[-1])))
+    # thin the x labels when they would overlap
+    slot = (fr.right - fr.left) / max(n, 1)
+    widest = max((_text_size(s, 0.5 * f)[0] for s in labs), default=0)
+    every = max(1, int(math.ceil((widest + 6) / max(slot, 1))))
+    shown = [i for i in range(n) if i % every == 0 or i == highlight]
+    _axes(img, fr, [float(i) for i in shown], [labs[i] for i in shown], yt, ylabels, f, title,
+          xlabel, ylabel, vertical_grid=False)
+    if not fin.size:
+        _no_data(img, fr, f)
+    half = 0.38
+    base_v = fr.px(0.0, 0.0)[1]
+    fs = 0.45 * f
+    show_values = annotate and (_text_size("0000", fs)[0] <= slot or n <= 20)
+    for i, v in enumerate(vals):
+        if not math.isfinite(v):
+            continue
+        (ua, vv), (ub, _) = fr.px(np.array([i - half, i + half]), np.array([v, v]))
+        colour = HIGHLIGHT_COLOUR if i == highlight else BAR_COLOUR
+        y_a, y_b = sorted((int(round(vv)), int(round(base_v))))
+        cv2.rectangle(img, (int(round(ua)), y_a), (int(round(ub)), max(y_b, y_a + 1)), colour, -1,
+                      cv2.LINE_AA)
+    # values are drawn after all bars so a tall neighbour never covers them
+    if show_values:
+        for i, v in enumerate(vals):
+            u = fr.px(float(i), 0.0)[0]
+            if math.isfinite(v):
+                vv = min(fr.px(float(i), float(v))[1], base_v)
+                text = format_tick(v, 1.0 if float(v).is_integer() else 0.01)
+            else:
+                vv, text = base_v, "-"
+            _text(img, text, (u, vv - 5 * f), fs, BLACK if i == highlight else TEXT,
+                  2 if i == highlight else 1, anchor="centre")
+    cv2.rectangle(img, (fr.left, fr.top), (fr.right, fr.bottom), BLACK, 1, cv2.LINE_AA)
+    save(img, path)
+    return img
