@@ -1,0 +1,288 @@
+"""Pictures of a match, drawn with OpenCV: the overlay, the matches, the per-scale chart.
+
+* ``overlay``: the high-resolution image warped by ``result.transform`` onto the low-resolution
+  one in false colour (low in magenta, warped high in green: grey where they agree, coloured
+  fringes where they do not) with the footprint of the high-resolution image outlined, so a
+  person sees at a glance whether the transform fits.
+* ``matches_image``: the two images side by side at one height, a line per inlier.
+* ``scale_plot``: inliers against scale (the paper's Table 1 as a chart), the winner highlighted.
+* ``write_outputs``: all of the above plus ``matches.csv`` into a directory.
+
+Conventions as in ``result``: OpenCV pixels (centres at integers), ``transform`` maps a
+high-resolution pixel to a low-resolution pixel (2x3 or 3x3). The image edge of a W x H image
+runs through (-0.5, -0.5) .. (W - 0.5, H - 0.5); that is the footprint outline drawn.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Dict, Optional, Sequence, Tuple, Union
+
+import cv2
+import numpy as np
+
+from .imageio import to_bgr8
+from .plot import bar_chart
+from .result import MatchResult, similarity_parts
+from .synthetic import apply
+
+PathLike = Union[str, Path]
+
+#: Footprint outline colour (BGR) and the false colours of the overlay.
+OUTLINE = (0, 215, 255)  # amber
+INLIER_LINE = (60, 200, 60)  # green
+INLIER_DOT = (0, 215, 255)
+#: Weight of the low image outside the footprint (dimmed so the footprint stands out).
+OUTSIDE_DIM = 0.55
+#: Height range of the side-by-side matches picture, px.
+MATCHES_HEIGHT = (360, 720)
+#: Inlier lines drawn at most (a seeded random subset beyond this, said in the caption).
+MAX_LINES = 300
+FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+# --------------------------------------------------------------------------- helpers
+
+def _as3(t: np.ndarray) -> np.ndarray:
+    t = np.asarray(t, dtype=np.float64)
+    return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
+
+
+def footprint(transform: np.ndarray, high_shape: Tuple[int, ...]) -> Optional[np.ndarray]:
+    """(4, 2) low-resolution px of the high image's corners (edges at -0.5), or None.
+
+    None when the transform sends a corner to infinity or behind the camera (homographies).
+    """
+    h, w = high_shape[:2]
+    corners = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+    t3 = _as3(transform)
+    den = np.hstack([corners, np.ones((4, 1))]) @ t3[2]
+    if np.any(den <= 1e-12):
+        return None
+    out = apply(transform, corners)
+    return out if np.all(np.isfinite(out)) else None
+
+
+def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
+               size: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray]:
+    """high warped onto a ``size`` (w, h) canvas by ``transform``; (image, mask 0/255).
+
+    The high image is first shrunk by INTER_AREA to about the target resolution so the warp does
+    not alias (a plain bilinear warp at 10x shrink keeps 1 pixel in 100).
+    """
+    ratio, _, _ = similarity_parts(transform)
+    t3 = _as3(transform)
+    img = high_bgr
+    f = 1.0 / ratio if np.isfinite(ratio) and ratio > 1.0 else 1.0
+    if f < 0.9:
+        h, w = img.shape[:2]
+        sw, sh = max(int(round(w * f)), 1), max(int(round(h * f)), 1)
+        img = cv2.resize(img, (sw, sh), interpolation=cv2.INTER_AREA)
+        fx, fy = sw / w, sh / h
+        # small px -> high px: x_high = (x_small + 0.5) / fx - 0.5
+        back = np.array([[1 / fx, 0, 0.5 / fx - 0.5], [0, 1 / fy, 0.5 / fy - 0.5], [0, 0, 1]])
+        t3 = t3 @ back
+    ones = np.full(img.shape[:2], 255, np.uint8)
+    if np.asarray(transform).shape == (2, 3):
+        warped = cv2.warpAffine(img, t3[:2], size, flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine(ones, t3[:2], size, flags=cv2.INTER_NEAREST)
+    else:
+        warped = cv2.warpPerspective(img, t3, size, flags=cv2.INTER_LINEAR)
+        mask = cv2.warpPerspective(ones, t3, size, flags=cv2.INTER_NEAREST)
+    return warped, mask
+
+
+def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.ndarray:
+    """Draw ``lines`` of white text on a translucent dark strip inside ``image`` (in place)."""
+    h, w = image.shape[:2]
+    lines = [s for s in lines if s]
+    if not lines:
+        return image
+    scale = float(np.clip(w / 900.0, 0.35, 0.8))
+    widest = max(cv2.getTextSize(s, FONT, scale, 1)[0][0] for s in lines)
+    while scale > 0.3 and widest > w - 12:
+        scale *= 0.9
+        widest = max(cv2.getTextSize(s, FONT, scale, 1)[0][0] for s in lines)
+    (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
+    step = th + base + 6
+    strip = min(step * len(lines) + 6, h)
+    y0 = 0 if where == "top" else h - strip
+    region = image[y0:y0 + strip]
+    region[:] = (region * 0.35).astype(np.uint8)
+    for i, s in enumerate(lines):
+        cv2.putText(image, s, (6, y0 + 4 + th + i * step), FONT, scale, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+    return image
+
+
+def summary_line(result: MatchResult) -> str:
+    """One line for captions: ratio, angle and inliers, or the reason there is no match."""
+    if not result.matched:
+        return f"no reliable match: {result.reason}" if result.reason else "no reliable match"
+    if result.model == "fundamental":
+        return f"fundamental matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
+    return (f"{result.model}: ratio {result.resolution_ratio:.2f}, rotation "
+            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, "
+            f"best scale {result.best_scale:g}")
+
+
+# --------------------------------------------------------------------------- pictures
+
+def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarray:
+    """The high image warped onto the low one, false-colour blended, footprint outlined.
+
+    Parameters
+    ----------
+    low : (H, W) or (H, W, 3) array
+        The low-resolution image (grey levels or BGR); the output has its size.
+    high : (h, w) or (h, w, 3) array
+        The high-resolution image.
+    result : MatchResult
+        When matched with a 2x3 or 3x3 transform: warp, blend and outline. For the fundamental
+        matrix (no point-to-point map) the inliers are drawn on ``low``. When not matched,
+        ``low`` with a "no reliable match: reason" caption.
+
+    Returns
+    -------
+    (H, W, 3) uint8 array, BGR
+    """
+    low_bgr = to_bgr8(low)
+    hh, ww = low_bgr.shape[:2]
+    low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
+    out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
+    t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
+    lines = [summary_line(result)]
+    if result.matched and t is not None and result.model != "fundamental":
+        high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
+        warped, mask = _warp_high(high_grey, t, (ww, hh))
+        inside = mask > 0
+        dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
+        out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
+        out[inside, 0] = low_grey[inside]  # B: low
+        out[inside, 1] = warped[inside]  # G: high, warped
+        out[inside, 2] = low_grey[inside]  # R: low
+        corners = footprint(t, high.shape)
+        if corners is not None:
+            pts = np.round((corners + 0.0) * 16).astype(np.int32).reshape(-1, 1, 2)
+            cv2.polylines(out, [pts], True, OUTLINE, 2, cv2.LINE_AA, shift=4)
+        lines.append("magenta = low, green = high warped (grey where they agree); "
+                     "outline = high footprint")
+    elif result.matched and result.inliers.size:
+        for x, y in result.inliers[:, 2:4]:
+            cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
+                       cv2.LINE_AA, shift=4)
+        lines.append("dots = inliers in the low image (a fundamental matrix has no overlay)")
+    return caption(out, lines)
+
+
+def _fit_height(img: np.ndarray, height: int) -> Tuple[np.ndarray, float]:
+    h = img.shape[0]
+    f = height / h
+    if abs(f - 1.0) < 1e-9:
+        return img, 1.0
+    w = max(int(round(img.shape[1] * f)), 1)
+    interp = cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
+    out = cv2.resize(img, (w, height), interpolation=interp)
+    return out, w / img.shape[1]
+
+
+def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
+                  seed: int = 0) -> np.ndarray:
+    """low (left) and high (right) side by side at one height, a line per inlier match.
+
+    The height is the taller image's, kept within ``MATCHES_HEIGHT``; at most ``MAX_LINES``
+    lines (a seeded random subset beyond that, said in the caption).
+    """
+    low_bgr, high_bgr = to_bgr8(low), to_bgr8(high)
+    height = int(np.clip(max(low_bgr.shape[0], high_bgr.shape[0]), *MATCHES_HEIGHT))
+    a, fa = _fit_height(low_bgr, height)
+    b, fb = _fit_height(high_bgr, height)
+    gap = 10
+    canvas = np.full((height, a.shape[1] + gap + b.shape[1], 3), 255, np.uint8)
+    canvas[:, :a.shape[1]] = a
+    x0 = a.shape[1] + gap
+    canvas[:, x0:] = b
+    pts = np.asarray(result.inliers, dtype=np.float64).reshape(-1, 4)
+    note = ""
+    if pts.shape[0] > MAX_LINES:
+        keep = np.random.default_rng(seed).choice(pts.shape[0], MAX_LINES, replace=False)
+        pts = pts[np.sort(keep)]
+        note = f" ({MAX_LINES} of them drawn)"
+    for xh, yh, xl, yl in pts:
+        pa = ((xl + 0.5) * fa - 0.5, (yl + 0.5) * fa - 0.5)
+        pb = (x0 + (xh + 0.5) * fb - 0.5, (yh + 0.5) * fb - 0.5)
+        ia = (int(round(pa[0] * 16)), int(round(pa[1] * 16)))
+        ib = (int(round(pb[0] * 16)), int(round(pb[1] * 16)))
+        cv2.line(canvas, ia, ib, INLIER_LINE, 1, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, ia, 2 * 16, INLIER_DOT, -1, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, ib, 2 * 16, INLIER_DOT, -1, cv2.LINE_AA, shift=4)
+    lh, lw = low_bgr.shape[:2]
+    hh, hw = high_bgr.shape[:2]
+    head = (f"left: low {lw}x{lh}   right: high {hw}x{hh}   "
+            f"{result.n_inliers} inlier matches{note}")
+    return np.vstack([_band([head, summary_line(result)], canvas.shape[1]), canvas])
+
+
+def _band(lines: Sequence[str], width: int) -> np.ndarray:
+    """A dark strip ``width`` px wide holding ``lines`` of caption (to stack above a picture)."""
+    scale = float(np.clip(width / 900.0, 0.35, 0.8))
+    (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
+    band = np.full(((th + base + 6) * len(lines) + 8, width, 3), 40, np.uint8)
+    return caption(band, lines)
+
+
+def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
+    """Bar chart of inliers against scale s, the winning scale highlighted."""
+    rows = list(result.scales)
+    labels = [float(r.s) for r in rows]
+    values = [float(r.inliers) for r in rows]
+    best = None
+    if np.isfinite(result.best_scale) and rows:
+        best = int(np.argmin([abs(r.s - result.best_scale) for r in rows]))
+    if result.matched:
+        title = (f"inliers per scale: best s = {result.best_scale:g}, "
+                 f"ratio {result.resolution_ratio:.2f}")
+    else:
+        title = "inliers per scale: no reliable match"
+    return bar_chart(labels, values, title=title, xlabel="scale s of the high-resolution image",
+                     ylabel="inliers", highlight=best, size=size)
+
+
+# --------------------------------------------------------------------------- files
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError(f"{path}: OpenCV could not encode the picture")
+    buf.tofile(str(path))
+
+
+def write_matches_csv(path: PathLike, result: MatchResult) -> None:
+    """Inlier matches as CSV: header x_high,y_high,x_low,y_low, one row per match (px)."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x_high", "y_high", "x_low", "y_low"])
+        for row in np.asarray(result.inliers, dtype=np.float64).reshape(-1, 4):
+            w.writerow([f"{v:.3f}" for v in row])
+
+
+def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
+                  low: np.ndarray, high: np.ndarray, result: MatchResult) -> Dict[str, Path]:
+    """Write overlay.png, matches.png, scales.png and matches.csv into ``out_dir``.
+
+    Everything is written whether or not a match was found (the overlay then shows ``low`` with
+    the reason, the CSV only its header). ``low_path``/``high_path`` name the inputs in the
+    pictures. Returns name -> path written. Raises ``OSError`` when ``out_dir`` is not writable.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {name: out / name for name in
+             ("overlay.png", "matches.png", "scales.png", "matches.csv")}
+    ov = overlay(low, high, result)
+    caption(ov, [f"low: {Path(low_path).name}   high: {Path(high_path).name}"], where="bottom")
+    _write_png(paths["overlay.png"], ov)
+    _write_png(paths["matches.png"], matches_image(low, high, result))
+    _write_png(paths["scales.png"], scale_plot(result))
+    write_matches_csv(paths["matches.csv"], result)
+    return paths

@@ -1,0 +1,134 @@
+"""render: pictures of a hand-built MatchResult with a known transform."""
+
+from __future__ import annotations
+
+import csv
+
+import cv2
+import numpy as np
+import pytest
+
+from scalematch.config import Config
+from scalematch.render import (OUTLINE, footprint, matches_image, overlay, scale_plot,
+                               write_outputs)
+from scalematch.result import MatchResult, ScaleRow, similarity_parts
+from scalematch.synthetic import apply, compose, zoom_warp
+
+RATIO, ANGLE = 3.0, 25.0
+CROP = (300, 200, 480, 360)  # x0, y0, w, h of the high-resolution crop of the photo
+
+
+@pytest.fixture(scope="module")
+def pair(raccoon):
+    """(low, high, T): high a full-resolution crop, low the whole photo turned and shrunk by 3."""
+    x0, y0, w, h = CROP
+    high = raccoon[y0:y0 + h, x0:x0 + w].copy()
+    low, a = zoom_warp(raccoon, RATIO, ANGLE)
+    t = compose(a, np.array([[1.0, 0, x0], [0, 1.0, y0]]))  # high px -> photo px -> low px
+    return low, high, t
+
+
+def make_result(t, model="similarity", matched=True, high_shape=(360, 480)) -> MatchResult:
+    rng = np.random.default_rng(1)
+    xy_high = rng.uniform([0, 0], [high_shape[1] - 1, high_shape[0] - 1], size=(40, 2))
+    if t is not None and model != "fundamental":
+        xy_low = apply(t, xy_high)
+    else:
+        xy_low = xy_high / RATIO
+    ratio, angle, tr = similarity_parts(t) if t is not None else (np.nan, np.nan, (np.nan,) * 2)
+    rows = tuple(ScaleRow(s=s, ratio=ratio if s == 3 else np.nan, points=100 * s, initial=50,
+                          kept=30, inliers=40 if s == 3 else 3, outlier_pct=20.0)
+                 for s in (1.0, 2.0, 3.0, 4.0))
+    return MatchResult(
+        matched=matched, reason="" if matched else "too few inliers", model=model,
+        transform=t if matched else None, resolution_ratio=ratio if matched else np.nan,
+        rotation_deg=angle if matched else np.nan, translation=tr, best_scale=3.0,
+        inliers=np.hstack([xy_high, xy_low]) if matched else np.zeros((0, 4)), scales=rows,
+        timings={"total": 1.0}, config=Config())
+
+
+def outline_mask(img: np.ndarray) -> np.ndarray:
+    return np.all(np.abs(img.astype(int) - np.array(OUTLINE)) <= 40, axis=2)
+
+
+@pytest.mark.parametrize("as_homography", [False, True])
+def test_overlay_fits_and_outlines_where_the_transform_says(pair, as_homography):
+    low, high, t = pair
+    tt = np.vstack([t, [0, 0, 1]]) * 2.0 if as_homography else t  # same map, scaled 3x3
+    out = overlay(low, high, make_result(tt, "homography" if as_homography else "similarity"))
+    assert out.shape == low.shape + (3,) and out.dtype == np.uint8
+    corners = footprint(tt, high.shape)
+    np.testing.assert_allclose(corners, apply(t, [[-0.5, -0.5], [479.5, -0.5], [479.5, 359.5],
+                                                  [-0.5, 359.5]]), atol=1e-9)
+    mask = outline_mask(out)
+    # every corner and edge midpoint of the footprint has outline pixels within 2 px
+    probes = np.vstack([corners, (corners + np.roll(corners, -1, axis=0)) / 2])
+    ys, xs = np.nonzero(mask)
+    for px, py in probes:
+        assert np.min(np.hypot(xs - px, ys - py)) <= 2.0, (px, py)
+    # and the outline is nowhere else: all outline pixels lie near the footprint's edges
+    d = np.full(len(xs), np.inf)
+    for p, q in zip(corners, np.roll(corners, -1, axis=0)):
+        v = q - p
+        tpar = np.clip(((xs - p[0]) * v[0] + (ys - p[1]) * v[1]) / (v @ v), 0, 1)
+        d = np.minimum(d, np.hypot(xs - p[0] - tpar * v[0], ys - p[1] - tpar * v[1]))
+    assert np.percentile(d, 99) <= 2.5
+    # inside the footprint the warped high (green) agrees with low (red): a correct fit
+    inside = np.zeros(low.shape, np.uint8)
+    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
+    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
+    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    assert diff.mean() < 6.0
+
+
+def test_overlay_of_a_wrong_transform_disagrees(pair):
+    low, high, t = pair
+    wrong = t.copy()
+    wrong[:, 2] += 12.0  # 12 low-res pixels off
+    out = overlay(low, high, make_result(wrong))
+    corners = footprint(wrong, high.shape)
+    inside = np.zeros(low.shape, np.uint8)
+    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
+    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
+    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    assert diff.mean() > 10.0
+
+
+def test_overlay_when_not_matched_or_fundamental(pair):
+    low, high, t = pair
+    out = overlay(low, high, make_result(None, matched=False))
+    assert out.shape == low.shape + (3,)
+    assert not outline_mask(out).any()
+    plain = np.clip(low, 0, 255).astype(np.uint8)
+    assert np.any(out[:20, :, 0] != plain[:20])  # the caption is written at the top
+    assert np.array_equal(out[-20:, :, 0], plain[-20:])  # and the rest is low itself
+    f = overlay(low, high, make_result(np.eye(3), model="fundamental"))
+    assert f.shape == low.shape + (3,)
+
+
+def test_matches_image_and_scale_plot(pair):
+    low, high, t = pair
+    res = make_result(t)
+    img = matches_image(low, high, res)
+    assert img.ndim == 3 and 360 <= img.shape[0] <= 720 + 100
+    assert img.shape[1] >= low.shape[1] + high.shape[1] - 1  # both at height 377
+    plot = scale_plot(res)
+    assert plot.ndim == 3 and plot.shape[2] == 3
+    # the winner (s = 3, index 2) is drawn in the highlight colour: some red pixels exist
+    assert np.any(np.all(plot == (40, 39, 214), axis=2))
+    assert scale_plot(make_result(None, matched=False)).ndim == 3
+
+
+def test_write_outputs(tmp_path, pair):
+    low, high, t = pair
+    paths = write_outputs(tmp_path / "out", "low.png", "high.png", low, high, make_result(t))
+    for name in ("overlay.png", "matches.png", "scales.png", "matches.csv"):
+        assert paths[name].is_file() and paths[name].stat().st_size > 0
+    with open(paths["matches.csv"]) as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["x_high", "y_high", "x_low", "y_low"] and len(rows) == 41
+    assert cv2.imread(str(paths["overlay.png"])).shape == low.shape + (3,)
+    # not matched: everything is still written, the CSV has only its header
+    paths = write_outputs(tmp_path / "none", "low.png", "high.png", low, high,
+                          make_result(None, matched=False))
+    assert paths["matches.csv"].read_text().strip() == "x_high,y_high,x_low,y_low"
