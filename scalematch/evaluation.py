@@ -1,0 +1,82 @@
+"""How a match is judged (EVALUATION.md, "Success and error").
+
+An estimated transform E and the truth T (each 2x3 or 3x3, high px -> low px) map a 21x21 grid
+of points spanning the high-resolution image; the points T maps inside the low-resolution image
+are kept, and the error is the mean distance between the two mappings in low-resolution pixels.
+A method that gives no transform ("no reliable match") has an infinite error: it fails the pair
+but claims nothing false.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .synthetic import apply
+
+#: Success threshold on the reprojection error, low-resolution px (EVALUATION.md).
+SUCCESS_PX = 3.0
+#: Points per side of the grid spanning the high image (EVALUATION.md: 21x21).
+GRID_POINTS = 21
+
+
+def grid(shape: Tuple[int, int], n: int = GRID_POINTS) -> np.ndarray:
+    """(n*n, 2) points (x, y) spanning an image of ``shape`` (H, W), corners included."""
+    h, w = int(shape[0]), int(shape[1])
+    xs = np.linspace(0.0, w - 1.0, n)
+    ys = np.linspace(0.0, h - 1.0, n)
+    gx, gy = np.meshgrid(xs, ys)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def _check(t: np.ndarray, name: str) -> np.ndarray:
+    t = np.asarray(t, dtype=np.float64)
+    if t.shape not in ((2, 3), (3, 3)):
+        raise ValueError(f"{name} must be a 2x3 affine or a 3x3 homography, got shape {t.shape}")
+    return t
+
+
+def reprojection_error(estimate: Optional[np.ndarray], truth: np.ndarray,
+                       high_shape: Tuple[int, ...], low_shape: Tuple[int, ...]) -> float:
+    """Mean distance, low px, between ``estimate`` and ``truth`` over a grid spanning ``high``.
+
+    Parameters
+    ----------
+    estimate : 2x3 or 3x3 array, or None
+        The estimated transform, high px -> low px; None (no match) gives ``inf``.
+    truth : 2x3 or 3x3 array
+        The true transform, high px -> low px.
+    high_shape, low_shape : tuple
+        Shapes (H, W, ...) of the high and low images.
+
+    Returns
+    -------
+    float
+        The mean error over the grid points ``truth`` maps inside ``low``; ``inf`` when the
+        estimate is None, not finite, or no grid point lands inside ``low``.
+    """
+    t = _check(truth, "truth")
+    if estimate is None:
+        return math.inf
+    e = _check(estimate, "estimate")
+    if not np.all(np.isfinite(e)):
+        return math.inf
+    pts = grid(high_shape[:2])
+    true_low = apply(t, pts)
+    lh, lw = int(low_shape[0]), int(low_shape[1])
+    inside = ((true_low[:, 0] >= -0.5) & (true_low[:, 0] <= lw - 0.5)
+              & (true_low[:, 1] >= -0.5) & (true_low[:, 1] <= lh - 0.5))
+    if not inside.any():
+        return math.inf
+    with np.errstate(all="ignore"):
+        est_low = apply(e, pts[inside])
+    d = np.linalg.norm(est_low - true_low[inside], axis=1)
+    err = float(np.mean(d))
+    return err if math.isfinite(err) else math.inf
+
+
+def is_success(err: float, threshold: float = SUCCESS_PX) -> bool:
+    """True when ``err`` (low px) is below ``threshold`` (EVALUATION.md: 3 px)."""
+    return bool(err < threshold)
