@@ -1,0 +1,663 @@
+"""The command line: a thin click layer over ``read_image``, ``match`` and ``write_outputs``.
+
+``scalematch LOW HIGH [options]`` runs the ``match`` command (the group routes any first argument
+that is not a command name to it); ``scalematch batch pairs.csv`` matches many pairs, one JSON
+line each. ``bench``, ``repeatability`` and ``covariance`` are registered when their modules are
+present. Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import dataclasses
+import importlib
+import json
+import multiprocessing
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+
+import click
+import numpy as np
+
+from . import __version__
+from .config import MODELS, MODES, Config
+from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
+from .result import MatchResult, to_jsonable
+
+#: Exit codes (documented in --help and README.md).
+EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
+
+#: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
+#: left out (not listed, "No such command") when the module is absent or cannot be imported.
+LAZY_COMMANDS = {
+    "bench": ("scalematch.bench", "bench_command"),
+    "repeatability": ("scalematch.repeatability", "repeatability_command"),
+    "covariance": ("scalematch.covariance", "covariance_command"),
+}
+
+#: Named threshold options: (option, Config path, type, help). An option is offered only when
+#: its path exists in ``Config()``; any other field can be set with ``--set PATH=VALUE``.
+THRESHOLD_OPTIONS = (
+    ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), float,
+     "Cornerness threshold of the scale-adapted Harris detector (both images), "
+     "(grey level/px)^4."),
+    ("--ratio-test", ("matcher.ratio",), float,
+     "Nearest / second-nearest descriptor distance ratio to keep a candidate match."),
+    ("--ransac-threshold", ("ransac.threshold_px",), float,
+     "RANSAC inlier distance, low-resolution px."),
+    ("--ransac-iterations", ("ransac.max_iters",), int, "RANSAC iterations at most."),
+    ("--min-inliers", ("decision.min_inliers",), int,
+     "Fewest inliers for a match to count as reliable."),
+    ("--max-log-nfa", ("decision.max_log_nfa",), float,
+     "Largest log10 number of false alarms for a match to count as reliable (lower: stricter)."),
+)
+
+
+class InputError(click.ClickException):
+    """Bad input (image, path, parameter value): ``Error: ...`` on stderr and exit code 2."""
+
+    exit_code = EXIT_BAD_INPUT
+
+
+# --------------------------------------------------------------------------- config helpers
+
+def parse_scales(text: str) -> Tuple[float, ...]:
+    """"1-8" (unit steps), "2-12:0.5" (steps of 0.5), "1,2,3.5" or a mix ("1-4,6,8") -> scales.
+
+    Raises ``ValueError`` with a message that says the accepted forms.
+    """
+    out: List[float] = []
+    forms = 'use e.g. "1-8", "2-12:0.5" or "1,2,3.5"'
+    for item in text.replace(" ", "").split(","):
+        if not item:
+            continue
+        try:
+            if "-" in item[1:]:
+                rng, _, step_txt = item.partition(":")
+                lo_txt, _, hi_txt = rng.partition("-")
+                lo, hi = float(lo_txt), float(hi_txt)
+                step = float(step_txt) if step_txt else 1.0
+                if step <= 0 or hi < lo:
+                    raise ValueError
+                n = int(np.floor((hi - lo) / step + 1e-9))
+                out.extend(round(lo + k * step, 6) for k in range(n + 1))
+            elif ":" in item:
+                raise ValueError
+            else:
+                out.append(float(item))
+        except ValueError:
+            raise ValueError(f"cannot read scales {text!r} at {item!r}; {forms}") from None
+    if not out:
+        raise ValueError(f"no scales in {text!r}; {forms}")
+    if min(out) < 1.0:
+        raise ValueError(f"scales must be >= 1 (the high-resolution image is never enlarged), "
+                         f"got {min(out):g}")
+    return tuple(sorted(set(out)))
+
+
+def _has_path(obj: Any, path: str) -> bool:
+    for name in path.split("."):
+        if not dataclasses.is_dataclass(obj) or name not in {f.name for f in dataclasses.fields(obj)}:
+            return False
+        obj = getattr(obj, name)
+    return True
+
+
+def _coerce(text: str, current: Any, path: str) -> Any:
+    """``text`` converted to the type of the field's current value."""
+    try:
+        if isinstance(current, bool):
+            low = text.strip().lower()
+            if low in ("1", "true", "yes", "on"):
+                return True
+            if low in ("0", "false", "no", "off"):
+                return False
+            raise ValueError
+        if isinstance(current, int):
+            return int(text)
+        if isinstance(current, float):
+            return float(text)
+        if isinstance(current, tuple):
+            return tuple(float(v) for v in text.split(",") if v.strip())
+        if current is None:
+            try:
+                return float(text) if "." in text or "e" in text.lower() else int(text)
+            except ValueError:
+                return text
+        if isinstance(current, Path):
+            return Path(text)
+    except ValueError:
+        kind = type(current).__name__
+        raise ValueError(f"{path} needs a {kind} value, got {text!r}") from None
+    return text
+
+
+def set_path(config: Any, path: str, value: Any) -> Any:
+    """A copy of the (nested, frozen) dataclass ``config`` with ``path`` ("a.b.c") set."""
+    head, _, rest = path.partition(".")
+    if not dataclasses.is_dataclass(config) or head not in {f.name for f in dataclasses.fields(config)}:
+        names = ", ".join(f.name for f in dataclasses.fields(config)) \
+            if dataclasses.is_dataclass(config) else ""
+        raise ValueError(f"no parameter {path!r} (known here: {names})")
+    if rest:
+        return dataclasses.replace(config, **{head: set_path(getattr(config, head), rest, value)})
+    if isinstance(value, str):
+        value = _coerce(value, getattr(config, head), path)
+    return dataclasses.replace(config, **{head: value})
+
+
+def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: Optional[int],
+                 thresholds: Dict[str, Any], settings: Sequence[str]) -> Config:
+    """The Config of the command-line options; ``ValueError`` with a message when one is bad."""
+    config = Config.paper() if mode == "paper" else Config()
+    changes: Dict[str, Any] = {}
+    if model is not None:
+        changes["model"] = model
+    if scales is not None:
+        changes["scales"] = parse_scales(scales)
+    if seed is not None:
+        changes["seed"] = seed
+    if changes:
+        config = dataclasses.replace(config, **changes)
+    for path, value in thresholds.items():
+        if value is not None:
+            config = set_path(config, path, value)
+    for item in settings:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise ValueError(f"--set needs PATH=VALUE (e.g. harris.threshold=50), got {item!r}")
+        config = set_path(config, key.strip(), value.strip())
+    return config
+
+
+# --------------------------------------------------------------------------- JSON contract
+
+def result_json(result: MatchResult, low_path: str, high_path: str,
+                low_shape: Tuple[int, ...], high_shape: Tuple[int, ...]) -> Dict[str, Any]:
+    """The JSON object of one match (README.md, "## Output"); plain types, nan -> None."""
+    t = result.transform
+    return {
+        "matched": bool(result.matched),
+        "reason": None if result.matched else (result.reason or "no reliable match"),
+        "model": result.model,
+        "transform": None if t is None else to_jsonable(np.asarray(t, dtype=np.float64)),
+        "resolution_ratio": to_jsonable(float(result.resolution_ratio)),
+        "rotation_deg": to_jsonable(float(result.rotation_deg)),
+        "translation": to_jsonable(list(result.translation)),
+        "best_scale": to_jsonable(float(result.best_scale)),
+        "inliers": result.n_inliers,
+        "matches": to_jsonable(np.round(np.asarray(result.inliers, np.float64).reshape(-1, 4), 3)),
+        "scales": [to_jsonable(row) for row in result.scales],
+        "seconds": round(result.seconds, 3),
+        "timings": to_jsonable({k: round(float(v), 3) for k, v in result.timings.items()}),
+        "evidence": to_jsonable(result.evidence),
+        "config": to_jsonable(result.config),
+        "version": __version__,
+        "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
+        "high": {"path": str(high_path), "width": int(high_shape[1]), "height": int(high_shape[0])},
+    }
+
+
+def dumps(obj: Dict[str, Any], indent: Optional[int] = None) -> str:
+    """JSON text; objects json cannot write (paths, numpy scalars left over) become strings."""
+    return json.dumps(to_jsonable(obj), indent=indent, default=str, allow_nan=False)
+
+
+# --------------------------------------------------------------------------- human output
+
+def summary(result: MatchResult) -> str:
+    """The one-line verdict on stderr."""
+    secs = f"{result.seconds:.1f} s"
+    if result.matched:
+        if result.model == "fundamental":
+            return (f"matched (fundamental): {result.n_inliers} inliers at scale "
+                    f"{result.best_scale:g}, {secs}")
+        return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
+                f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers at scale "
+                f"{result.best_scale:g}, {secs}")
+    best = f", best scale {result.best_scale:g}" if np.isfinite(result.best_scale) else ""
+    return f"no reliable match: {result.reason or 'the evidence is too weak'}{best}, {secs}"
+
+
+def scale_table(result: MatchResult) -> str:
+    """The per-scale table (the paper's Table 1) as text."""
+    head = f"{'s':>7} {'points':>7} {'initial':>7} {'kept':>6} {'inliers':>7} {'outl%':>6} " \
+           f"{'ratio':>7} {'rot':>7}"
+    lines = [head]
+    for r in result.scales:
+        flag = "  skipped" if r.skipped else ("  <- best" if r.s == result.best_scale else "")
+        ratio = f"{r.ratio:7.3f}" if np.isfinite(r.ratio) and abs(r.ratio) < 1e3 else f"{'-':>7}"
+        rot = f"{r.rotation_deg:7.1f}" if np.isfinite(r.rotation_deg) else f"{'-':>7}"
+        lines.append(f"{r.s:7.3g} {r.points:7d} {r.initial:7d} {r.kept:6d} {r.inliers:7d} "
+                     f"{r.outlier_pct:6.1f} {ratio} {rot}{flag}")
+    return "\n".join(lines)
+
+
+def _show_progress(quiet: bool) -> bool:
+    try:
+        return not quiet and sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+# --------------------------------------------------------------------------- output checks
+
+def check_out_dir(path: Path) -> None:
+    """Create ``path`` and make sure a file can be written in it, before the work starts."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".scalematch-check-"):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write to the output directory {path}: "
+                         f"{exc.strerror or exc}; choose another with --out-dir")
+
+
+def check_out_file(path: Path, option: str) -> None:
+    """Make sure ``path`` can be written (its folder exists and is writable) before the work."""
+    if path.is_dir():
+        raise InputError(f"{option} {path} is a directory; give a file name")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"cannot write {option} {path}: the folder {parent} does not exist; "
+                         "create it first")
+    try:
+        with open(path, "a"):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
+
+
+def write_text(path: Path, text: str, option: str) -> None:
+    try:
+        path.write_text(text)
+    except OSError as exc:
+        raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
+
+
+# --------------------------------------------------------------------------- the group
+
+class ScalematchGroup(click.Group):
+    """A group whose default command is ``match``, with lazily imported extra commands."""
+
+    default_command = "match"
+
+    def _known(self) -> set:
+        return set(self.commands) | set(LAZY_COMMANDS)
+
+    def parse_args(self, ctx: click.Context, args: List[str]) -> List[str]:
+        own = {"--help", "-h", "--version"}
+        if args and args[0] not in self._known() and args[0] not in own:
+            args = [self.default_command] + list(args)
+        return super().parse_args(ctx, args)
+
+    def get_command(self, ctx: click.Context, name: str) -> Optional[click.Command]:
+        cmd = super().get_command(ctx, name)
+        if cmd is not None or name not in LAZY_COMMANDS:
+            return cmd
+        module, attr = LAZY_COMMANDS[name]
+        try:
+            return getattr(importlib.import_module(module), attr)
+        except (ImportError, AttributeError):
+            return None
+
+    def list_commands(self, ctx: click.Context) -> List[str]:
+        names = list(self.commands)
+        names += [n for n in LAZY_COMMANDS if self.get_command(ctx, n) is not None]
+        return names
+
+
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+@click.group(cls=ScalematchGroup, context_settings=CONTEXT)
+@click.version_option(__version__, "--version", prog_name="scalematch",
+                      message="%(prog)s %(version)s")
+def cli() -> None:
+    """Match a low-resolution image against a high-resolution image of the same scene with
+    unknown zoom (2x-10x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
+
+    Without a command name, the arguments go to the match command:
+
+    \b
+    Examples:
+      scalematch low.jpg high.jpg
+      scalematch low.jpg high.jpg -o out/ --json out/result.json
+      scalematch low.png high.png --model homography --scales 1-8 --json -
+      scalematch batch pairs.csv --output results.jsonl --jobs 4
+
+    \b
+    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+    """
+
+
+def matching_options(f: Callable) -> Callable:
+    """The options shared by ``match`` and ``batch``: what is matched and how."""
+    opts = [
+        click.option("--model", type=click.Choice(MODELS), default=None,
+                     help="Transform fitted from high-res px to low-res px. [default: similarity]"),
+        click.option("--mode", type=click.Choice(MODES), default="default", show_default=True,
+                     help="'paper': the method as published (jets, Mahalanobis, semi-local "
+                          "constraints, scales 1-8)."),
+        click.option("--scales", metavar="LIST",
+                     help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
+                          '"1,2,3.5". [default: 1-12 in quarter octaves; paper mode 1-8]'),
+    ]
+    base = Config()
+    for name, paths, typ, text in THRESHOLD_OPTIONS:
+        paths = [p for p in paths if _has_path(base, p)]
+        if paths:
+            dest = "thr_" + name[2:].replace("-", "_")
+            opts.append(click.option(name, dest, type=typ, default=None,
+                                     help=f"{text} (Config {', '.join(paths)}) [default: "
+                                          f"{_get(base, paths[0])}]"))
+    opts += [
+        click.option("--set", "settings", multiple=True, metavar="PATH=VALUE",
+                     help="Set any Config field, e.g. --set harris.sigma_tilde=2.5 (repeatable)."),
+        click.option("--seed", type=int, default=None,
+                     help="Seed of all randomness (RANSAC); same input, same output. [default: 0]"),
+        click.option("--max-pixels", type=click.IntRange(min=1), default=DEFAULT_MAX_PIXELS,
+                     show_default=True, help="Refuse images with more pixels than this."),
+    ]
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def _get(obj: Any, path: str) -> Any:
+    for name in path.split("."):
+        obj = getattr(obj, name)
+    return obj
+
+
+def _config_from(kwargs: Dict[str, Any]) -> Config:
+    base = Config()
+    thresholds = {}
+    for name, paths, _, _ in THRESHOLD_OPTIONS:
+        value = kwargs.pop("thr_" + name[2:].replace("-", "_"), None)
+        for p in paths:
+            if _has_path(base, p):
+                thresholds[p] = value
+    try:
+        return build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
+                            kwargs.pop("seed"), thresholds, kwargs.pop("settings"))
+    except ValueError as exc:
+        raise InputError(str(exc))
+
+
+def _load(path: str, max_pixels: int) -> np.ndarray:
+    try:
+        return read_image(path, max_pixels=max_pixels)
+    except ImageError as exc:
+        raise InputError(str(exc))
+
+
+def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
+               progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
+    from .pipeline import match  # imported here so the CLI starts (and --help works) fast
+
+    return match(low, high, config, progress=progress)
+
+
+# --------------------------------------------------------------------------- match
+
+@cli.command("match", context_settings=CONTEXT)
+@click.argument("low", type=click.Path(exists=True, dir_okay=False))
+@click.argument("high", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Write overlay.png, matches.png, scales.png and matches.csv here.")
+@click.option("--json", "json_path", metavar="PATH",
+              help="Write the result as JSON here ('-' for stdout); written whether or not a "
+                   "match was found.")
+@matching_options
+@click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar on stderr.")
+@click.option("-v", "--verbose", is_flag=True,
+              help="Also print the per-scale table, the timings and the files written.")
+def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optional[str],
+                  quiet: bool, verbose: bool, max_pixels: int, **kwargs: Any) -> None:
+    """Match LOW (low-resolution image) against HIGH (high-resolution image).
+
+    Finds the zoom ratio (2x-10x), rotation and translation taking HIGH's pixels to LOW's, or
+    says "no reliable match". A one-line summary goes to stderr.
+
+    \b
+    Examples:
+      scalematch low.jpg high.jpg
+      scalematch low.jpg high.jpg -o out/ --json out/result.json
+      scalematch low.png high.png --mode paper --scales 1-8 --json - -q
+      scalematch low.png high.png --ransac-threshold 2 --set harris.threshold=50
+
+    \b
+    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+    """
+    config = _config_from(kwargs)
+    if out_dir is not None:
+        check_out_dir(out_dir)
+    if json_path and json_path != "-":
+        check_out_file(Path(json_path), "--json")
+    low_img = _load(low, max_pixels)
+    high_img = _load(high, max_pixels)
+    low_grey, high_grey = to_grey(low_img), to_grey(high_img)
+
+    try:
+        if _show_progress(quiet):
+            with click.progressbar(length=len(config.scales), label="matching scales",
+                                   file=sys.stderr, show_pos=True) as bar:
+                def progress(done: int, total: int) -> None:
+                    bar.update(done - bar.pos)
+                result = _run_match(low_grey, high_grey, config, progress)
+        else:
+            result = _run_match(low_grey, high_grey, config)
+    except ImageError as exc:
+        raise InputError(str(exc))
+    except ValueError as exc:  # the pipeline refuses the input (e.g. an image too small)
+        raise InputError(str(exc))
+
+    payload = result_json(result, low, high, low_grey.shape, high_grey.shape)
+    if json_path == "-":
+        click.echo(dumps(payload, indent=2))
+    elif json_path:
+        write_text(Path(json_path), dumps(payload, indent=2) + "\n", "--json")
+    written: Dict[str, Path] = {}
+    if out_dir is not None:
+        from .render import write_outputs
+
+        try:
+            written = write_outputs(out_dir, low, high, low_img, high_img, result)
+        except OSError as exc:
+            raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
+
+    if not quiet:
+        if verbose:
+            click.echo(scale_table(result), err=True)
+            click.echo("timings: " + ", ".join(f"{k} {v:.2f} s"
+                                               for k, v in result.timings.items()), err=True)
+            for path in written.values():
+                click.echo(f"wrote {path}", err=True)
+            if json_path and json_path != "-":
+                click.echo(f"wrote {json_path}", err=True)
+        click.echo(summary(result), err=True)
+    sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+
+# --------------------------------------------------------------------------- batch
+
+def read_pairs(path: Path) -> List[Tuple[str, str]]:
+    """(low, high) rows of a CSV; a first row "low,high" (any case) is a header and skipped."""
+    try:
+        with open(path, newline="") as fh:
+            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read {path}: {exc}; give a CSV with two columns low,high")
+    if rows and [c.strip().lower() for c in rows[0][:2]] == ["low", "high"]:
+        rows = rows[1:]
+    pairs = []
+    for k, row in enumerate(rows, 1):
+        if len(row) < 2 or not row[0].strip() or not row[1].strip():
+            raise InputError(f"{path}: row {k} {row!r} does not have two paths low,high")
+        pairs.append((row[0].strip(), row[1].strip()))
+    return pairs
+
+
+def _resolve(path: str, base: Path) -> str:
+    p = Path(path).expanduser()
+    return str(p if p.is_absolute() else base / p)
+
+
+def _init_worker() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def match_pair(low: str, high: str, low_file: str, high_file: str, config: Config,
+               max_pixels: int) -> Dict[str, Any]:
+    """One batch line: the JSON of the match of (low, high), or {"error": ...}; never raises."""
+    t0 = time.perf_counter()
+    try:
+        low_img = to_grey(read_image(low_file, max_pixels=max_pixels))
+        high_img = to_grey(read_image(high_file, max_pixels=max_pixels))
+        result = _run_match(low_img, high_img, config)
+        return result_json(result, low, high, low_img.shape, high_img.shape)
+    except ImageError as exc:
+        error = str(exc)
+    except ValueError as exc:
+        error = str(exc)
+    except Exception as exc:  # a bad pair must never stop the batch
+        error = f"{type(exc).__name__}: {exc}"
+    return {"low": {"path": low}, "high": {"path": high}, "matched": False, "error": error,
+            "seconds": round(time.perf_counter() - t0, 3), "version": __version__}
+
+
+def done_pairs(path: Path) -> set:
+    """(low, high) of the complete lines already in a batch output; a torn last line is cut."""
+    if not path.is_file():
+        return set()
+    text = path.read_text()
+    lines = text.splitlines(keepends=True)
+    keep: List[str] = []
+    done = set()
+    for line in lines:
+        try:
+            obj = json.loads(line)
+            key = (obj["low"]["path"], obj["high"]["path"])
+        except (ValueError, KeyError, TypeError):
+            continue
+        if not line.endswith("\n"):
+            line += "\n"
+        keep.append(line)
+        done.add(key)
+    if len(keep) != len(lines) or (lines and not lines[-1].endswith("\n")):
+        path.write_text("".join(keep))  # drop what an interruption tore
+    return done
+
+
+@cli.command("batch", context_settings=CONTEXT)
+@click.argument("pairs_csv", metavar="PAIRS.csv",
+                type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Append JSON lines here (resumable: pairs already in it are skipped) "
+                   "instead of stdout.")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes.")
+@matching_options
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar and no summary on stderr.")
+def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, quiet: bool,
+                  max_pixels: int, **kwargs: Any) -> None:
+    """Match every pair of PAIRS.csv (two columns low,high; header optional), one JSON line
+    per pair.
+
+    Relative paths in the CSV are taken from the CSV's folder. Each line is the JSON of
+    "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
+    is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
+    gets a line with "error" and the batch goes on. With --output, running the same command
+    again after an interruption skips the pairs already in the file (delete a line to redo it).
+
+    \b
+    Examples:
+      scalematch batch pairs.csv > results.jsonl
+      scalematch batch pairs.csv --output results.jsonl --jobs 4 --mode paper
+
+    \b
+    Exit codes: 0 every pair has its line, 2 bad CSV or usage.
+    """
+    config = _config_from(kwargs)
+    pairs = read_pairs(pairs_csv)
+    skip: set = set()
+    if output is not None:
+        check_out_file(output, "--output")
+        skip = done_pairs(output)
+    todo = [(lo, hi) for lo, hi in pairs if (lo, hi) not in skip]
+    base = pairs_csv.resolve().parent
+    out_fh = open(output, "a") if output is not None else sys.stdout
+    counts = {"matched": 0, "no match": 0, "error": 0}
+    show = _show_progress(quiet)
+    if not quiet and len(todo) < len(pairs):
+        click.echo(f"resuming: {len(pairs) - len(todo)} of {len(pairs)} pairs already in "
+                   f"{output}", err=True)
+
+    def emit(line: Dict[str, Any]) -> None:
+        out_fh.write(dumps(line) + "\n")
+        out_fh.flush()
+        counts["error" if "error" in line else "matched" if line["matched"] else "no match"] += 1
+
+    jobs_args = [(lo, hi, _resolve(lo, base), _resolve(hi, base), config, max_pixels)
+                 for lo, hi in todo]
+    bar = click.progressbar(length=len(todo), label="matching pairs", file=sys.stderr,
+                            show_pos=True) if show else None
+    try:
+        if bar is not None:
+            bar.__enter__()
+        if jobs == 1 or len(todo) <= 1:
+            for a in jobs_args:
+                emit(match_pair(*a))
+                if bar is not None:
+                    bar.update(1)
+        else:
+            ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
+            with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx,
+                                                        initializer=_init_worker) as pool:
+                futures = {pool.submit(match_pair, *a): a for a in jobs_args}
+                try:
+                    for fut in concurrent.futures.as_completed(futures):
+                        try:
+                            line = fut.result()
+                        except Exception as exc:  # the worker died (e.g. out of memory)
+                            lo, hi = futures[fut][:2]
+                            line = {"low": {"path": lo}, "high": {"path": hi}, "matched": False,
+                                    "error": f"worker failed: {type(exc).__name__}: {exc}",
+                                    "version": __version__}
+                        emit(line)
+                        if bar is not None:
+                            bar.update(1)
+                except KeyboardInterrupt:
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    raise
+    except KeyboardInterrupt:
+        done = sum(counts.values())
+        hint = "; run the same command again to resume" if output is not None else ""
+        click.echo(f"\ninterrupted: {done} of {len(todo)} pairs done{hint}", err=True)
+        sys.exit(130)
+    finally:
+        if bar is not None:
+            bar.__exit__(None, None, None)
+        if output is not None:
+            out_fh.close()
+    if not quiet:
+        click.echo(f"{len(todo)} pairs: {counts['matched']} matched, {counts['no match']} no "
+                   f"reliable match, {counts['error']} errors"
+                   + (f" ({len(pairs) - len(todo)} skipped as done)" if skip else ""), err=True)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> None:
+    """Console entry point (``scalematch``)."""
+    cli.main(args=list(argv) if argv is not None else None, prog_name="scalematch")
+
+
+if __name__ == "__main__":
+    main()
