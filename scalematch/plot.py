@@ -14,7 +14,7 @@ Pixel convention: OpenCV's, x to the right, y down; data y grows upwards on the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
@@ -111,14 +111,17 @@ class Frame:
     right: int
     bottom: int
     xlim: Tuple[float, float]  #: data x at left and right
-    ylim: Tuple[float, float]  #: data y at bottom and top
+    ylim: Tuple[float, float]  #: data y at bottom and top (``inset`` px inside the box)
+    inset: int = 0  #: gap, px, between the box and the data range (keeps end markers whole)
 
     def px(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Data (N,) x and y -> (N, 2) canvas px (float)."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        u = self.left + (x - self.xlim[0]) / (self.xlim[1] - self.xlim[0]) * (self.right - self.left)
-        v = self.bottom - (y - self.ylim[0]) / (self.ylim[1] - self.ylim[0]) * (self.bottom - self.top)
+        l, r = self.left + self.inset, self.right - self.inset
+        t, b = self.top + self.inset, self.bottom - self.inset
+        u = l + (x - self.xlim[0]) / (self.xlim[1] - self.xlim[0]) * (r - l)
+        v = b - (y - self.ylim[0]) / (self.ylim[1] - self.ylim[0]) * (b - t)
         return np.stack([u, v], axis=-1)
 
 
@@ -274,30 +277,62 @@ def _no_data(img: np.ndarray, fr: Frame, f: float) -> None:
           (150, 150, 150), 1, anchor="centre")
 
 
-def _legend(img: np.ndarray, fr: Frame, entries: List[Tuple[str, tuple, str]],
-            points: np.ndarray, f: float) -> None:
-    """A boxed legend in the plot corner that hides the fewest data points."""
-    if not entries:
-        return
-    fs = 0.5 * f
-    line_h = int(22 * f)
-    swatch = int(28 * f)
-    width = max(_text_size(name, fs)[0] for name, _, _ in entries) + swatch + int(24 * f)
-    height = line_h * len(entries) + int(10 * f)
-    pad = int(10 * f)
-    corners = [(fr.right - pad - width, fr.top + pad), (fr.left + pad, fr.top + pad),
-               (fr.right - pad - width, fr.bottom - pad - height),
-               (fr.left + pad, fr.bottom - pad - height)]
+def _densify(p: np.ndarray, step: float = 4.0) -> np.ndarray:
+    """(N, 2) polyline vertices -> points every ``step`` px along it (vertices included)."""
+    if p.shape[0] < 2:
+        return p
+    out = [p[:1]]
+    for a, b in zip(p[:-1], p[1:]):
+        k = max(int(np.hypot(*(b - a)) / step), 1)
+        t = np.arange(1, k + 1)[:, None] / k
+        out.append(a + t * (b - a))
+    return np.concatenate(out)
 
-    def hidden(corner):
-        x0, y0 = corner
+
+def _legend_size(entries: List[Tuple[str, tuple, str]], f: float) -> Tuple[int, int]:
+    """(width, height) px of the legend box for ``entries``."""
+    fs = 0.5 * f
+    width = max(_text_size(name, fs)[0] for name, _, _ in entries) + int(28 * f) + int(24 * f)
+    return width, int(22 * f) * len(entries) + int(10 * f)
+
+
+def _legend_spot(fr: Frame, size: Tuple[int, int], points: np.ndarray,
+                 f: float) -> Tuple[Tuple[int, int], int]:
+    """Top-left corner of the legend inside the plot where it hides the fewest ``points``.
+
+    Returns the corner and how many of ``points`` (canvas px sampled along the lines) it hides;
+    the top-right corner wins ties.
+    """
+    width, height = size
+    pad = int(10 * f)
+    mid_x = (fr.left + fr.right - width) // 2
+    mid_y = (fr.top + fr.bottom - height) // 2
+    spots = [(fr.right - pad - width, fr.top + pad), (fr.left + pad, fr.top + pad),
+             (fr.right - pad - width, fr.bottom - pad - height),
+             (fr.left + pad, fr.bottom - pad - height),
+             (fr.right - pad - width, mid_y), (fr.left + pad, mid_y),
+             (mid_x, fr.top + pad), (mid_x, fr.bottom - pad - height)]
+
+    def hidden(spot):
+        x0, y0 = spot
         if points.size == 0:
             return 0
         inside = ((points[:, 0] >= x0 - 8) & (points[:, 0] <= x0 + width + 8)
                   & (points[:, 1] >= y0 - 8) & (points[:, 1] <= y0 + height + 8))
         return int(inside.sum())
 
-    x0, y0 = min(corners, key=hidden)  # first corner wins ties: top right
+    best = min(spots, key=hidden)
+    return best, hidden(best)
+
+
+def _draw_legend(img: np.ndarray, spot: Tuple[int, int], entries: List[Tuple[str, tuple, str]],
+                 f: float) -> None:
+    """A boxed legend with its top-left corner at ``spot``."""
+    fs = 0.5 * f
+    line_h = int(22 * f)
+    swatch = int(28 * f)
+    width, height = _legend_size(entries, f)
+    x0, y0 = spot
     sub = img[y0:y0 + height, x0:x0 + width]
     sub[:] = (0.15 * sub + 0.85 * 255).astype(np.uint8)  # light box, grid faintly visible
     cv2.rectangle(img, (x0, y0), (x0 + width, y0 + height), (160, 160, 160), 1, cv2.LINE_AA)
@@ -357,7 +392,6 @@ def line_chart(series: Series, path: Optional[PathLike] = None, title: str = "",
     data = [(str(name), *_as_xy(pair, str(name))) for name, pair in series.items()]
     w, h = int(size[0]), int(size[1])
     f = _font_scale((w, h))
-    img = np.full((h, w, 3), 255, np.uint8)
     xs = np.concatenate([_finite(x[np.isfinite(y)]) for _, x, y in data]) if data else np.zeros(0)
     ys = np.concatenate([_finite(y[np.isfinite(x)]) for _, x, y in data]) if data else np.zeros(0)
 
@@ -366,8 +400,7 @@ def line_chart(series: Series, path: Optional[PathLike] = None, title: str = "",
         lo, hi = float(xt.min()), float(xt.max())
         if xs.size:
             lo, hi = min(lo, float(xs.min())), max(hi, float(xs.max()))
-        span = hi - lo if hi > lo else 1.0
-        xlim = (lo - 0.03 * span, hi + 0.03 * span)
+        xlim = (lo, hi) if hi > lo else (lo - 0.5, hi + 0.5)
         xstep = float(np.min(np.diff(xt))) if xt.size > 1 else 1.0
     else:
         xt = nice_ticks(float(xs.min()), float(xs.max())) if xs.size else nice_ticks(0.0, 1.0)
@@ -389,32 +422,44 @@ def line_chart(series: Series, path: Optional[PathLike] = None, title: str = "",
     xlabels = [format_tick(v, xstep) for v in xt]
 
     ytw = max((_text_size(s, 0.5 * f)[0] for s in ylabels), default=0)
-    fr = _frame((w, h), f, bool(title), bool(xlabel), bool(ylabel), ytw, xlim, y_range)
-    _axes(img, fr, xt, xlabels, yt, ylabels, f, title, xlabel, ylabel)
+    fr = replace(_frame((w, h), f, bool(title), bool(xlabel), bool(ylabel), ytw, xlim, y_range),
+                 inset=int(8 * f))
+    entries = [(name, PALETTE[i % len(PALETTE)], MARKERS[i % len(MARKERS)])
+               for i, (name, _, _) in enumerate(data)]
 
-    plot_area = img[fr.top + 1:fr.bottom, fr.left + 1:fr.right]
-    canvas = img.copy()
-    entries = []
-    all_px = []
-    thick = max(int(round(2 * f)), 2)
-    for i, (name, x, y) in enumerate(data):
-        colour = PALETTE[i % len(PALETTE)]
-        marker = MARKERS[i % len(MARKERS)]
-        entries.append((name, colour, marker))
-        for run in finite_runs(x, y):
-            p = fr.px(x[run], y[run])
-            all_px.append(p)
-            pts = np.round(p * 16).astype(np.int32).reshape(-1, 1, 2)  # 4 fractional bits
-            if len(run) > 1:
-                cv2.polylines(canvas, [pts], False, colour, thick, cv2.LINE_AA, shift=4)
-            for q in p:
-                _marker(canvas, (q[0], q[1]), marker, colour, max(int(9 * f), 5))
-    # data outside ylim is clipped to the plot area
-    plot_area[:] = canvas[fr.top + 1:fr.bottom, fr.left + 1:fr.right]
-    if not ys.size:
-        _no_data(img, fr, f)
-    pts_all = np.concatenate(all_px) if all_px else np.zeros((0, 2))
-    _legend(img, fr, entries, pts_all, f)
+    def draw(fr: Frame) -> Tuple[np.ndarray, np.ndarray]:
+        img = np.full((h, w, 3), 255, np.uint8)
+        _axes(img, fr, xt, xlabels, yt, ylabels, f, title, xlabel, ylabel)
+        canvas = img.copy()
+        along = []
+        thick = max(int(round(2 * f)), 2)
+        for (_, x, y), (_, colour, marker) in zip(data, entries):
+            for run in finite_runs(x, y):
+                p = fr.px(x[run], y[run])
+                along.append(_densify(p))
+                pts = np.round(p * 16).astype(np.int32).reshape(-1, 1, 2)  # 4 fractional bits
+                if len(run) > 1:
+                    cv2.polylines(canvas, [pts], False, colour, thick, cv2.LINE_AA, shift=4)
+                for q in p:
+                    _marker(canvas, (q[0], q[1]), marker, colour, max(int(9 * f), 5))
+        # data outside ylim is clipped to the plot area
+        img[fr.top + 1:fr.bottom, fr.left + 1:fr.right] = \
+            canvas[fr.top + 1:fr.bottom, fr.left + 1:fr.right]
+        if not ys.size:
+            _no_data(img, fr, f)
+        return img, (np.concatenate(along) if along else np.zeros((0, 2)))
+
+    img, along = draw(fr)
+    if entries:
+        box = _legend_size(entries, f)
+        spot, hidden = _legend_spot(fr, box, along, f)
+        narrowed = fr.right - box[0] - int(20 * f)
+        if hidden > 0 and narrowed - fr.left >= 0.5 * (fr.right - fr.left):
+            # no free spot inside: the legend goes to the right of a narrower plot
+            fr = replace(fr, right=narrowed)
+            img, along = draw(fr)
+            spot = (fr.right + int(10 * f), fr.top)
+        _draw_legend(img, spot, entries, f)
     save(img, path)
     return img
 
