@@ -510,8 +510,13 @@ def _resolve(path: str, base: Path) -> str:
 
 
 def _init_worker() -> None:
+    """Worker set-up: one OpenCV thread (the processes are the parallelism); Ctrl-C is left to
+    the parent, which stops the pool and says how to resume."""
+    import signal
+
     import cv2
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     cv2.setNumThreads(1)
 
 
@@ -620,24 +625,30 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, quiet: boo
                     bar.update(1)
         else:
             ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
-            with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx,
-                                                        initializer=_init_worker) as pool:
+            pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx,
+                                                          initializer=_init_worker)
+            try:
                 futures = {pool.submit(match_pair, *a): a for a in jobs_args}
-                try:
-                    for fut in concurrent.futures.as_completed(futures):
-                        try:
-                            line = fut.result()
-                        except Exception as exc:  # the worker died (e.g. out of memory)
-                            lo, hi = futures[fut][:2]
-                            line = {"low": {"path": lo}, "high": {"path": hi}, "matched": False,
-                                    "error": f"worker failed: {type(exc).__name__}: {exc}",
-                                    "version": __version__}
-                        emit(line)
-                        if bar is not None:
-                            bar.update(1)
-                except KeyboardInterrupt:
-                    pool.shutdown(wait=False, cancel_futures=True)
-                    raise
+                for fut in concurrent.futures.as_completed(futures):
+                    try:
+                        line = fut.result()
+                    except Exception as exc:  # the worker died (e.g. out of memory)
+                        lo, hi = futures[fut][:2]
+                        line = {"low": {"path": lo}, "high": {"path": hi}, "matched": False,
+                                "error": f"worker failed: {type(exc).__name__}: {exc}",
+                                "version": __version__}
+                    emit(line)
+                    if bar is not None:
+                        bar.update(1)
+            except KeyboardInterrupt:
+                # stop now: the pairs still running are redone when the batch is resumed
+                procs = list((getattr(pool, "_processes", None) or {}).values())
+                pool.shutdown(wait=False, cancel_futures=True)
+                for proc in procs:
+                    proc.terminate()
+                raise
+            finally:
+                pool.shutdown(wait=True)
     except KeyboardInterrupt:
         done = sum(counts.values())
         hint = "; run the same command again to resume" if output is not None else ""
