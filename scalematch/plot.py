@@ -146,7 +146,8 @@ def _finite(values: np.ndarray) -> np.ndarray:
     return values[np.isfinite(values)]
 
 
-def _as_xy(pair: Tuple[Sequence[float], Sequence[float]], name: str) -> Tuple[np.ndarray, np.ndarray]:
+def _as_xy(pair: Tuple[Sequence[float], Sequence[float]],
+           name: str) -> Tuple[np.ndarray, np.ndarray]:
     if len(pair) != 2:
         raise ValueError(f"series {name!r} must be a pair (xs, ys), got {len(pair)} items")
     x = np.asarray(pair[0], dtype=np.float64).ravel()

@@ -132,6 +132,8 @@ class FactorRow:
     chance_standard_raw: float = float("nan")  #: chance level of ``standard_raw``
     chance_standard_equal: float = float("nan")  #: chance level of ``standard_equal``
     chance_adapted_equal: float = float("nan")  #: chance level of ``adapted_equal``
+    standard_equal_max: float = float("nan")  #: ``standard_equal`` of the best photo
+    adapted_equal_min: float = float("nan")  #: ``adapted_equal`` of the worst photo
 
 
 @dataclass(frozen=True)
@@ -342,7 +344,7 @@ def texture(image: np.ndarray, shrink: float) -> float:
 
 def choose_crop(photo: np.ndarray, size: Tuple[int, int], pad: int, n_positions: int,
                 shrink: float, rng: np.random.Generator) -> Tuple[int, int, int, int]:
-    """(x0, y0, w, h) of the most textured of ``n_positions`` random crops ``pad`` px from the border.
+    """(x0, y0, w, h): the most textured of ``n_positions`` random crops, ``pad`` px inside.
 
     The crop is shrunk to fit when the photo is too small for ``size`` plus the padding; a
     ``ValueError`` says so when it would be under 64 px.
@@ -442,6 +444,12 @@ def _mean(values: Sequence[float]) -> float:
     return float(v.mean()) if v.size else float("nan")
 
 
+def _extreme(values: Sequence[float], fn) -> float:
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(fn(v)) if v.size else float("nan")
+
+
 def summarise(pairs: Sequence[PairMeasure], factors: Sequence[float]) -> Tuple[FactorRow, ...]:
     """Per-factor means over photos (photos where a value is nan are left out of that mean)."""
     rows = []
@@ -457,7 +465,9 @@ def summarise(pairs: Sequence[PairMeasure], factors: Sequence[float]) -> Tuple[F
             n_photos=len(ok),
             chance_standard_raw=_mean([p.chance_standard_raw for p in at]),
             chance_standard_equal=_mean([p.chance_standard_equal for p in at]),
-            chance_adapted_equal=_mean([p.chance_adapted_equal for p in at])))
+            chance_adapted_equal=_mean([p.chance_adapted_equal for p in at]),
+            standard_equal_max=_extreme([p.standard_equal for p in at], np.max),
+            adapted_equal_min=_extreme([p.adapted_equal for p in at], np.min)))
     return tuple(rows)
 
 
@@ -515,15 +525,20 @@ def _pct(v: float) -> str:
 
 def format_table(table: StudyTable) -> str:
     """The per-factor table as aligned text, repeatability in percent."""
-    lines = ["        |  all points (raw)  |  equal budget      |  chance level      |",
-             " factor | standard  adapted  | standard  adapted  | std raw  equal std | photos",
-             "--------+--------------------+--------------------+--------------------+-------"]
+    lines = ["        |  all points (raw)  |  equal budget      |  chance level      | equal, photo  |",
+             " factor | standard  adapted  | standard  adapted  | std raw  equal std | std    adapt  |"
+             " photos",
+             " (r)    |   mean      mean   |   mean      mean   |   mean     mean    | best   worst  |",
+             "--------+--------------------+--------------------+--------------------+---------------+"
+             "-------"]
     for r in table.rows:
         lines.append(f" {r.factor:6.2f} |   {_pct(r.standard_raw)}     {_pct(r.adapted_raw)}    |"
                      f"   {_pct(r.standard_equal)}     {_pct(r.adapted_equal)}    |"
                      f"   {_pct(r.chance_standard_raw)}     {_pct(r.chance_standard_equal)}     |"
+                     f" {_pct(r.standard_equal_max)}   {_pct(r.adapted_equal_min)}   |"
                      f" {r.n_photos:5d}")
-    lines.append("(repeatability, % mean over photos; chance = what random points would score)")
+    lines.append("(repeatability in %; chance = what random points would score; best/worst = the "
+                 "photo most favourable to standard / least favourable to adapted)")
     return "\n".join(lines)
 
 

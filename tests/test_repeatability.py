@@ -123,8 +123,9 @@ def test_chance_level_matches_random_points():
     rng = np.random.default_rng(0)
     side, n_high, n_low, eps = 200.0, 2000, 300, 1.5
     truth = np.array([[1.0, 0, 0], [0, 1.0, 0]])
-    got = [repeatability(rng.uniform(0, side - 1, (n_high, 2)), rng.uniform(0, side - 1, (n_low, 2)),
-                         truth, (int(side), int(side)), (int(side), int(side)), eps)
+    shape = (int(side), int(side))
+    got = [repeatability(rng.uniform(0, side - 1, (n_high, 2)),
+                         rng.uniform(0, side - 1, (n_low, 2)), truth, shape, shape, eps)
            for _ in range(5)]
     expected = chance_repeatability(n_high, n_low, (side - 1) ** 2, eps)
     assert np.mean(got) == pytest.approx(expected, abs=0.03)
