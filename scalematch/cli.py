@@ -457,6 +457,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
         raise InputError(str(exc))
     except ValueError as exc:  # the pipeline refuses the input (e.g. an image too small)
         raise InputError(str(exc))
+    except OSError as exc:  # a file the configuration names is missing (e.g. --set ..._path=)
+        raise InputError(str(exc))
 
     payload = result_json(result, low, high, low_grey.shape, high_grey.shape)
     if json_path == "-":

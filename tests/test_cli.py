@@ -259,7 +259,7 @@ def test_batch_with_worker_processes(tmp_path, flat_pair):
     assert result.exit_code == 0, result.output
     lines = [json.loads(x) for x in result.stdout.splitlines()]
     assert len(lines) == 3
-    assert sorted("error" in x for x in lines) == [False, True, True]
+    assert sorted("error" in x for x in lines) == [False, True, True], result.stdout
     ok = next(x for x in lines if "error" not in x)
     assert ok["matched"] is False and ok["reason"]
 
