@@ -100,10 +100,7 @@ def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.n
     if not lines:
         return image
     scale = float(np.clip(w / 900.0, 0.35, 0.8))
-    widest = max(cv2.getTextSize(s, FONT, scale, 1)[0][0] for s in lines)
-    while scale > 0.3 and widest > w - 12:
-        scale *= 0.9
-        widest = max(cv2.getTextSize(s, FONT, scale, 1)[0][0] for s in lines)
+    lines = [part for s in lines for part in _wrap(s, scale, w - 12)]
     (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
     step = th + base + 6
     strip = min(step * len(lines) + 6, h)
@@ -114,6 +111,19 @@ def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.n
         cv2.putText(image, s, (6, y0 + 4 + th + i * step), FONT, scale, (255, 255, 255), 1,
                     cv2.LINE_AA)
     return image
+
+
+def _wrap(text: str, scale: float, width: int) -> list:
+    """``text`` broken at spaces into lines no wider than ``width`` px (a long word stays whole)."""
+    out, line = [], ""
+    for word in text.split(" "):
+        trial = f"{line} {word}" if line else word
+        if line and cv2.getTextSize(trial, FONT, scale, 1)[0][0] > width:
+            out.append(line)
+            line = word
+        else:
+            line = trial
+    return out + [line]
 
 
 def summary_line(result: MatchResult) -> str:
@@ -227,6 +237,7 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
 def _band(lines: Sequence[str], width: int) -> np.ndarray:
     """A dark strip ``width`` px wide holding ``lines`` of caption (to stack above a picture)."""
     scale = float(np.clip(width / 900.0, 0.35, 0.8))
+    lines = [part for s in lines for part in _wrap(s, scale, width - 12)]
     (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
     band = np.full(((th + base + 6) * len(lines) + 8, width, 3), 40, np.uint8)
     return caption(band, lines)
