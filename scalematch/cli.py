@@ -266,9 +266,12 @@ def check_out_file(path: Path, option: str) -> None:
     if not parent.is_dir():
         raise InputError(f"cannot write {option} {path}: the folder {parent} does not exist; "
                          "create it first")
+    existed = path.exists()
     try:
         with open(path, "a"):
             pass
+        if not existed:
+            path.unlink()  # leave nothing behind if the run stops before writing it
     except OSError as exc:
         raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
 
@@ -436,12 +439,12 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
     """
     config = _config_from(kwargs)
-    if out_dir is not None:
+    low_img = _load(low, max_pixels)
+    high_img = _load(high, max_pixels)
+    if out_dir is not None:  # checked before the match, not after a minute's work
         check_out_dir(out_dir)
     if json_path and json_path != "-":
         check_out_file(Path(json_path), "--json")
-    low_img = _load(low, max_pixels)
-    high_img = _load(high, max_pixels)
     low_grey, high_grey = to_grey(low_img), to_grey(high_img)
 
     try:
