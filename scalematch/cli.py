@@ -493,14 +493,15 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 # --------------------------------------------------------------------------- batch
 
 def read_pairs(path: Path) -> List[Tuple[str, str]]:
-    """(low, high) rows of a CSV; a first row "low,high" (any case) is a header and skipped."""
+    """(low, high) rows of a CSV; a first row "low...,high..." (any case) is a header, skipped."""
     try:
         with open(path, newline="") as fh:
             rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"cannot read {path}: {exc}; give a CSV with two columns low,high")
-    if rows and [c.strip().lower() for c in rows[0][:2]] == ["low", "high"]:
-        rows = rows[1:]
+    head = [c.strip().lower() for c in rows[0][:2]] if rows else []
+    if len(head) == 2 and head[0].startswith("low") and head[1].startswith("high"):
+        rows = rows[1:]  # a header: low,high (or low_path,high_path, ...)
     pairs = []
     for k, row in enumerate(rows, 1):
         if len(row) < 2 or not row[0].strip() or not row[1].strip():
