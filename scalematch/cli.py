@@ -500,7 +500,8 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"cannot read {path}: {exc}; give a CSV with two columns low,high")
     head = [c.strip().lower() for c in rows[0][:2]] if rows else []
-    if len(head) == 2 and head[0].startswith("low") and head[1].startswith("high"):
+    if (len(head) == 2 and head[0].startswith("low") and head[1].startswith("high")
+            and not any(ch in "".join(head) for ch in "./\\")):
         rows = rows[1:]  # a header: low,high (or low_path,high_path, ...)
     pairs = []
     for k, row in enumerate(rows, 1):
