@@ -7,9 +7,14 @@ gathers them and is recorded with every result (``MatchResult.config``, the JSON
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Tuple
+from typing import Optional, Tuple
 
+from .constraints import OrientationParams, SemiLocalParams
+from .decision import DecisionParams
+from .descriptors import GradientParams, JetParams
 from .detector import HarrisParams, PAPER_SCALES
+from .estimator import RansacParams
+from .matcher import MatcherParams
 
 #: Models the robust estimator can fit (paper section 5 and "Further examples").
 MODELS = ("similarity", "affine", "homography", "fundamental")
@@ -31,6 +36,15 @@ def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float
 
 
 @dataclass(frozen=True)
+class ProbeParams:
+    """Skipping hopeless scales from the initial matches of their strongest points (paper 5)."""
+
+    enabled: bool = True  #: False runs the full matching at every scale
+    points: int = 150  #: strongest points per scale used to score it
+    keep: int = 3  #: best-scoring scales kept, each with its two neighbours
+
+
+@dataclass(frozen=True)
 class Config:
     """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper."""
 
@@ -40,7 +54,19 @@ class Config:
     #: (the paper: 1..8 in unit steps, PAPER_SCALES; ratios up to 10 need scales past 8)
     scales: Tuple[float, ...] = geometric_scales(1.0, 12.0, 4)
     seed: int = 0  #: the one seed for all randomness (RANSAC)
-    harris: HarrisParams = field(default_factory=HarrisParams)
+    harris: HarrisParams = field(default_factory=HarrisParams)  #: the high image, every scale
+    #: the low image, at s = 1 only: the same detector; more points allowed, since the high
+    #: image's footprint may be a small part of it
+    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
+    gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
+    jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
+    covariance_path: Optional[str] = None  #: Lambda for the jets (None: data/jet_covariance.json)
+    matcher: MatcherParams = field(default_factory=MatcherParams)
+    orientation: OrientationParams = field(default_factory=OrientationParams)  #: default mode
+    semi_local: SemiLocalParams = field(default_factory=SemiLocalParams)  #: paper mode
+    ransac: RansacParams = field(default_factory=RansacParams)
+    probe: ProbeParams = field(default_factory=ProbeParams)
+    decision: DecisionParams = field(default_factory=DecisionParams)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -53,4 +79,7 @@ class Config:
     @staticmethod
     def paper(**changes) -> "Config":
         """The paper's method as published: scales 1..8, jets, Mahalanobis, constraints."""
-        return replace(Config(mode="paper", scales=PAPER_SCALES), **changes)
+        base = Config(mode="paper", scales=PAPER_SCALES,
+                      # the paper: Mahalanobis nearest neighbours, then the constraints decide
+                      matcher=MatcherParams(selection="knn", k=3))
+        return replace(base, **changes)

@@ -1,0 +1,166 @@
+"""The covariance Lambda of jet differences and the Mahalanobis distance (paper eq. mahalanobis).
+
+``d(V, V') = sqrt((V - V')^T Lambda^-1 (V - V'))`` equals the Euclidean distance between
+``W V`` and ``W V'`` with ``W = Lambda^-1/2`` (whitening), so whitened descriptors go through
+ordinary nearest-neighbour search.
+
+Lambda is the covariance of the difference between the descriptors of the *same physical point*
+seen in two images. Schmid & Mohr estimated it by tracking points through image sequences; here
+it is estimated by tracking points through known synthetic changes of real photos (rotation, a
+small scale error, noise, gain and offset): :func:`estimate_covariance`. The shipped estimate is
+``data/jet_covariance.json`` (how it was made is recorded inside it); ``scalematch covariance``
+re-estimates it from a user's own photos.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Optional, Sequence
+
+import numpy as np
+
+from .descriptors import JET_DIM, JetParams, describe_jets
+from .detector import HarrisParams, detect_on_level
+from .scalespace import Level
+from .synthetic import apply, similarity_matrix
+
+#: The shipped estimate, at the top of the source tree.
+DEFAULT_COVARIANCE = Path(__file__).resolve().parents[1] / "data" / "jet_covariance.json"
+
+
+@dataclass(frozen=True)
+class Covariance:
+    matrix: np.ndarray = field(repr=False)  #: (D, D) Lambda
+    mean: np.ndarray = field(repr=False)  #: (D,) mean difference (should be ~0)
+    samples: int = 0
+    provenance: dict = field(default_factory=dict, repr=False)
+
+    def whitening(self) -> np.ndarray:
+        """W = Lambda^-1/2 (symmetric), so that |W (V - V')| is the Mahalanobis distance."""
+        w, v = np.linalg.eigh(self.matrix)
+        w = np.maximum(w, 1e-12 * max(w.max(), 1e-12))
+        return (v / np.sqrt(w)) @ v.T
+
+
+def whiten(desc: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Descriptors (N, D) -> whitened (N, D) float32."""
+    return (np.asarray(desc, np.float64) @ w.T).astype(np.float32)
+
+
+def mahalanobis(v: np.ndarray, v2: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Direct Mahalanobis distances between rows of v and v2 (for checks)."""
+    d = np.asarray(v, np.float64) - np.asarray(v2, np.float64)
+    return np.sqrt(np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d))
+
+
+def save_covariance(cov: Covariance, path: Path) -> None:
+    data = {"matrix": cov.matrix.tolist(), "mean": cov.mean.tolist(), "samples": cov.samples,
+            "dimension": int(cov.matrix.shape[0]), "provenance": cov.provenance}
+    Path(path).write_text(json.dumps(data, indent=2) + "\n")
+
+
+def load_covariance(path: Optional[Path] = None) -> Covariance:
+    """Read a covariance written by :func:`save_covariance` (default: the shipped one)."""
+    p = Path(path) if path is not None else DEFAULT_COVARIANCE
+    if not p.is_file():
+        raise FileNotFoundError(
+            f"{p}: jet covariance not found; re-estimate it with `scalematch covariance` "
+            "or pass its path")
+    data = json.loads(p.read_text())
+    m = np.asarray(data["matrix"], np.float64)
+    if m.shape != (JET_DIM, JET_DIM):
+        raise ValueError(f"{p}: covariance is {m.shape}, expected {JET_DIM}x{JET_DIM}")
+    return Covariance(matrix=m, mean=np.asarray(data.get("mean", np.zeros(JET_DIM))),
+                      samples=int(data.get("samples", 0)), provenance=data.get("provenance", {}))
+
+
+# ------------------------------------------------------------------------------- estimation
+
+
+@dataclass(frozen=True)
+class CovarianceRecipe:
+    """The synthetic changes points are tracked through (ALGORITHM.md step 4)."""
+
+    crop: int = 512  #: side of the square crop taken from each photo, px
+    crops_per_photo: int = 4
+    scale_error: float = 0.1  #: relative scale change, uniform in [-x, x] (scales are discrete)
+    gain: Sequence[float] = (0.7, 1.3)  #: grey-level gain range
+    offset: Sequence[float] = (-20.0, 20.0)  #: grey-level offset range
+    noise_std: float = 3.0  #: max Gaussian noise std, grey levels
+    match_px: float = 1.5  #: a point is tracked when re-detected within this distance
+    trim: float = 0.05  #: fraction of the largest differences dropped (robust estimate)
+
+
+def tracked_differences(image: np.ndarray, rng: np.random.Generator,
+                        recipe: CovarianceRecipe = CovarianceRecipe(),
+                        harris: HarrisParams = HarrisParams(), jets: JetParams = JetParams()
+                        ) -> np.ndarray:
+    """Descriptor differences (N, D) of points re-detected after one random synthetic change."""
+    import cv2
+
+    img = np.asarray(image, np.float32)
+    scale = 1.0 + rng.uniform(-recipe.scale_error, recipe.scale_error)
+    angle = rng.uniform(-180.0, 180.0)
+    h, w = img.shape
+    c = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    a = similarity_matrix(scale, angle)
+    a[:, 2] = c - a[:, :2] @ c
+    warped = cv2.warpAffine(img, a, (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT_101)
+    warped = warped * rng.uniform(*recipe.gain) + rng.uniform(*recipe.offset)
+    warped = warped + rng.normal(0.0, rng.uniform(0, recipe.noise_std), warped.shape)
+    warped = np.clip(np.rint(warped), 0, 255).astype(np.float32)
+    l0 = Level(1.0, 1.0, 0.0, img)
+    l1 = Level(1.0, 1.0, 0.0, warped)
+    k0 = detect_on_level(l0, harris)
+    k1 = detect_on_level(l1, harris)
+    if len(k0) == 0 or len(k1) == 0:
+        return np.zeros((0, JET_DIM))
+    mapped = apply(a, k0.xy)
+    margin = 16
+    inside = np.all((mapped >= margin) & (mapped <= np.array([w, h]) - 1 - margin), axis=1)
+    d = np.linalg.norm(mapped[inside, None, :] - k1.xy[None, :, :], axis=2)
+    if d.size == 0:
+        return np.zeros((0, JET_DIM))
+    nearest = d.argmin(axis=1)
+    ok = d[np.arange(d.shape[0]), nearest] <= recipe.match_px
+    src = k0.xy[inside][ok]
+    dst = k1.xy[nearest[ok]]
+    v0 = describe_jets(l0, src, harris.sigma_tilde, jets)
+    # the same physical point seen at a scale off by `scale`: its jet scale follows
+    v1 = describe_jets(l1, dst, harris.sigma_tilde, jets)
+    return (v1 - v0).astype(np.float64)
+
+
+def estimate_covariance(images: Iterable[np.ndarray], seed: int = 0,
+                        recipe: CovarianceRecipe = CovarianceRecipe(),
+                        harris: HarrisParams = HarrisParams(), jets: JetParams = JetParams(),
+                        provenance: Optional[dict] = None) -> Covariance:
+    """Estimate Lambda from grey photos by tracking points through random synthetic changes."""
+    rng = np.random.default_rng(seed)
+    diffs = []
+    for img in images:
+        img = np.asarray(img, np.float32)
+        h, w = img.shape
+        for _ in range(recipe.crops_per_photo):
+            cs = min(recipe.crop, h, w)
+            y = int(rng.integers(0, h - cs + 1))
+            x = int(rng.integers(0, w - cs + 1))
+            diffs.append(tracked_differences(img[y:y + cs, x:x + cs], rng, recipe, harris, jets))
+    d = np.concatenate(diffs) if diffs else np.zeros((0, JET_DIM))
+    d = d[np.all(np.isfinite(d), axis=1)]
+    if d.shape[0] < 10 * JET_DIM:
+        raise ValueError(f"only {d.shape[0]} tracked points: need more or more textured photos")
+    # robust: drop the largest differences (in a first covariance's metric), then re-estimate
+    c0 = np.cov(d, rowvar=False)
+    m0 = np.sqrt(np.einsum("ni,ij,nj->n", d, np.linalg.pinv(c0), d))
+    keep = m0 <= np.quantile(m0, 1.0 - recipe.trim)
+    d = d[keep]
+    cov = np.cov(d, rowvar=False)
+    prov = dict(provenance or {})
+    prov.update({"seed": seed, "recipe": {k: (list(v) if isinstance(v, tuple) else v)
+                                          for k, v in recipe.__dict__.items()},
+                 "trimmed_fraction": recipe.trim, "method": "tracked synthetic changes"})
+    return Covariance(matrix=cov, mean=d.mean(axis=0), samples=int(d.shape[0]), provenance=prov)

@@ -1,0 +1,221 @@
+"""The one-to-many matcher: every scale of the high image against the low image (paper 4.2, 5).
+
+``match(low, high, config)`` runs, for each scale s of the high-resolution image: detection
+(scale-adapted Harris), description, candidate matching against the low image's points (found
+once, at s = 1), geometric constraints, and robust estimation; the scale with the most inliers
+wins (ALGORITHM.md step 7) and :mod:`scalematch.decision` says whether the evidence is enough.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, List, Optional
+
+import numpy as np
+
+from .config import Config
+from .constraints import orientation_groups, semi_local_filter
+from .decision import Decision, decide
+from .descriptors import Described, describe_gradients, describe_jets
+from .detector import Keypoints, detect_on_level
+from .estimator import Estimate, estimate
+from .mahalanobis import load_covariance, whiten
+from .matcher import match_descriptors
+from .result import MatchResult, ScaleRow, similarity_parts
+from .scalespace import Level, as_float_image, scale_space
+
+#: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
+#: Harris filters (4 sigma~ = 8 px) see mostly border.
+MIN_SIDE_PX = 24
+
+
+@dataclass(frozen=True)
+class ScaleOutcome:
+    """What one scale produced (internal to the pipeline; summarised as a ScaleRow)."""
+
+    row: ScaleRow
+    estimate: Optional[Estimate]
+    src: np.ndarray  #: (K, 2) high px of the candidates given to the estimator
+    dst: np.ndarray  #: (K, 2) low px
+    candidates: int  #: initial candidate matches
+
+
+def _describe(level: Level, kp: Keypoints, config: Config, whitening) -> Described:
+    if config.mode == "paper":
+        desc = describe_jets(level, kp.xy, config.harris.sigma_tilde, config.jets)
+        ok = np.all(np.isfinite(desc), axis=1)
+        rows = np.nonzero(ok)[0]
+        return Described(s=level.s, xy=kp.xy[rows], index=rows,
+                         angle=np.full(rows.size, np.nan), desc=whiten(desc[rows], whitening))
+    return describe_gradients(level, kp.xy, config.gradients)
+
+
+def _constrain(config: Config, high: Described, low: Described, cand, level,
+               low_image: np.ndarray) -> List[np.ndarray]:
+    """Candidate subsets to hand to the estimator (each a boolean mask over the candidates)."""
+    p = high.xy[cand.i]
+    q = low.xy[cand.j]
+    if config.mode == "paper":
+        return [semi_local_filter(p, q, level, low_image, config.semi_local)]
+    dtheta = low.angle[cand.j] - high.angle[cand.i]
+    return orientation_groups(dtheta, config.orientation)
+
+
+def _full_scale(level, kp: Keypoints, high: Described, low: Described,
+                low_image: np.ndarray, config: Config) -> ScaleOutcome:
+    """Candidate matching, constraints and robust estimation at one scale.
+
+    ``level`` is the scale-space Level in the paper mode (its correlation check needs the
+    image) and just the scale s otherwise.
+    """
+    s = level.s if isinstance(level, Level) else float(level)
+    cand = match_descriptors(high.desc, low.desc, config.matcher)
+    best: Optional[Estimate] = None
+    best_src = best_dst = np.zeros((0, 2))
+    kept = 0
+    if len(cand):
+        for mask in _constrain(config, high, low, cand, level, low_image):
+            src = high.xy[cand.i[mask]]
+            dst = low.xy[cand.j[mask]]
+            est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
+            if best is None or est.n_inliers > best.n_inliers:
+                best, best_src, best_dst, kept = est, src, dst, int(mask.sum())
+    n_in = best.n_inliers if best is not None and best.transform is not None else 0
+    ratio = angle = float("nan")
+    if n_in and config.model != "fundamental":
+        ratio, angle, _ = similarity_parts(best.transform)
+    initial = len(cand)
+    row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
+                   inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,
+                   rotation_deg=angle)
+    return ScaleOutcome(row, best, best_src, best_dst, initial)
+
+
+def probe_score(high: Described, low: Described, config: Config) -> int:
+    """How promising a scale looks from the initial matches of its strongest points alone.
+
+    The paper (section 5) notes that the initial matches already point at the best scale. The
+    score is the number of candidate matches among the ``ProbeParams.points`` strongest points;
+    in the default mode only those in the dominant rotation peak count.
+    """
+    n = config.probe.points
+    sub = Described(high.s, high.xy[:n], high.index[:n], high.angle[:n], high.desc[:n])
+    cand = match_descriptors(sub.desc, low.desc, config.matcher)
+    if len(cand) == 0:
+        return 0
+    if config.mode == "paper":
+        return len(cand)
+    groups = orientation_groups(low.angle[cand.j] - sub.angle[cand.i], config.orientation)
+    return int(groups[0].sum()) if groups else 0
+
+
+def select_scales(scores: List[int], keep: int) -> List[int]:
+    """Indices of the ``keep`` best-scoring scales and their immediate neighbours."""
+    order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
+    chosen = set()
+    for i in order:
+        chosen.update(j for j in (i - 1, i, i + 1) if 0 <= j < len(scores))
+    return sorted(chosen)
+
+
+def _check_images(low: np.ndarray, high: np.ndarray) -> None:
+    for name, img in (("low", low), ("high", high)):
+        if min(img.shape) < MIN_SIDE_PX:
+            raise ValueError(f"the {name}-resolution image is {img.shape[1]}x{img.shape[0]} px; "
+                             f"at least {MIN_SIDE_PX} px on each side is needed")
+
+
+def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
+          progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
+    """Match a low-resolution image against a high-resolution one of the same scene.
+
+    Parameters
+    ----------
+    low, high : (H, W) arrays
+        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`).
+    config : Config
+        Every parameter; recorded in the result.
+    progress : callable, optional
+        ``progress(done, total)`` after each scale.
+
+    Returns
+    -------
+    MatchResult
+        ``matched`` False with a ``reason`` when the evidence is too weak: a wrong transform
+        reported as a match is the worst outcome, so the decision errs on the side of no.
+    """
+    t0 = time.perf_counter()
+    timings = {}
+    low = as_float_image(low)
+    high = as_float_image(high)
+    _check_images(low, high)
+    whitening = load_covariance(config.covariance_path).whitening() if config.mode == "paper" else None
+
+    low_level = Level(s=1.0, d=1.0, blur=0.0, image=low)
+    low_kp = detect_on_level(low_level, config.harris_low)
+    low_desc = _describe(low_level, low_kp, config, whitening)
+    timings["low_image"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    scales = sorted(config.scales)
+    levels = scale_space(high, scales, sigma=config.harris.sigma,
+                         min_level_sigma=config.harris.min_level_sigma,
+                         decimate=config.harris.decimate)
+    described = []  # (level or scale, keypoints, descriptors) per scale
+    total = 2 * len(scales)  # progress: describing each scale, then matching it
+    for level in levels:
+        if min(level.image.shape) < MIN_SIDE_PX // 2:
+            described.append((level.s, Keypoints.empty(level.s), None))
+            if progress is not None:
+                progress(len(described), total)
+            continue
+        kp = detect_on_level(level, config.harris)
+        desc = _describe(level, kp, config, whitening)
+        # only the paper's correlation check (eq. 5) needs the level image later: drop it
+        # otherwise, so a huge high image never holds all its levels at once
+        described.append((level if config.mode == "paper" else level.s, kp, desc))
+        if progress is not None:
+            progress(len(described), total)
+    timings["high_image"] = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    usable = [i for i, d in enumerate(described) if d[2] is not None and len(d[2])]
+    if config.probe.enabled and len(usable) > config.probe.keep:
+        scores = [probe_score(described[i][2], low_desc, config) for i in usable]
+        run = {usable[j] for j in select_scales(scores, config.probe.keep)}
+    else:
+        run = set(usable)
+    outcomes: List[ScaleOutcome] = []
+    for n, (level, kp, desc) in enumerate(described):
+        if n in run:
+            outcomes.append(_full_scale(level, kp, desc, low_desc, low, config))
+        else:
+            row = ScaleRow(s=scales[n], ratio=float("nan"), points=len(kp), initial=0, kept=0,
+                           inliers=0, outlier_pct=100.0, skipped=True)
+            outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
+        if progress is not None:
+            progress(len(scales) + n + 1, total)
+    timings["matching"] = time.perf_counter() - t2
+
+    t3 = time.perf_counter()
+    verdict: Decision = decide(outcomes, low.shape, high.shape, len(low_desc), config)
+    timings["decision"] = time.perf_counter() - t3
+    timings["total"] = time.perf_counter() - t0
+    rows = tuple(o.row for o in outcomes)
+    if not verdict.matched:
+        return MatchResult(matched=False, reason=verdict.reason, model=config.model, transform=None,
+                           resolution_ratio=float("nan"), rotation_deg=float("nan"),
+                           translation=(float("nan"), float("nan")),
+                           best_scale=verdict.best_scale, inliers=np.zeros((0, 4)), scales=rows,
+                           timings=timings, config=config, evidence=verdict.evidence)
+    t = verdict.transform
+    if config.model == "fundamental":
+        ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))
+    else:
+        ratio, angle, tr = similarity_parts(t)
+    return MatchResult(matched=True, reason="", model=config.model, transform=t,
+                       resolution_ratio=ratio, rotation_deg=angle, translation=tr,
+                       best_scale=verdict.best_scale, inliers=verdict.inliers, scales=rows,
+                       timings=timings, config=config, evidence=verdict.evidence)
