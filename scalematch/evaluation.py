@@ -80,3 +80,38 @@ def reprojection_error(estimate: Optional[np.ndarray], truth: np.ndarray,
 def is_success(err: float, threshold: float = SUCCESS_PX) -> bool:
     """True when ``err`` (low px) is below ``threshold`` (EVALUATION.md: 3 px)."""
     return bool(err < threshold)
+
+
+def fit_similarity(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares 2x3 similarity mapping (N, 2) ``src`` onto (N, 2) ``dst`` (N >= 2)."""
+    src = np.asarray(src, dtype=np.float64).reshape(-1, 2)
+    dst = np.asarray(dst, dtype=np.float64).reshape(-1, 2)
+    if len(src) < 2:
+        raise ValueError("fit_similarity needs at least 2 point pairs")
+    x, y = src[:, 0], src[:, 1]
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    # unknowns (a, b, tx, ty) of [[a, -b, tx], [b, a, ty]]
+    m = np.concatenate([np.stack([x, -y, one, zero], 1), np.stack([y, x, zero, one], 1)])
+    rhs = np.concatenate([dst[:, 0], dst[:, 1]])
+    a, b, tx, ty = np.linalg.lstsq(m, rhs, rcond=None)[0]
+    return np.array([[a, -b, tx], [b, a, ty]])
+
+
+def similarity_floor(truth: np.ndarray, high_shape: Tuple[int, ...],
+                     low_shape: Tuple[int, ...]) -> float:
+    """The error of the best similarity (least squares on the grid) against ``truth``.
+
+    Zero for a similarity truth; for a homography (the boat pairs) it is the part of the error
+    no similarity can remove: a method fitting a similarity cannot do better (within the
+    least-squares-versus-mean-distance gap).
+    """
+    t = _check(truth, "truth")
+    pts = grid(high_shape[:2])
+    true_low = apply(t, pts)
+    lh, lw = int(low_shape[0]), int(low_shape[1])
+    inside = ((true_low[:, 0] >= -0.5) & (true_low[:, 0] <= lw - 0.5)
+              & (true_low[:, 1] >= -0.5) & (true_low[:, 1] <= lh - 0.5))
+    if inside.sum() < 2:
+        return math.inf
+    return reprojection_error(fit_similarity(pts[inside], true_low[inside]), t, high_shape,
+                              low_shape)

@@ -206,16 +206,48 @@ def degrade(image: np.ndarray, gain: float, offset: float, noise_std: float,
     return np.clip(np.rint(out), 0, 255).astype(np.float32)
 
 
+def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], ratio: float,
+                        rng: np.random.Generator, low_max: Tuple[int, int] = LOW_MAX,
+                        source: str = "") -> ZoomPair:
+    """A zoom pair whose high image is the crop ``(x, y, w, h)`` of ``photo`` (steps 2-3).
+
+    ``low`` is the whole photo blurred, rotated by a random angle and shrunk by ``ratio``
+    (``zoom_warp``), cut to a window of at most ``low_max`` holding the crop's footprint
+    (``window_offset``), then changed in grey level and noise (``degrade``; doing the cut first
+    only saves work). The truth is ``T(-window) o A_warp o T(crop)``. ``rng`` draws, in order:
+    the angle, gain, offset, noise std, window offset and the noise.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if photo.ndim != 2:
+        raise ValueError(f"photo must be a grey (H, W) array, got shape {photo.shape}")
+    if not ratio >= 1.0:
+        raise ValueError(f"ratio must be >= 1, got {ratio}")
+    x, y, w, h = (int(v) for v in crop)
+    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    canvas, warp = zoom_warp(photo, ratio, angle)
+    to_canvas = compose(warp, _translation(x, y))
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
+                                   low_max, rng)
+    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
+    truth = compose(_translation(-wx, -wy), to_canvas)
+    return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
+                    gain=gain, offset=offset, noise_std=noise_std, source=source,
+                    crop_xy=(x, y), window_xy=(wx, wy))
+
+
 def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
                    high_size: Tuple[int, int] = HIGH_SIZE, low_max: Tuple[int, int] = LOW_MAX,
                    source: str = "") -> ZoomPair:
     """Cut a synthetic zoom pair with exact ground truth from one photo (EVALUATION.md 1-3).
 
     ``high`` is the most textured of 6 random crops (``choose_crop``); ``low`` is the whole photo
-    blurred, rotated by a random angle and shrunk by ``ratio`` (``zoom_warp``), cut to a window
-    of at most ``low_max`` holding the high image's footprint (``window_offset``), then changed in
-    grey level and noise (``degrade``; doing the cut first only saves work). The truth is
-    ``T(-window) o A_warp o T(crop)``.
+    blurred, rotated by a random angle and shrunk by ``ratio``, cut to at most ``low_max`` around
+    the high image's footprint, with a grey-level change and noise (``zoom_pair_from_crop``).
 
     Parameters
     ----------
@@ -240,22 +272,8 @@ def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
         raise ValueError(f"photo must be a grey (H, W) array, got shape {photo.shape}")
     if not ratio >= 1.0:
         raise ValueError(f"ratio must be >= 1, got {ratio}")
-    x, y, w, h = choose_crop(photo, ratio, rng, high_size)
-    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
-    angle = float(rng.uniform(*ANGLE_RANGE))
-    gain = float(rng.uniform(*GAIN_RANGE))
-    offset = float(rng.uniform(*OFFSET_RANGE))
-    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
-    canvas, warp = zoom_warp(photo, ratio, angle)
-    to_canvas = compose(warp, _translation(x, y))
-    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
-    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
-                                   low_max, rng)
-    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
-    truth = compose(_translation(-wx, -wy), to_canvas)
-    return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
-                    gain=gain, offset=offset, noise_std=noise_std, source=source,
-                    crop_xy=(x, y), window_xy=(wx, wy))
+    crop = choose_crop(photo, ratio, rng, high_size)
+    return zoom_pair_from_crop(photo, crop, ratio, rng, low_max, source)
 
 
 def make_unrelated_pair(photo_low: np.ndarray, photo_high: np.ndarray, ratio: float,
@@ -274,13 +292,24 @@ def make_unrelated_pair(photo_low: np.ndarray, photo_high: np.ndarray, ratio: fl
                    high_source=source_high or "other photo")
 
 
+def unrelated_indices(sources: Sequence[str], ratios: Sequence[float], count: int,
+                      rng: np.random.Generator, scene_of: Callable[[str], str]) -> List[Tuple[int, int]]:
+    """``count`` index pairs (i, j): low of pair i against high of pair j, never one scene.
+
+    Only pairs of the same ratio are combined, and only when ``scene_of(source)`` differs (two
+    photos of one scene could truly match). Combinations are drawn without replacement (one
+    permutation by ``rng``); fewer than ``count`` come back when there are not enough.
+    """
+    scenes = [scene_of(s) for s in sources]
+    combos = [(i, j) for i in range(len(sources)) for j in range(len(sources))
+              if ratios[i] == ratios[j] and scenes[i] != scenes[j]]
+    order = rng.permutation(len(combos))[:max(int(count), 0)]
+    return [combos[k] for k in order]
+
+
 def unrelated_from_pairs(pairs: Sequence[ZoomPair], count: int, rng: np.random.Generator,
                          scene_of: Callable[[str], str]) -> List[ZoomPair]:
     """Recombine zoom pairs into ``count`` unrelated pairs: low of one, high of another scene.
-
-    Only pairs of the same ratio are recombined, and only when ``scene_of(source)`` differs (two
-    photos of one scene could truly match). Combinations are drawn without replacement while
-    they last; fewer than ``count`` are returned when there are not enough.
 
     Parameters
     ----------
@@ -288,19 +317,19 @@ def unrelated_from_pairs(pairs: Sequence[ZoomPair], count: int, rng: np.random.G
         Pairs with a ``source`` each (e.g. from ``pairs_from_photos``).
     count : int
     rng : numpy Generator
-        Draws the order of the combinations (one permutation).
+        Draws the combinations (``unrelated_indices``).
     scene_of : callable
-        ``source`` -> scene name.
+        ``source`` -> scene name, e.g. ``datasets.scene_of``.
+
+    Returns
+    -------
+    list of ZoomPair
+        ``truth`` None, ``high_source`` naming where the high image comes from.
     """
-    combos = [(i, j) for i, a in enumerate(pairs) for j, b in enumerate(pairs)
-              if a.ratio == b.ratio and scene_of(a.source) != scene_of(b.source)]
-    order = rng.permutation(len(combos))[:max(int(count), 0)]
-    out = []
-    for k in order:
-        a, b = pairs[combos[k][0]], pairs[combos[k][1]]
-        out.append(replace(a, high=b.high, truth=None, crop_xy=b.crop_xy,
-                           high_source=b.source))
-    return out
+    idx = unrelated_indices([p.source for p in pairs], [p.ratio for p in pairs], count, rng,
+                            scene_of)
+    return [replace(pairs[i], high=pairs[j].high, truth=None, crop_xy=pairs[j].crop_xy,
+                    high_source=pairs[j].source) for i, j in idx]
 
 
 def pair_rng(seed: int, source: str, ratio: float) -> np.random.Generator:

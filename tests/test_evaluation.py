@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from scalematch.evaluation import SUCCESS_PX, grid, is_success, reprojection_error
+from scalematch.evaluation import (SUCCESS_PX, grid, is_success, reprojection_error,
+                                  similarity_floor)
 from scalematch.synthetic import similarity_matrix
 
 HIGH = (480, 640)
@@ -66,3 +67,11 @@ def test_grid_spans_image_and_threshold():
 def test_bad_shape_raises():
     with pytest.raises(ValueError, match="2x3"):
         reprojection_error(np.eye(2), np.eye(3), HIGH, LOW)
+
+
+def test_similarity_floor():
+    t = similarity_matrix(0.3, 45.0, 300.0, 200.0)
+    assert similarity_floor(t, HIGH, LOW) == pytest.approx(0.0, abs=1e-6)
+    h = np.vstack([t, [1e-4, 0, 1]])  # a little perspective
+    floor = similarity_floor(h, HIGH, LOW)
+    assert 0.1 < floor < reprojection_error(t, h, HIGH, LOW)
