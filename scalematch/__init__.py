@@ -5,12 +5,22 @@ The pipeline, by module: ``scalespace`` -> ``detector`` -> descriptors -> matchi
 constraints -> estimation -> ``pipeline`` (scale selection and decision) -> ``render``/``cli``.
 """
 
-from .config import Config
-from .detector import HarrisParams, Keypoints, PAPER_SCALES, detect
-from .imageio import ImageError, read_grey
-from .result import MatchResult, ScaleRow
+import os as _os
+
+# The matcher multiplies small matrices (a few hundred descriptors against a few thousand): a
+# multi-threaded BLAS spends more time waking threads than computing, 4x slower measured on 2
+# busy cores. One BLAS thread unless the user says otherwise; this only takes effect when
+# scalematch is imported before numpy (as the command line does).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    _os.environ.setdefault(_var, "1")
+
+from .config import Config  # noqa: E402
+from .detector import HarrisParams, Keypoints, PAPER_SCALES, detect  # noqa: E402
+from .imageio import ImageError, read_grey  # noqa: E402
+from .pipeline import match  # noqa: E402
+from .result import MatchResult, ScaleRow  # noqa: E402
 
 __version__ = "0.1.0"
 
-__all__ = ["Config", "HarrisParams", "Keypoints", "PAPER_SCALES", "detect", "ImageError",
+__all__ = ["match", "Config", "HarrisParams", "Keypoints", "PAPER_SCALES", "detect", "ImageError",
            "read_grey", "MatchResult", "ScaleRow", "__version__"]

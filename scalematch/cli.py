@@ -37,7 +37,7 @@ EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
 LAZY_COMMANDS = {
     "bench": ("scalematch.bench", "bench_command"),
     "repeatability": ("scalematch.repeatability", "repeatability_command"),
-    "covariance": ("scalematch.covariance", "covariance_command"),
+    "covariance": ("scalematch.mahalanobis", "covariance_command"),
 }
 
 #: Named threshold options: (option, Config path, type, help). An option is offered only when

@@ -81,5 +81,7 @@ class Config:
         """The paper's method as published: scales 1..8, jets, Mahalanobis, constraints."""
         base = Config(mode="paper", scales=PAPER_SCALES,
                       # the paper: Mahalanobis nearest neighbours, then the constraints decide
-                      matcher=MatcherParams(selection="knn", k=3))
+                      matcher=MatcherParams(selection="knn", k=3),
+                      # "In practice we run the latter algorithm at all scales" (section 5)
+                      probe=ProbeParams(enabled=False))
         return replace(base, **changes)

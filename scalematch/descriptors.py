@@ -144,14 +144,16 @@ class GradientParams:
     cell_px: float = 4.0  #: width of one of the 4x4 cells (window 16 px: SIFT's 4 cells x 3 sigma)
     grid: int = 4  #: cells per side (Lowe 2004)
     bins: int = 8  #: orientation bins per cell (Lowe 2004)
-    samples_per_cell: int = 4  #: gradient samples per cell side (Lowe 2004: 4)
+    #: gradient samples per cell side (Lowe 2004: 4; 2 measured as accurate here, 4x cheaper)
+    samples_per_cell: int = 2
     clip: float = 0.2  #: clip of the normalised histogram (Lowe 2004 section 6.1)
     orientation_bins: int = 36  #: orientation histogram bins (Lowe 2004 section 5)
     orientation_radius_px: float = 6.0  #: radius of the orientation window
     orientation_sigma_px: float = 3.0  #: Gaussian weight of the orientation window (1.5 sigma~)
     #: secondary orientation peaks within this fraction of the highest give extra points (Lowe: 0.8)
     secondary_peak: float = 0.8
-    presmooth_px: float = 0.7  #: blur of the level before sampling the window (anti-alias)
+    presmooth_px: float = 1.0  #: blur before sampling the window every cell_px/2 px (anti-alias)
+    orientation_step_px: int = 2  #: the orientation window is sampled every this many px
 
 
 @dataclass(frozen=True)
@@ -182,9 +184,10 @@ def dominant_orientations(image: np.ndarray, xy: np.ndarray, params: GradientPar
     n = xy.shape[0]
     if n == 0:
         return np.zeros(0, int), np.zeros(0)
-    gx, gy = _gradients(image)
+    step = params.orientation_step_px
+    gx, gy = _gradients(gaussian_blur(image, 0.5 * step))
     r = int(np.ceil(params.orientation_radius_px))
-    oy, ox = np.mgrid[-r:r + 1, -r:r + 1]
+    oy, ox = np.mgrid[-r:r + 1:step, -r:r + 1:step]
     disk = (ox ** 2 + oy ** 2) <= params.orientation_radius_px ** 2
     ox, oy = ox[disk], oy[disk]
     wgt = np.exp(-(ox ** 2 + oy ** 2) / (2 * params.orientation_sigma_px ** 2))

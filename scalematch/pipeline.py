@@ -52,7 +52,7 @@ def _describe(level: Level, kp: Keypoints, config: Config, whitening) -> Describ
     return describe_gradients(level, kp.xy, config.gradients)
 
 
-def _constrain(config: Config, high: Described, low: Described, cand, level,
+def _constrain(config: Config, high: Described, low: Described, cand, level: Level,
                low_image: np.ndarray) -> List[np.ndarray]:
     """Candidate subsets to hand to the estimator (each a boolean mask over the candidates)."""
     p = high.xy[cand.i]
@@ -63,14 +63,10 @@ def _constrain(config: Config, high: Described, low: Described, cand, level,
     return orientation_groups(dtheta, config.orientation)
 
 
-def _full_scale(level, kp: Keypoints, high: Described, low: Described,
+def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
                 low_image: np.ndarray, config: Config) -> ScaleOutcome:
-    """Candidate matching, constraints and robust estimation at one scale.
-
-    ``level`` is the scale-space Level in the paper mode (its correlation check needs the
-    image) and just the scale s otherwise.
-    """
-    s = level.s if isinstance(level, Level) else float(level)
+    """Candidate matching, constraints and robust estimation at one scale."""
+    s = level.s
     cand = match_descriptors(high.desc, low.desc, config.matcher)
     best: Optional[Estimate] = None
     best_src = best_dst = np.zeros((0, 2))
@@ -93,15 +89,19 @@ def _full_scale(level, kp: Keypoints, high: Described, low: Described,
     return ScaleOutcome(row, best, best_src, best_dst, initial)
 
 
+def _head(kp: Keypoints, n: int) -> Keypoints:
+    """The ``n`` strongest keypoints (they are sorted strongest first)."""
+    return Keypoints(s=kp.s, xy=kp.xy[:n], response=kp.response[:n])
+
+
 def probe_score(high: Described, low: Described, config: Config) -> int:
     """How promising a scale looks from the initial matches of its strongest points alone.
 
     The paper (section 5) notes that the initial matches already point at the best scale. The
-    score is the number of candidate matches among the ``ProbeParams.points`` strongest points;
+    score is the number of candidate matches of ``high``, the ``ProbeParams.points`` strongest points;
     in the default mode only those in the dominant rotation peak count.
     """
-    n = config.probe.points
-    sub = Described(high.s, high.xy[:n], high.index[:n], high.angle[:n], high.desc[:n])
+    sub = high
     cand = match_descriptors(sub.desc, low.desc, config.matcher)
     if len(cand) == 0:
         return 0
@@ -160,39 +160,42 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
 
     t1 = time.perf_counter()
     scales = sorted(config.scales)
-    levels = scale_space(high, scales, sigma=config.harris.sigma,
-                         min_level_sigma=config.harris.min_level_sigma,
-                         decimate=config.harris.decimate)
-    described = []  # (level or scale, keypoints, descriptors) per scale
-    total = 2 * len(scales)  # progress: describing each scale, then matching it
-    for level in levels:
+    total = 2 * len(scales)  # progress: probing each scale, then matching it
+    space = dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
+                 decimate=config.harris.decimate)
+    probing = config.probe.enabled and len(scales) > config.probe.keep
+    detected = []  # (keypoints, descriptors of the probe points or all) per scale
+    for n, level in enumerate(scale_space(high, scales, **space)):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
-            described.append((level.s, Keypoints.empty(level.s), None))
-            if progress is not None:
-                progress(len(described), total)
-            continue
-        kp = detect_on_level(level, config.harris)
-        desc = _describe(level, kp, config, whitening)
-        # only the paper's correlation check (eq. 5) needs the level image later: drop it
-        # otherwise, so a huge high image never holds all its levels at once
-        described.append((level if config.mode == "paper" else level.s, kp, desc))
+            detected.append((Keypoints.empty(level.s), None))
+        else:
+            kp = detect_on_level(level, config.harris)
+            part = _head(kp, config.probe.points) if probing else kp
+            detected.append((kp, _describe(level, part, config, whitening)))
         if progress is not None:
-            progress(len(described), total)
+            progress(n + 1, total)
     timings["high_image"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    usable = [i for i, d in enumerate(described) if d[2] is not None and len(d[2])]
-    if config.probe.enabled and len(usable) > config.probe.keep:
-        scores = [probe_score(described[i][2], low_desc, config) for i in usable]
-        run = {usable[j] for j in select_scales(scores, config.probe.keep)}
+    usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
+    if probing:
+        scores = [probe_score(detected[i][1], low_desc, config) for i in usable]
+        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
     else:
-        run = set(usable)
+        run = usable
+    full = {}
+    # the selected scales are described in full (their levels computed again: holding every
+    # level of a large high image in memory would cost several full-resolution copies)
+    for i, level in zip(run, scale_space(high, [scales[i] for i in run], **space)):
+        kp = detected[i][0]
+        desc = _describe(level, kp, config, whitening) if probing else detected[i][1]
+        full[i] = _full_scale(level, kp, desc, low_desc, low, config)
     outcomes: List[ScaleOutcome] = []
-    for n, (level, kp, desc) in enumerate(described):
-        if n in run:
-            outcomes.append(_full_scale(level, kp, desc, low_desc, low, config))
+    for n, s in enumerate(scales):
+        if n in full:
+            outcomes.append(full[n])
         else:
-            row = ScaleRow(s=scales[n], ratio=float("nan"), points=len(kp), initial=0, kept=0,
+            row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
                            inliers=0, outlier_pct=100.0, skipped=True)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         if progress is not None:
