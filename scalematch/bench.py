@@ -45,7 +45,7 @@ import click
 import cv2
 import numpy as np
 
-from .baselines import BASELINES, make_detector, match_baseline
+from .baselines import BASELINES, MIN_INLIERS, make_detector, match_baseline
 from .datasets import boat_pairs, find_shared, list_photos, scene_of
 from .evaluation import SUCCESS_PX, is_success, reprojection_error, similarity_floor
 from .imageio import read_grey
@@ -117,7 +117,12 @@ def make_method(name: str, seed: int = 0, model: str = "similarity") -> Method:
     if name in ("scalematch", "scalematch-paper"):
         import importlib
 
-        importlib.import_module("scalematch.pipeline")
+        try:
+            importlib.import_module("scalematch.pipeline")
+        except ImportError:
+            raise
+        except Exception as exc:  # a module being edited (SyntaxError, ...) counts as missing
+            raise ImportError(f"scalematch.pipeline failed to import: {exc!r}") from exc
         mode = "paper" if name.endswith("paper") else "default"
         return functools.partial(scalematch_method, mode=mode, seed=seed, model=model)
     raise ValueError(f"unknown method {name!r}; choose from {', '.join(METHOD_NAMES)}")
@@ -583,6 +588,7 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
     BenchReport
     """
     log = log or _quiet
+    load_at_start = _load_average()
     shared_path = Path(shared) if shared is not None else find_shared()
     if shared_path is None or not (shared_path / "data" / "photos").is_dir():
         raise ValueError("the shared data folder was not found: pass shared=... or set "
@@ -672,6 +678,7 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
         "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "commit": _git_commit(), "opencv": cv2.__version__, "numpy": np.__version__,
         "python": platform.python_version(), "large_pair": large_recs[0].source if large_recs else "",
+        "load_average_at_start": load_at_start, "opencv_threads": cv2.getNumThreads(),
     }
     summary_path = out / "summary.json"
     with open(summary_path, "w") as f:
@@ -692,6 +699,14 @@ def _jsonable(obj: Any) -> Any:
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
+
+
+def _load_average() -> Optional[float]:
+    """1-minute load average (other processes sharing the CPUs skew the times); None if unknown."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (OSError, AttributeError):
+        return None
 
 
 def machine() -> str:
@@ -740,8 +755,15 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
              f"- Reference for times: {s['reference']}. Each method runs alone in its own worker "
              "process; peak memory = the worker's peak resident set size minus its size before "
              "the first pair (after imports and a warm-up call).",
-             f"- The 6000x4000 pair: {s['large_pair']} (bicubic upscale of the largest photo, "
-             f"centre cut), low image at ratio {LARGE_RATIO:g}.",
+             f"- Load average when the run started: {s['load_average_at_start']} (times are "
+             f"wall-clock; OpenCV uses {s['opencv_threads']} threads per call, so more worker "
+             "processes than cores do not speed a batch up).",
+             ("- The 6000x4000 pair: " + s["large_pair"] + " (bicubic upscale of the largest "
+              f"photo, centre cut), low image at ratio {LARGE_RATIO:g}.") if s["large_pair"]
+             else "- The 6000x4000 pair was not run.",
+             f"- A claim is any transform returned; the OpenCV baselines claim a match from "
+             f"{MIN_INLIERS} RANSAC inliers up (`baselines.MIN_INLIERS`); the CSV's `inliers` "
+             "column allows recounting false matches at another threshold.",
              f"- The boat pairs are judged against the homography truth, every method fitting "
              f"a {BOAT_MODEL} there (the best similarity is 0.3-1.0 px off on 1->2 .. 1->5 and "
              "3.9 px on 1->6: see `similarity_floor_px` in the CSV).", ""]
