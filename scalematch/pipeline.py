@@ -94,24 +94,29 @@ def _head(kp: Keypoints, n: int) -> Keypoints:
     return Keypoints(s=kp.s, xy=kp.xy[:n], response=kp.response[:n])
 
 
-def probe_score(high: Described, low: Described, config: Config) -> int:
+def probe_score(high: Described, low: Described, config: Config) -> float:
     """How promising a scale looks from the initial matches of its strongest points alone.
 
     The paper (section 5) notes that the initial matches already point at the best scale. The
     score is the number of candidate matches of ``high``, the ``ProbeParams.points`` strongest points;
-    in the default mode only those in the dominant rotation peak count.
+    in the default mode, those in the dominant rotation peak beyond what chance puts there.
     """
     sub = high
     cand = match_descriptors(sub.desc, low.desc, config.matcher)
     if len(cand) == 0:
         return 0
     if config.mode == "paper":
-        return len(cand)
+        return float(len(cand))
     groups = orientation_groups(low.angle[cand.j] - sub.angle[cand.i], config.orientation)
-    return int(groups[0].sum()) if groups else 0
+    if not groups:
+        return 0.0
+    # excess over chance: random candidates fall in the +-tolerance window with probability
+    # 2 tol / 360, so a scale with many points does not win on its random matches alone
+    chance = len(cand) * 2.0 * config.orientation.tolerance_deg / 360.0
+    return float(groups[0].sum()) - chance
 
 
-def select_scales(scores: List[int], keep: int) -> List[int]:
+def select_scales(scores: List[float], keep: int) -> List[int]:
     """Indices of the ``keep`` best-scoring scales and their immediate neighbours."""
     order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
     chosen = set()
