@@ -111,12 +111,12 @@ def jet_invariants(l1: np.ndarray, l2: np.ndarray, l3: np.ndarray, sigma: float,
     v2 = np.einsum("ni,nij,nj->n", l1, l2, l1)
     v3 = np.einsum("nii->n", l2)
     v4 = np.einsum("nij,nji->n", l2, l2)
-    jkl_ikl = np.einsum("njkl,ni,nk,nl->nj", l3, l1, l1, l1)  # L_jkl L_k L_l, times L_i later
+    jkl_kl = np.einsum("njkl,nk,nl->nj", l3, l1, l1)  # L_jkl L_k L_l (free index j)
     jkk = np.einsum("njkk->nj", l3)
-    v5 = (np.einsum("ij,ni,nj->n", _EPS, l1, jkl_ikl)
+    v5 = (np.einsum("ij,ni,nj->n", _EPS, l1, jkl_kl)
           - np.einsum("ij,ni,nj->n", _EPS, l1, jkk) * v1)
     v6 = np.einsum("niij,nj->n", l3, l1) * v1 - np.einsum("nijk,ni,nj,nk->n", l3, l1, l1, l1)
-    v7 = -np.einsum("ij,ni,nj->n", _EPS, l1, jkl_ikl)
+    v7 = -np.einsum("ij,ni,nj->n", _EPS, l1, jkl_kl)
     v8 = np.einsum("nijk,ni,nj,nk->n", l3, l1, l1, l1)
     g = np.maximum(np.sqrt(v1), min_gradient)
     s = sigma

@@ -15,12 +15,9 @@ Known answers:
 
 Thresholds are set from measured values (written next to each) with headroom.
 
-Known bug (reported, not fixed by these tests): ``jet_invariants`` computes the vector
-``L_jkl L_k L_l`` of v5 and v7 as ``einsum("njkl,ni,nk,nl->nj", l3, l1, l1, l1)``, which also
-sums over the free index ``i`` and so multiplies it by ``(L_x + L_y)``. v5 and v7 are then
-neither rotation- nor gain-invariant. The tests of those two components are marked
-``xfail(strict=True)``: they fail today and will report XPASS (an error) once it is fixed,
-so that the marks are removed then.
+These tests found a bug, since fixed: ``L_jkl L_k L_l`` of v5 and v7 was computed with an
+extra sum over the free index ``i`` (a factor ``L_x + L_y``), so v5 and v7 were neither rotation-
+nor gain-invariant. The per-component tests below guard against its return.
 """
 
 from __future__ import annotations
@@ -40,14 +37,12 @@ from scalematch.synthetic import apply, similarity_matrix
 NAMES = ("v2", "v3", "v4", "v5", "v6", "v7", "v8")
 #: components not touched by the v5/v7 bug
 FIVE = [0, 1, 2, 4, 6]
-BUG = ("jet_invariants: L_jkl L_k L_l is computed with an extra sum over i, i.e. multiplied by "
-       "(L_x + L_y): v5 and v7 are not invariant")
 
 
 def _per_component():
     """One parameter per jet component; v5 and v7 are expected to fail (the bug above)."""
     return [pytest.param(c, id=NAMES[c],
-                         marks=[pytest.mark.xfail(strict=True, reason=BUG)] if c in (3, 5) else [])
+                         marks=[])
             for c in range(JET_DIM)]
 
 
@@ -350,7 +345,7 @@ def test_jets_agree_under_gain_and_offset(photo):
     ok = 0.7 * g > 2 * JetParams().min_gradient  # the floor is not reached in either image
     assert ok.mean() > 0.95  # measured 98.4 %
     # measured max absolute difference 1.1e-4 (float32 filtering)
-    np.testing.assert_allclose(raw1[ok][:, FIVE], raw0[ok][:, FIVE], rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(raw1[ok], raw0[ok], rtol=1e-3, atol=1e-3)
 
 
 def test_gradient_descriptors_are_unchanged_by_gain_and_offset(photo):

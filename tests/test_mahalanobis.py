@@ -121,8 +121,6 @@ def test_tracked_differences_of_a_pixel_exact_half_turn_are_zero(raccoon):
     assert np.abs(d[:, FIVE]).max() < 0.02
 
 
-@pytest.mark.xfail(strict=True, reason="descriptors.jet_invariants: v5 and v7 carry a spurious "
-                   "factor (L_x + L_y), which flips sign under a half turn (see test_descriptors)")
 def test_tracked_differences_of_v5_v7_under_a_half_turn_are_zero(raccoon):
     d = _half_turn_differences(raccoon)
     assert np.abs(d[:, [3, 5]]).max() < 0.02  # measured 17.3 with the bug
