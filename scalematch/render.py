@@ -244,10 +244,13 @@ def _band(lines: Sequence[str], width: int) -> np.ndarray:
 
 
 def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
-    """Bar chart of inliers against scale s, the winning scale highlighted."""
+    """Bar chart of inliers against scale s, the winning scale highlighted.
+
+    Scales the probe skipped as hopeless have no bar and an asterisk on their label.
+    """
     rows = list(result.scales)
-    labels = [float(r.s) for r in rows]
-    values = [float(r.inliers) for r in rows]
+    labels = [f"{r.s:g}*" if r.skipped else float(r.s) for r in rows]
+    values = [float("nan") if r.skipped else float(r.inliers) for r in rows]
     best = None
     if np.isfinite(result.best_scale) and rows:
         best = int(np.argmin([abs(r.s - result.best_scale) for r in rows]))
@@ -256,7 +259,10 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
                  f"ratio {result.resolution_ratio:.2f}")
     else:
         title = "inliers per scale: no reliable match"
-    return bar_chart(labels, values, title=title, xlabel="scale s of the high-resolution image",
+    xlabel = "scale s of the high-resolution image"
+    if any(r.skipped for r in rows):
+        xlabel += "   (* skipped: hopeless from its initial matches)"
+    return bar_chart(labels, values, title=title, xlabel=xlabel,
                      ylabel="inliers", highlight=best, size=size)
 
 
