@@ -54,8 +54,25 @@ from .synthetic import ZoomPair, pair_rng, pairs_from_photos, unrelated_indices,
 
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
 RATIOS = (2, 3, 4, 6, 8, 10)
-#: All methods, in the order they are reported.
+#: scalematch configurations by name: the two modes, and the ablation steps from the paper's
+#: method to the default (``--methods`` takes any of them; docs/BENCHMARKS.md reports what each
+#: step bought). Values: (one-line description, keyword arguments of ``_variant_config``).
+VARIANTS: Dict[str, Tuple[str, Dict[str, Any]]] = {
+    "scalematch": ("the default", {}),
+    "scalematch-paper": ("the paper: jets, Mahalanobis, semi-local constraints, scales 1-8",
+                         {"paper": True}),
+    "paper-finer-scales": ("the paper's pipeline on the default's scales (1-11.3, quarter octaves)",
+                           {"paper": True, "default_scales": True}),
+    "default-paper-scales": ("the default's descriptors and constraints on the paper's scales "
+                             "1-8, every scale run", {"paper_scales": True, "probe": False}),
+    "default-no-probe": ("the default, every scale run (no probe)", {"probe": False}),
+    "default-no-rotation-check": ("the default without the rotation-consistency filter",
+                                  {"rotation_check": False}),
+}
+#: The default run: the two modes and the peers, in the order they are reported.
 METHOD_NAMES = ("scalematch", "scalematch-paper") + BASELINES
+#: Every name ``--methods`` accepts.
+ALL_METHODS = METHOD_NAMES + tuple(v for v in VARIANTS if v not in METHOD_NAMES)
 #: The reference every time is divided by (EVALUATION.md: OpenCV SIFT).
 REFERENCE = "sift"
 #: Unrelated pairs (false-match test).
@@ -84,16 +101,35 @@ PathLike = Union[str, Path]
 # Methods
 # --------------------------------------------------------------------------------------------
 
+def _variant_config(seed: int, model: str, paper: bool = False, default_scales: bool = False,
+                    paper_scales: bool = False, probe: bool = True, rotation_check: bool = True):
+    """The Config of one entry of VARIANTS."""
+    from dataclasses import replace
+
+    from .config import Config, ProbeParams
+    from .constraints import OrientationParams
+    from .detector import PAPER_SCALES
+
+    config = Config.paper(seed=seed, model=model) if paper else Config(seed=seed, model=model)
+    if default_scales:
+        config = replace(config, scales=Config().scales)
+    if paper_scales:
+        config = replace(config, scales=PAPER_SCALES)
+    if not probe:
+        config = replace(config, probe=ProbeParams(enabled=False))
+    if not rotation_check:  # one group holding every candidate
+        config = replace(config, orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1))
+    return config
+
+
 def scalematch_method(low: np.ndarray, high: np.ndarray, mode: str = "default", seed: int = 0,
                       model: str = "similarity") -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
-    """scalematch's ``pipeline.match`` with ``Config()`` or ``Config.paper()`` (``mode``)."""
-    from .config import Config
+    """scalematch's ``pipeline.match`` with the configuration named ``mode`` (VARIANTS;
+    "default" and "paper" stand for "scalematch" and "scalematch-paper")."""
     from .pipeline import match
 
-    if mode == "paper":
-        config = Config.paper(seed=seed, model=model)
-    else:
-        config = Config(seed=seed, model=model)
+    name = {"default": "scalematch", "paper": "scalematch-paper"}.get(mode, mode)
+    config = _variant_config(seed, model, **VARIANTS[name][1])
     r = match(low, high, config)
     return (r.transform if r.matched else None), {"inliers": r.n_inliers, "reason": r.reason}
 
@@ -114,7 +150,7 @@ def make_method(name: str, seed: int = 0, model: str = "similarity") -> Method:
     if name in BASELINES:
         make_detector(name)  # fails early when this OpenCV build lacks the detector
         return functools.partial(baseline_method, name=name, seed=seed, model=model)
-    if name in ("scalematch", "scalematch-paper"):
+    if name in VARIANTS:
         import importlib
 
         try:
@@ -123,9 +159,8 @@ def make_method(name: str, seed: int = 0, model: str = "similarity") -> Method:
             raise
         except Exception as exc:  # a module being edited (SyntaxError, ...) counts as missing
             raise ImportError(f"scalematch.pipeline failed to import: {exc!r}") from exc
-        mode = "paper" if name.endswith("paper") else "default"
-        return functools.partial(scalematch_method, mode=mode, seed=seed, model=model)
-    raise ValueError(f"unknown method {name!r}; choose from {', '.join(METHOD_NAMES)}")
+        return functools.partial(scalematch_method, mode=name, seed=seed, model=model)
+    raise ValueError(f"unknown method {name!r}; choose from {', '.join(ALL_METHODS)}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -570,7 +605,7 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
     seed : int
         The one seed: pairs, unrelated combinations, RANSAC of every method.
     methods : sequence of str
-        Names from METHOD_NAMES; a method whose code cannot be imported is skipped (logged and
+        Names from ALL_METHODS; a method whose code cannot be imported is skipped (logged and
         listed in ``BenchReport.skipped``).
     unrelated : int
         Number of unrelated pairs (false-match test).
@@ -593,9 +628,9 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
     if shared_path is None or not (shared_path / "data" / "photos").is_dir():
         raise ValueError("the shared data folder was not found: pass shared=... or set "
                          "SCALEMATCH_SHARED to the folder holding data/photos")
-    unknown = [m for m in methods if m not in METHOD_NAMES]
+    unknown = [m for m in methods if m not in ALL_METHODS]
     if unknown:
-        raise ValueError(f"unknown method(s) {unknown}; choose from {', '.join(METHOD_NAMES)}")
+        raise ValueError(f"unknown method(s) {unknown}; choose from {', '.join(ALL_METHODS)}")
     ratios = tuple(float(r) for r in ratios)
     if not ratios or min(ratios) < 1:
         raise ValueError("ratios must be a non-empty list of values >= 1")
@@ -788,9 +823,9 @@ def _csv_floats(ctx, param, value):
 
 def _csv_methods(ctx, param, value):
     names = tuple(v.strip() for v in value.split(",") if v.strip())
-    bad = [n for n in names if n not in METHOD_NAMES]
+    bad = [n for n in names if n not in ALL_METHODS]
     if bad:
-        raise click.BadParameter(f"unknown {', '.join(bad)}; choose from {', '.join(METHOD_NAMES)}")
+        raise click.BadParameter(f"unknown {', '.join(bad)}; choose from {', '.join(ALL_METHODS)}")
     return names
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, List, Optional
 
 import numpy as np
@@ -97,23 +97,43 @@ def _head(kp: Keypoints, n: int) -> Keypoints:
 def probe_score(high: Described, low: Described, config: Config) -> float:
     """How promising a scale looks from the initial matches of its strongest points alone.
 
-    The paper (section 5) notes that the initial matches already point at the best scale. The
-    score is the number of candidate matches of ``high``, the ``ProbeParams.points`` strongest points;
-    in the default mode, those in the dominant rotation peak beyond what chance puts there.
+    The paper (section 5) notes that the initial matches already point at the best scale.
+    ``high`` holds the ``ProbeParams.points`` strongest points of the scale. In the paper mode
+    the score is their number of candidate matches. In the default mode it is the number of
+    inliers of a quick similarity fit to the candidates in the dominant rotation peak, counted
+    only when the fit's ratio agrees with the scale: rotation alone cannot rank scales where
+    the scene's edges share a few directions (facades), geometry can.
     """
-    sub = high
-    cand = match_descriptors(sub.desc, low.desc, config.matcher)
+    cand = match_descriptors(high.desc, low.desc, config.matcher)
     if len(cand) == 0:
-        return 0
+        return 0.0
     if config.mode == "paper":
         return float(len(cand))
-    groups = orientation_groups(low.angle[cand.j] - sub.angle[cand.i], config.orientation)
-    if not groups:
+    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], config.orientation)
+    best = 0.0
+    for mask in groups:
+        est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
+                       replace(config.ransac, max_iters=config.probe.ransac_iters),
+                       seed=config.seed)
+        if est.transform is None:
+            continue
+        ratio = similarity_parts(est.transform)[0]
+        if math.isfinite(ratio) and abs(math.log(ratio / high.s)) <= math.log(
+                config.decision.scale_agreement):
+            best = max(best, float(est.n_inliers))
+    return best
+
+
+def log10_binomial_tail(n: int, k: int, p: float) -> float:
+    """log10 P(X >= k) for X ~ Binomial(n, p)."""
+    if k <= 0:
         return 0.0
-    # excess over chance: random candidates fall in the +-tolerance window with probability
-    # 2 tol / 360, so a scale with many points does not win on its random matches alone
-    chance = len(cand) * 2.0 * config.orientation.tolerance_deg / 360.0
-    return float(groups[0].sum()) - chance
+    if k > n:
+        return -math.inf
+    logs = [math.lgamma(n + 1) - math.lgamma(i + 1) - math.lgamma(n - i + 1)
+            + i * math.log(p) + (n - i) * math.log1p(-p) for i in range(k, n + 1)]
+    top = max(logs)
+    return (top + math.log(sum(math.exp(v - top) for v in logs))) / math.log(10)
 
 
 def select_scales(scores: List[float], keep: int) -> List[int]:
@@ -200,8 +220,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         if n in full:
             outcomes.append(full[n])
         else:
+            # skipped: the probe judged it hopeless (not: too small, or no points at all)
             row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
-                           inliers=0, outlier_pct=100.0, skipped=True)
+                           inliers=0, outlier_pct=100.0, skipped=n in usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         if progress is not None:
             progress(len(scales) + n + 1, total)
