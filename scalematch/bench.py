@@ -61,11 +61,13 @@ VARIANTS: Dict[str, Tuple[str, Dict[str, Any]]] = {
     "scalematch": ("the default", {}),
     "scalematch-paper": ("the paper: jets, Mahalanobis, semi-local constraints, scales 1-8",
                          {"paper": True}),
-    "paper-finer-scales": ("the paper's pipeline on the default's scales (1-11.3, quarter octaves)",
+    "paper-finer-scales": ("the paper's pipeline on the default's scales (1-12.7, third octaves)",
                            {"paper": True, "default_scales": True}),
     "default-paper-scales": ("the default's descriptors and constraints on the paper's scales "
                              "1-8, every scale run", {"paper_scales": True, "probe": False}),
     "default-no-probe": ("the default, every scale run (no probe)", {"probe": False}),
+    "default-quarter-octaves": ("the default on 15 scales 1-11.3 (quarter octaves)",
+                                {"quarter_octaves": True}),
     "default-no-rotation-check": ("the default without the rotation-consistency filter",
                                   {"rotation_check": False}),
 }
@@ -102,11 +104,12 @@ PathLike = Union[str, Path]
 # --------------------------------------------------------------------------------------------
 
 def _variant_config(seed: int, model: str, paper: bool = False, default_scales: bool = False,
-                    paper_scales: bool = False, probe: bool = True, rotation_check: bool = True):
+                    paper_scales: bool = False, probe: bool = True, rotation_check: bool = True,
+                    quarter_octaves: bool = False):
     """The Config of one entry of VARIANTS."""
     from dataclasses import replace
 
-    from .config import Config, ProbeParams
+    from .config import Config, ProbeParams, geometric_scales
     from .constraints import OrientationParams
     from .detector import PAPER_SCALES
 
@@ -115,6 +118,8 @@ def _variant_config(seed: int, model: str, paper: bool = False, default_scales: 
         config = replace(config, scales=Config().scales)
     if paper_scales:
         config = replace(config, scales=PAPER_SCALES)
+    if quarter_octaves:
+        config = replace(config, scales=geometric_scales(1.0, 12.0, 4))
     if not probe:
         config = replace(config, probe=ProbeParams(enabled=False))
     if not rotation_check:  # one group holding every candidate

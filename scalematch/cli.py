@@ -349,7 +349,7 @@ def matching_options(f: Callable) -> Callable:
                           "constraints, scales 1-8)."),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
-                          '"1,2,3.5". [default: 1-12 in quarter octaves; paper mode 1-8]'),
+                          '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
     ]
     base = Config()
     for name, paths, typ, text in THRESHOLD_OPTIONS:
