@@ -40,7 +40,9 @@ class ProbeParams:
     """Skipping hopeless scales from the initial matches of their strongest points (paper 5)."""
 
     enabled: bool = True  #: False runs the full matching at every scale
-    points: int = 150  #: strongest points per scale used to score it
+    #: strongest points per scale used to score it (100 and 150 measured the same success on
+    #: the 38 photos at ratios 8 and 10; 100 is 16 % faster)
+    points: int = 100
     keep: int = 3  #: best-scoring scales kept, each with its two neighbours
     #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
     #: with 99.9 % confidence down to an inlier fraction of 12 %

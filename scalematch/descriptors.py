@@ -180,12 +180,16 @@ def _gradients(image: np.ndarray) -> tuple:
 
 
 def dominant_orientations(image: np.ndarray, xy: np.ndarray, params: GradientParams):
-    """Orientations (radians) at level points ``xy`` (N, 2): returns (rows (M,), angles (M,))."""
+    """Orientations (radians) at level points ``xy`` (N, 2): returns (rows (M,), angles (M,)).
+
+    ``image`` is the level already smoothed by ``presmooth_px`` (enough for sampling gradients
+    every ``orientation_step_px`` = 2 px).
+    """
+    step = params.orientation_step_px
     n = xy.shape[0]
     if n == 0:
         return np.zeros(0, int), np.zeros(0)
-    step = params.orientation_step_px
-    gx, gy = _gradients(gaussian_blur(image, 0.5 * step))
+    gx, gy = _gradients(image)
     r = int(np.ceil(params.orientation_radius_px))
     oy, ox = np.mgrid[-r:r + 1:step, -r:r + 1:step]
     disk = (ox ** 2 + oy ** 2) <= params.orientation_radius_px ** 2
@@ -223,7 +227,10 @@ def dominant_orientations(image: np.ndarray, xy: np.ndarray, params: GradientPar
 
 def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
                         params: GradientParams) -> np.ndarray:
-    """4x4x8 oriented gradient histograms (M, 128) at level points ``xy`` turned by ``angles``."""
+    """4x4x8 oriented gradient histograms (M, 128) at level points ``xy`` turned by ``angles``.
+
+    ``image`` is the level already smoothed by ``presmooth_px`` (anti-alias for the sampling).
+    """
     m = xy.shape[0]
     g, nb = params.grid, params.bins
     dim = g * g * nb
@@ -240,7 +247,7 @@ def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
     mapy = (xy[:, 1, None, None] + s * uu + c * vv).astype(np.float32)
     mapx = mapx.reshape(m, (ns + 2) ** 2)
     mapy = mapy.reshape(m, (ns + 2) ** 2)
-    src = gaussian_blur(image, params.presmooth_px)
+    src = image  # already smoothed by presmooth_px (describe_gradients)
     patch = np.empty_like(mapx)
     for lo in range(0, m, _REMAP_ROWS):  # cv2.remap takes maps of fewer than 32767 rows
         patch[lo:lo + _REMAP_ROWS] = cv2.remap(src, mapx[lo:lo + _REMAP_ROWS],
@@ -280,6 +287,7 @@ def describe_gradients(level: Level, xy_full: np.ndarray,
     """Oriented gradient-histogram descriptors of points (full-res px) of one level."""
     xy_full = np.asarray(xy_full, dtype=np.float64).reshape(-1, 2)
     xy = level.to_level(xy_full)
-    rows, angles = dominant_orientations(level.image, xy, params)
-    desc = gradient_histograms(level.image, xy[rows], angles, params)
+    smooth = gaussian_blur(level.image, params.presmooth_px)  # one blur serves both steps
+    rows, angles = dominant_orientations(smooth, xy, params)
+    desc = gradient_histograms(smooth, xy[rows], angles, params)
     return Described(s=level.s, xy=xy_full[rows], index=rows, angle=angles, desc=desc)
