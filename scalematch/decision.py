@@ -126,7 +126,7 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
     return min(p, 1.0)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, n_low_points: int, config) -> Decision:
+def decide(outcomes: Sequence, low_shape, high_shape, config) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match."""
     params: DecisionParams = config.decision
     model = config.model

@@ -229,7 +229,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     timings["matching"] = time.perf_counter() - t2
 
     t3 = time.perf_counter()
-    verdict: Decision = decide(outcomes, low.shape, high.shape, len(low_desc), config)
+    verdict: Decision = decide(outcomes, low.shape, high.shape, config)
     timings["decision"] = time.perf_counter() - t3
     timings["total"] = time.perf_counter() - t0
     rows = tuple(o.row for o in outcomes)
