@@ -55,7 +55,7 @@ from .synthetic import ZoomPair, pair_rng, pairs_from_photos, unrelated_indices,
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
 RATIOS = (2, 3, 4, 6, 8, 10)
 #: scalematch configurations by name: the two modes, and the ablation steps from the paper's
-#: method to the default (``--methods`` takes any of them; docs/BENCHMARKS.md reports what each
+#: method to the default (``--methods`` takes any of them; docs/ABLATION.md reports what each
 #: step bought). Values: (one-line description, keyword arguments of ``_variant_config``).
 VARIANTS: Dict[str, Tuple[str, Dict[str, Any]]] = {
     "scalematch": ("the default", {}),

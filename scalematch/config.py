@@ -58,7 +58,7 @@ class Config:
     #: scales s of the high-resolution image to try: 1 to 12.7 by third octaves (12 scales;
     #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 10 need scales past 8; a
     #: scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves (15 scales)
-    #: measured 1 more success in 38 at ratio 10 for 12 % more time (docs/BENCHMARKS.md).
+    #: measured 1 more success in 38 at ratio 10 for 12 % more time (docs/ABLATION.md).
     scales: Tuple[float, ...] = geometric_scales(1.0, 12.7, 3)
     seed: int = 0  #: the one seed for all randomness (RANSAC)
     harris: HarrisParams = field(default_factory=HarrisParams)  #: the high image, every scale

@@ -50,8 +50,9 @@ class DecisionParams:
     #: the winner's (mean over a grid, as EVALUATION.md measures error)
     agreement_px: float = 4.0
     min_agreeing_scales: int = 1  #: other scales that must agree with the winner ...
-    #: ... unless the winner alone is this far beyond chance (log10 NFA): unrelated pairs
-    #: measured here never went below -1 (docs/BENCHMARKS.md), true ones with ~8 inliers reach -25
+    #: ... unless the winner alone is this far beyond chance (log10 NFA): the best transforms of
+    #: 39 unrelated pairs measured during development never went below -1.05, true ones at
+    #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
 
