@@ -775,7 +775,8 @@ def _git_commit() -> str:
 def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.md") -> Path:
     """Write ``path`` (Markdown): the tables and plot of ``report``, the command, machine, date.
 
-    The plot is copied next to it as ``benchmarks.png``. The page is generated: never edit a
+    The plot is copied next to it, named after the page (BENCHMARKS.md -> benchmarks.png, so
+    several pages can live side by side). The page is generated: never edit a
     figure in it by hand, re-run the command.
     """
     p = Path(path)
@@ -808,8 +809,9 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
              f"a {BOAT_MODEL} there (the best similarity is 0.3-1.0 px off on 1->2 .. 1->5 and "
              "3.9 px on 1->6: see `similarity_floor_px` in the CSV).", ""]
     if report.plot_path is not None and Path(report.plot_path).is_file():
-        shutil.copyfile(report.plot_path, p.parent / "benchmarks.png")
-        lines += ["![success rate against ratio](benchmarks.png)", ""]
+        png = p.stem.lower() + ".png"
+        shutil.copyfile(report.plot_path, p.parent / png)
+        lines += [f"![success rate against ratio]({png})", ""]
     lines += [report.table, "", "Photos: " + ", ".join(f"`{n}`" for n in s["photos"]), ""]
     p.write_text("\n".join(lines))
     return p
