@@ -31,6 +31,7 @@ from typing import Dict, Optional, Sequence, Tuple
 import numpy as np
 
 from .estimator import MIN_SAMPLE
+from .evaluation import grid
 from .result import similarity_parts
 from .synthetic import apply
 
@@ -79,13 +80,6 @@ def log10_nfa(n: int, k: int, m: int, p: float, tests: float) -> float:
         return math.inf
     return (math.log10(max(tests, 1.0)) + log10_binom(n, k) + log10_binom(k, m)
             + (k - m) * math.log10(max(min(p, 1.0), 1e-300)))
-
-
-def grid(shape: Tuple[int, int], n: int = 21) -> np.ndarray:
-    """An n x n grid of points spanning an image of ``shape`` (H, W): (n*n, 2)."""
-    h, w = shape
-    xs, ys = np.meshgrid(np.linspace(0, w - 1, n), np.linspace(0, h - 1, n))
-    return np.stack([xs.ravel(), ys.ravel()], axis=1)
 
 
 def mean_transfer_gap(t1: np.ndarray, t2: np.ndarray, high_shape) -> float:

@@ -101,9 +101,9 @@ def match_descriptors(high: np.ndarray, low: np.ndarray,
     elif params.selection == "nn":
         i, j, d, sec = np.arange(n), idx[:, 0], dist[:, 0], second
     else:  # knn / threshold: every listed neighbour, one-to-many
-        kk = idx.shape[1] if params.selection == "knn" else idx.shape[1]
+        kk = idx.shape[1]
         i = np.repeat(np.arange(n), kk)
-        j, d = idx[:, :kk].ravel(), dist[:, :kk].ravel()
+        j, d = idx.ravel(), dist.ravel()
         sec = np.repeat(second, kk)
     keep = d <= params.max_distance
     i, j, d, sec = i[keep], j[keep], d[keep], sec[keep]

@@ -62,7 +62,7 @@ import numpy as np
 
 from .datasets import find_shared, list_photos, load_photo
 from .detector import HarrisParams, detect, detect_one
-from .synthetic import apply, compose, zoom_warp
+from .synthetic import apply, compose, most_textured_crop, zoom_warp
 
 PathLike = Union[str, Path]
 
@@ -330,18 +330,6 @@ def equal_budget_repeatability(high_xy: np.ndarray, high_resp: np.ndarray, low_x
 # Pairs with exact ground truth
 # --------------------------------------------------------------------------------------------
 
-def texture(image: np.ndarray, shrink: float) -> float:
-    """Mean gradient magnitude (grey levels / px) of ``image`` shrunk by ``shrink``."""
-    img = np.asarray(image, dtype=np.float32)
-    if shrink > 1:
-        w = max(int(round(img.shape[1] / shrink)), 8)
-        h = max(int(round(img.shape[0] / shrink)), 8)
-        img = cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
-    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    return float(np.mean(np.sqrt(gx * gx + gy * gy)))
-
-
 def choose_crop(photo: np.ndarray, size: Tuple[int, int], pad: int, n_positions: int,
                 shrink: float, rng: np.random.Generator) -> Tuple[int, int, int, int]:
     """(x0, y0, w, h): the most textured of ``n_positions`` random crops, ``pad`` px inside.
@@ -354,14 +342,7 @@ def choose_crop(photo: np.ndarray, size: Tuple[int, int], pad: int, n_positions:
     h = min(int(size[1]), ph - 2 * pad)
     if w < 64 or h < 64:
         raise ValueError(f"photo {pw}x{ph} too small for a crop with a {pad} px context band")
-    best, best_t = None, -1.0
-    for _ in range(max(n_positions, 1)):
-        x0 = int(rng.integers(pad, pw - pad - w + 1))
-        y0 = int(rng.integers(pad, ph - pad - h + 1))
-        t = texture(photo[y0:y0 + h, x0:x0 + w], shrink)
-        if t > best_t:
-            best, best_t = (x0, y0, w, h), t
-    return best
+    return most_textured_crop(photo, (w, h), (pad, pad), n_positions, shrink, rng)
 
 
 def make_pair(photo: np.ndarray, crop: Tuple[int, int, int, int], factor: float,

@@ -157,8 +157,21 @@ def choose_crop(photo: np.ndarray, ratio: float, rng: np.random.Generator,
         raise ValueError(f"photo {pw}x{ph} is too small to cut a high-resolution crop from")
     mx = min(int(BORDER_MARGIN_FRAC * pw), (pw - w) // 2)
     my = min(int(BORDER_MARGIN_FRAC * ph), (ph - h) // 2)
+    return most_textured_crop(photo, (w, h), (mx, my), n_candidates, ratio, rng)
+
+
+def most_textured_crop(photo: np.ndarray, size: Tuple[int, int], margin: Tuple[int, int],
+                       n_candidates: int, ratio: float,
+                       rng: np.random.Generator) -> Tuple[int, int, int, int]:
+    """(x, y, w, h): the most textured (``texture_score``) of ``n_candidates`` random crops.
+
+    Each candidate draws x in [mx, W - w - mx], then y in [my, H - h - my] (``margin`` = (mx,
+    my)); the first of equally textured crops wins.
+    """
+    ph, pw = photo.shape[:2]
+    (w, h), (mx, my) = size, margin
     best, best_score = None, -1.0
-    for _ in range(n_candidates):
+    for _ in range(max(n_candidates, 1)):
         x = int(rng.integers(mx, pw - w - mx + 1))
         y = int(rng.integers(my, ph - h - my + 1))
         score = texture_score(photo[y:y + h, x:x + w], ratio)
