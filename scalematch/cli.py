@@ -2,22 +2,19 @@
 
 ``scalematch LOW HIGH [options]`` runs the ``match`` command (the group routes any first argument
 that is not a command name to it); ``scalematch batch pairs.csv`` matches many pairs, one JSON
-line each. ``bench``, ``repeatability`` and ``covariance`` are registered when their modules are
-present. Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+line each (the work itself is in :mod:`scalematch.batch`). ``bench``, ``repeatability`` and
+``covariance`` are registered when their modules are present. Exit codes: 0 matched, 1 no reliable
+match, 2 bad input or usage (one line, ``Error: ...``), 3 a batch pair errored, 130 interrupted.
 """
 
 from __future__ import annotations
 
-import concurrent.futures
-import csv
 import dataclasses
 import importlib
 import json
-import multiprocessing
-import os
+import math
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -29,8 +26,9 @@ from .config import MODELS, MODES, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, to_jsonable
 
-#: Exit codes (documented in --help and README.md).
-EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
+#: Exit codes (documented in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
+EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130
 
 #: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
 #: left out (not listed, "No such command") when the module is absent or cannot be imported.
@@ -40,20 +38,38 @@ LAZY_COMMANDS = {
     "covariance": ("scalematch.mahalanobis", "covariance_command"),
 }
 
-#: Named threshold options: (option, Config path, type, help). An option is offered only when
-#: its path exists in ``Config()``; any other field can be set with ``--set PATH=VALUE``.
+class FiniteFloatRange(click.FloatRange):
+    """A float in a range that also refuses nan and inf (``FloatRange`` lets nan through)."""
+
+    def convert(self, value: Any, param: Optional[click.Parameter],
+                ctx: Optional[click.Context]) -> Any:
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{rv} is not a finite number.", param, ctx)
+        return rv
+
+    def _describe_range(self) -> str:  # click's help text of the range: "x<=None" unbounded
+        if self.min is None and self.max is None:
+            return "finite"
+        return super()._describe_range()
+
+
+#: Named threshold options: (option, Config path, type with the values that mean something,
+#: help). An option is offered only when its path exists in ``Config()``; any other field can be
+#: set with ``--set PATH=VALUE`` (values given so for these paths are checked against the type).
 THRESHOLD_OPTIONS = (
-    ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), float,
+    ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), FiniteFloatRange(min=0),
      "Cornerness threshold of the scale-adapted Harris detector (both images), "
      "(grey level/px)^4."),
-    ("--ratio-test", ("matcher.ratio",), float,
+    ("--ratio-test", ("matcher.ratio",), FiniteFloatRange(min=0, max=1, min_open=True),
      "Nearest / second-nearest descriptor distance ratio to keep a candidate match."),
-    ("--ransac-threshold", ("ransac.threshold_px",), float,
+    ("--ransac-threshold", ("ransac.threshold_px",), FiniteFloatRange(min=0, min_open=True),
      "RANSAC inlier distance, low-resolution px."),
-    ("--ransac-iterations", ("ransac.max_iters",), int, "RANSAC iterations at most."),
-    ("--min-inliers", ("decision.min_inliers",), int,
+    ("--ransac-iterations", ("ransac.max_iters",), click.IntRange(min=1),
+     "RANSAC iterations at most."),
+    ("--min-inliers", ("decision.min_inliers",), click.IntRange(min=0),
      "Fewest inliers for a match to count as reliable."),
-    ("--max-log-nfa", ("decision.max_log_nfa",), float,
+    ("--max-log-nfa", ("decision.max_log_nfa",), FiniteFloatRange(),
      "Largest log10 number of false alarms for a match to count as reliable (lower: stricter)."),
 )
 
@@ -290,6 +306,27 @@ class ScalematchGroup(click.Group):
 
     default_command = "match"
 
+    def main(self, args: Optional[Sequence[str]] = None, prog_name: Optional[str] = None,
+             complete_var: Optional[str] = None, standalone_mode: bool = True,
+             **extra: Any) -> Any:
+        """Click's main, with every error on one line (a usage error says where help is, in
+        place of click's usage block: 4 lines) and Ctrl-C exiting 130, not 1 (no match)."""
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.UsageError as exc:
+            hint = f" Try '{exc.ctx.command_path} --help' for help." if exc.ctx else ""
+            click.echo(f"Error: {exc.format_message()}{hint}", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:  # Ctrl-C (click turns KeyboardInterrupt into Abort)
+            click.echo("interrupted", err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
     def _known(self) -> set:
         return set(self.commands) | set(LAZY_COMMANDS)
 
@@ -387,10 +424,18 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
             if _has_path(base, p):
                 thresholds[p] = value
     try:
-        return build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
-                            kwargs.pop("seed"), thresholds, kwargs.pop("settings"))
+        config = build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
+                              kwargs.pop("seed"), thresholds, kwargs.pop("settings"))
     except ValueError as exc:
         raise InputError(str(exc))
+    for _, paths, typ, _ in THRESHOLD_OPTIONS:  # a --set value for a named threshold
+        for p in paths:
+            if _has_path(config, p):
+                try:
+                    typ.convert(_get(config, p), None, None)
+                except click.BadParameter as exc:
+                    raise InputError(f"{p} = {_get(config, p)}: {exc.message}")
+    return config
 
 
 def _load(path: str, max_pixels: int) -> np.ndarray:
@@ -492,184 +537,118 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
 # --------------------------------------------------------------------------- batch
 
-def read_pairs(path: Path) -> List[Tuple[str, str]]:
-    """(low, high) rows of a CSV; a first row "low...,high..." (any case) is a header, skipped."""
-    try:
-        with open(path, newline="") as fh:
-            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"cannot read {path}: {exc}; give a CSV with two columns low,high")
-    head = [c.strip().lower() for c in rows[0][:2]] if rows else []
-    if (len(head) == 2 and head[0].startswith("low") and head[1].startswith("high")
-            and not any(ch in "".join(head) for ch in "./\\")):
-        rows = rows[1:]  # a header: low,high (or low_path,high_path, ...)
-    pairs = []
-    for k, row in enumerate(rows, 1):
-        if len(row) < 2 or not row[0].strip() or not row[1].strip():
-            raise InputError(f"{path}: row {k} {row!r} does not have two paths low,high")
-        pairs.append((row[0].strip(), row[1].strip()))
-    return pairs
+def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
+                 client: Any) -> Iterator[Dict[str, Any]]:
+    """The result lines of ``pairs`` from the runner the options ask for."""
+    from . import batch
 
-
-def _resolve(path: str, base: Path) -> str:
-    p = Path(path).expanduser()
-    return str(p if p.is_absolute() else base / p)
-
-
-def _init_worker() -> None:
-    """Worker set-up: one OpenCV thread (the processes are the parallelism); Ctrl-C is left to
-    the parent, which stops the pool and says how to resume."""
-    import signal
-
-    import cv2
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    cv2.setNumThreads(1)
-
-
-def match_pair(low: str, high: str, low_file: str, high_file: str, config: Config,
-               max_pixels: int) -> Dict[str, Any]:
-    """One batch line: the JSON of the match of (low, high), or {"error": ...}; never raises."""
-    t0 = time.perf_counter()
-    try:
-        low_img = to_grey(read_image(low_file, max_pixels=max_pixels))
-        high_img = to_grey(read_image(high_file, max_pixels=max_pixels))
-        result = _run_match(low_img, high_img, config)
-        return result_json(result, low, high, low_img.shape, high_img.shape)
-    except ImageError as exc:
-        error = str(exc)
-    except ValueError as exc:
-        error = str(exc)
-    except Exception as exc:  # a bad pair must never stop the batch
-        error = f"{type(exc).__name__}: {exc}"
-    return {"low": {"path": low}, "high": {"path": high}, "matched": False, "error": error,
-            "seconds": round(time.perf_counter() - t0, 3), "version": __version__}
-
-
-def done_pairs(path: Path) -> set:
-    """(low, high) of the complete lines already in a batch output; a torn last line is cut."""
-    if not path.is_file():
-        return set()
-    text = path.read_text()
-    lines = text.splitlines(keepends=True)
-    keep: List[str] = []
-    done = set()
-    for line in lines:
-        try:
-            obj = json.loads(line)
-            key = (obj["low"]["path"], obj["high"]["path"])
-        except (ValueError, KeyError, TypeError):
-            continue
-        if not line.endswith("\n"):
-            line += "\n"
-        keep.append(line)
-        done.add(key)
-    if len(keep) != len(lines) or (lines and not lines[-1].endswith("\n")):
-        path.write_text("".join(keep))  # drop what an interruption tore
-    return done
+    if client is not None:
+        return batch.run_dask(pairs, config, max_pixels, client)
+    if jobs == 1 or len(pairs) <= 1:
+        return batch.run_serial(pairs, config, max_pixels)
+    return batch.run_pool(pairs, config, max_pixels, jobs)
 
 
 @cli.command("batch", context_settings=CONTEXT)
 @click.argument("pairs_csv", metavar="PAIRS.csv",
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Append JSON lines here (resumable: pairs already in it are skipped) "
-                   "instead of stdout.")
+              help="Append JSON lines here instead of stdout; resumable: the pairs already in it "
+                   "are skipped. It must be new or the output of an earlier batch run with the "
+                   "same options (anything else is refused, exit 2).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes.")
+              help="Worker processes on this machine.")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Run on the Dask cluster of this scheduler (e.g. tcp://host:8786) instead of "
+                   "local processes; needs pip install 'scalematch[dask]'.")
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no summary on stderr.")
-def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, quiet: bool,
-                  max_pixels: int, **kwargs: Any) -> None:
-    """Match every pair of PAIRS.csv (two columns low,high; header optional), one JSON line
-    per pair.
+def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler: Optional[str],
+                  quiet: bool, max_pixels: int, **kwargs: Any) -> None:
+    """Match every pair of PAIRS.csv, one JSON line per pair.
 
-    Relative paths in the CSV are taken from the CSV's folder. Each line is the JSON of
+    PAIRS.csv has two columns low,high (no header), or a header row naming the columns low and
+    high (or low_path,high_path, ...) in any position among others. Relative paths are taken
+    from the CSV's folder; a repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
-    gets a line with "error" and the batch goes on. With --output, running the same command
-    again after an interruption skips the pairs already in the file (delete a line to redo it).
+    gets a line with "error" and the batch goes on.
+
+    Resuming: with --output, running the same command again after an interruption (Ctrl-C,
+    kill, power cut) skips the pairs already in the file (delete a line to redo its pair). The
+    options must be the same: a file holding results made with other options is refused
+    (exit 2), never mixed.
 
     \b
     Examples:
       scalematch batch pairs.csv > results.jsonl
       scalematch batch pairs.csv --output results.jsonl --jobs 4 --mode paper
+      scalematch batch pairs.csv --output results.jsonl --scheduler tcp://host:8786
 
     \b
-    Exit codes: 0 every pair has its line, 2 bad CSV or usage.
+    Exit codes: 0 every pair has its line, none an error; 2 bad CSV, output file or usage;
+    3 some pair has an "error" line (this run or an earlier one resumed); 130 interrupted.
     """
+    from . import batch
+
+    ctx = click.get_current_context()
+    if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
+        raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
+                               "workers' threads set the parallelism.")
     config = _config_from(kwargs)
-    pairs = read_pairs(pairs_csv)
-    skip: set = set()
-    if output is not None:
-        check_out_file(output, "--output")
-        skip = done_pairs(output)
-    todo = [(lo, hi) for lo, hi in pairs if (lo, hi) not in skip]
-    base = pairs_csv.resolve().parent
-    out_fh = open(output, "a") if output is not None else sys.stdout
+    done = batch.NOTHING_DONE
+    try:
+        rows = batch.read_pairs(pairs_csv)
+        pairs = batch.unique_pairs(rows, pairs_csv.resolve().parent)
+        if output is not None:
+            check_out_file(output, "--output")
+            done = batch.scan_output(output, batch.config_json(config))
+            batch.cut_torn_line(output, done)
+        client = batch.connect(scheduler) if scheduler is not None else None
+    except batch.BatchError as exc:
+        raise InputError(str(exc))
+    todo = [p for p in pairs if p.key not in done.pairs]
+    skipped = len(pairs) - len(todo)
+    errors_before = sum(p.key in done.errors for p in pairs)
+    if not quiet and len(rows) > len(pairs):
+        click.echo(f"rows repeated in {pairs_csv}: {len(rows) - len(pairs)} (each pair is "
+                   f"matched once)", err=True)
+    if not quiet and skipped:
+        click.echo(f"resuming: {skipped} of {len(pairs)} pairs already in {output}", err=True)
+
     counts = {"matched": 0, "no match": 0, "error": 0}
-    show = _show_progress(quiet)
-    if not quiet and len(todo) < len(pairs):
-        click.echo(f"resuming: {len(pairs) - len(todo)} of {len(pairs)} pairs already in "
-                   f"{output}", err=True)
-
-    def emit(line: Dict[str, Any]) -> None:
-        out_fh.write(dumps(line) + "\n")
-        out_fh.flush()
-        counts["error" if "error" in line else "matched" if line["matched"] else "no match"] += 1
-
-    jobs_args = [(lo, hi, _resolve(lo, base), _resolve(hi, base), config, max_pixels)
-                 for lo, hi in todo]
+    out_fh = open(output, "a") if output is not None else sys.stdout
     bar = click.progressbar(length=len(todo), label="matching pairs", file=sys.stderr,
-                            show_pos=True) if show else None
+                            show_pos=True) if _show_progress(quiet) else None
+    lines = _batch_lines(todo, config, max_pixels, jobs, client)
     try:
         if bar is not None:
             bar.__enter__()
-        if jobs == 1 or len(todo) <= 1:
-            for a in jobs_args:
-                emit(match_pair(*a))
-                if bar is not None:
-                    bar.update(1)
-        else:
-            ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
-            pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx,
-                                                          initializer=_init_worker)
-            try:
-                futures = {pool.submit(match_pair, *a): a for a in jobs_args}
-                for fut in concurrent.futures.as_completed(futures):
-                    try:
-                        line = fut.result()
-                    except Exception as exc:  # the worker died (e.g. out of memory)
-                        lo, hi = futures[fut][:2]
-                        line = {"low": {"path": lo}, "high": {"path": hi}, "matched": False,
-                                "error": f"worker failed: {type(exc).__name__}: {exc}",
-                                "version": __version__}
-                    emit(line)
-                    if bar is not None:
-                        bar.update(1)
-            except KeyboardInterrupt:
-                # stop now: the pairs still running are redone when the batch is resumed
-                procs = list((getattr(pool, "_processes", None) or {}).values())
-                pool.shutdown(wait=False, cancel_futures=True)
-                for proc in procs:
-                    proc.terminate()
-                raise
-            finally:
-                pool.shutdown(wait=True)
+        for line in lines:
+            out_fh.write(dumps(line) + "\n")
+            out_fh.flush()
+            counts["error" if "error" in line else "matched" if line["matched"] else "no match"] += 1
+            if bar is not None:
+                bar.update(1)
     except KeyboardInterrupt:
-        done = sum(counts.values())
         hint = "; run the same command again to resume" if output is not None else ""
-        click.echo(f"\ninterrupted: {done} of {len(todo)} pairs done{hint}", err=True)
-        sys.exit(130)
+        click.echo(f"\ninterrupted: {sum(counts.values())} of {len(todo)} pairs done{hint}",
+                   err=True)
+        sys.exit(EXIT_INTERRUPTED)
     finally:
+        lines.close()  # stops the workers now if the loop ended early
         if bar is not None:
             bar.__exit__(None, None, None)
         if output is not None:
             out_fh.close()
+        if client is not None:
+            client.close()
     if not quiet:
+        before = f" ({skipped} done before, {errors_before} of them errors)" if skipped else ""
         click.echo(f"{len(todo)} pairs: {counts['matched']} matched, {counts['no match']} no "
-                   f"reliable match, {counts['error']} errors"
-                   + (f" ({len(pairs) - len(todo)} skipped as done)" if skip else ""), err=True)
+                   f"reliable match, {counts['error']} errors{before}", err=True)
+    if counts["error"] or errors_before:
+        sys.exit(EXIT_PAIR_ERRORS)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:

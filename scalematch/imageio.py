@@ -16,6 +16,7 @@ applies it itself (OpenCV 5 ``imdecode`` does; some older builds did not).
 
 from __future__ import annotations
 
+import math
 import struct
 from pathlib import Path
 from typing import Optional, Tuple
@@ -68,6 +69,36 @@ def to_bgr8(image: np.ndarray) -> np.ndarray:
     if img.shape[2] == 4:
         return np.ascontiguousarray(img[:, :, :3])
     return np.ascontiguousarray(img)
+
+
+def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
+    """The check at the edge of ``match``: a 2-D grey array -> float32 8-bit grey levels.
+
+    Scaled as ``to_grey`` scales: floats in [0, 1] (scikit-image's convention) by 255, 16-bit by
+    255/65535; other values are taken as grey levels. Raises ``ImageError`` (a ``ValueError``)
+    for what would otherwise give "no match" without saying why: a bool array, a NaN or infinite
+    value, a constant image.
+    """
+    img = np.asarray(image)
+    if img.dtype == np.bool_:
+        raise ImageError(f"the {name} image is a bool array (a mask?); give grey levels, "
+                         f"e.g. image.astype(np.uint8) * 255")
+    if img.dtype.kind not in "uif":
+        raise ImageError(f"the {name} image has dtype {img.dtype}; give grey levels as an "
+                         f"integer or float array")
+    if img.ndim != 2:
+        raise ImageError(f"the {name} image has shape {img.shape}; give a 2-D grey image "
+                         f"(scalematch.read_grey reads and converts any image file)")
+    if img.size == 0:
+        raise ImageError(f"the {name} image is empty (shape {img.shape})")
+    lo, hi = float(img.min()), float(img.max())  # nan when any value is nan
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ImageError(f"the {name} image holds NaN or infinite values; replace them "
+                         f"(e.g. np.nan_to_num) or crop them out")
+    if lo == hi:
+        raise ImageError(f"the {name} image is constant (every pixel {lo:g}): there is nothing "
+                         f"to match in it")
+    return to_grey(img)
 
 
 # --------------------------------------------------------------------------- header parsing

@@ -21,6 +21,7 @@ from .decision import Decision, decide
 from .descriptors import Described, describe_gradients, describe_jets
 from .detector import Keypoints, detect_on_level
 from .estimator import Estimate, estimate
+from .imageio import grey_levels
 from .mahalanobis import load_covariance, whiten
 from .matcher import match_descriptors
 from .result import MatchResult, ScaleRow, similarity_parts
@@ -159,7 +160,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     Parameters
     ----------
     low, high : (H, W) arrays
-        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`).
+        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`), or floats in
+        [0, 1] (scaled by 255); ``ValueError`` for bool, NaN or constant arrays.
     config : Config
         Every parameter; recorded in the result.
     progress : callable, optional
@@ -173,8 +175,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     """
     t0 = time.perf_counter()
     timings = {}
-    low = as_float_image(low)
-    high = as_float_image(high)
+    low = as_float_image(grey_levels(low, "low"))  # ValueError: bool, NaN, constant
+    high = as_float_image(grey_levels(high, "high"))
     _check_images(low, high)
     whitening = load_covariance(config.covariance_path).whitening() if config.mode == "paper" else None
 

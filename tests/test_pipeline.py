@@ -146,5 +146,29 @@ def test_flat_pair_is_no_reliable_match():
 
 
 def test_too_small_image_is_a_clear_error():
+    noise = np.random.default_rng(0).uniform(0, 255, (100, 100))  # not constant: that is refused
     with pytest.raises(ValueError, match="at least"):
-        match(np.zeros((10, 10), np.float32), np.zeros((100, 100), np.float32))
+        match(noise[:10, :10], noise)
+
+
+def test_float_images_in_0_1_match_as_8_bit_grey_levels(raccoon):
+    pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(0), high_size=(200, 150),
+                          low_max=(200, 150))
+    low, high = np.clip(pair.low, 0, 255) / 255.0, np.clip(pair.high, 0, 255) / 255.0
+    r = match(low, high)  # scikit-image's convention: floats in [0, 1]
+    assert r.matched and abs(r.resolution_ratio - 3.0) < 0.05
+    assert r.n_inliers == match(low * 255.0, high * 255.0).n_inliers
+
+
+@pytest.mark.parametrize("bad,needle", [
+    (np.full((100, 100), 0.5), "constant"),
+    (np.where(np.eye(100) > 0, np.nan, 0.5), "NaN"),
+    (np.eye(100, dtype=bool), "bool"),
+    (np.zeros((100, 100, 3), np.uint8) + np.arange(3, dtype=np.uint8), "2-D"),
+])
+def test_unusable_arrays_raise_a_clear_value_error(bad, needle):
+    good = np.random.default_rng(0).uniform(0, 255, (100, 100))
+    with pytest.raises(ValueError, match=needle):
+        match(good, bad)
+    with pytest.raises(ValueError, match=f"the low image .*{needle}"):
+        match(bad, good)

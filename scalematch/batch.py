@@ -1,0 +1,444 @@
+"""Batch matching: many pairs from a CSV, one JSON line each, resumable, on a local process pool
+or a Dask cluster.
+
+In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``unique_pairs``
+(repeated rows matched once, paths resolved), ``scan_output`` (what an earlier run left in the
+output file: the pairs done and which of them errored; it refuses a file holding anything but
+result lines, or results made with another configuration), ``match_pair`` (one pair -> one JSON
+line, never raises), and the runners ``run_serial``, ``run_pool`` and ``run_dask``: each yields
+the lines in the order pairs finish and keeps at most a few pairs per worker in flight, so the
+main process stays the same size however many pairs there are (docs/BATCH.md).
+
+Errors here are ``BatchError`` (a ``ValueError``) with a one-line message; the command line turns
+them into exit code 2.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import ctypes
+import csv
+import json
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import (Any, Callable, Dict, FrozenSet, Hashable, Iterable, Iterator, List, Optional,
+                    Sequence, Tuple)
+
+from . import __version__
+from .cli import dumps, result_json
+from .config import Config
+from .imageio import read_image, to_grey
+from .pipeline import match
+from .result import to_jsonable
+
+#: Header names of the two path columns; a column named exactly so wins, else the one column
+#: whose name starts with it ("low_path", "high-res", ...). Any other columns are ignored.
+COLUMNS = ("low", "high")
+#: A first-row cell holding one of these is a path, so the row is data, not a header.
+PATH_CHARS = "./\\"
+#: Pairs submitted per worker and not yet finished: 2 keeps a worker busy while the main process
+#: writes the line of the pair it just finished, and bounds the main process's memory.
+IN_FLIGHT_PER_WORKER = 2
+#: How often a worker checks that the process that started it is still alive, s (where
+#: PR_SET_PDEATHSIG is not available: not on Linux).
+PARENT_POLL_S = 0.5
+#: Linux prctl option: signal this process when its parent dies (<linux/prctl.h>).
+PR_SET_PDEATHSIG = 1
+#: How long to try to reach a Dask scheduler before giving up, s.
+DASK_CONNECT_TIMEOUT_S = 10.0
+#: How often the number of Dask worker threads (hence the in-flight bound) is asked again, s.
+DASK_RECHECK_S = 5.0
+#: The start of every line ``dumps`` writes: a last line torn by an interruption starts so too.
+LINE_START = b'{"'
+
+
+class BatchError(ValueError):
+    """A batch cannot start (bad CSV, unusable output file, no scheduler); one-line message."""
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One row of the pairs CSV."""
+
+    low: str  #: the low-resolution image's path as written in the CSV (its line's key)
+    high: str  #: the high-resolution image's path as written in the CSV
+    low_file: str  #: the file read: a relative path is taken from the CSV's folder
+    high_file: str
+
+    @property
+    def key(self) -> Tuple[str, str]:
+        """(low, high) as written: what identifies the pair's line in the output."""
+        return (self.low, self.high)
+
+
+@dataclass(frozen=True)
+class Done:
+    """What an earlier run left in the output file."""
+
+    pairs: FrozenSet[Tuple[str, str]]  #: (low, high) of every complete result line
+    errors: FrozenSet[Tuple[str, str]]  #: those whose line holds an "error"
+    complete_bytes: int  #: length of the complete lines; anything after it was torn
+
+
+NOTHING_DONE = Done(frozenset(), frozenset(), 0)
+
+
+# --------------------------------------------------------------------------- the pairs CSV
+
+def _column(cells: Sequence[str], name: str, path: Path) -> int:
+    exact = [i for i, c in enumerate(cells) if c == name]
+    named = exact or [i for i, c in enumerate(cells) if c.startswith(name)]
+    if len(named) == 1:
+        return named[0]
+    found = "several columns" if named else "no column"
+    raise BatchError(f"{path}: the header {','.join(cells)} has {found} named {name!r}; "
+                     f"name one column low and one high")
+
+
+def _header(row: Sequence[str], path: Path) -> Optional[Tuple[int, int]]:
+    """(low column, high column) if ``row`` is a header naming them, None if it is data."""
+    cells = [c.strip().lower() for c in row]
+    if any(ch in c for c in cells for ch in PATH_CHARS):
+        return None
+    if not any(c.startswith(COLUMNS) for c in cells):
+        return None
+    return _column(cells, "low", path), _column(cells, "high", path)
+
+
+def _trimmed(row: Sequence[str]) -> List[str]:
+    """The cells of a row without the empty ones at its end (spreadsheets add them)."""
+    cells = [c.strip() for c in row]
+    while cells and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def read_pairs(path: Path) -> List[Tuple[str, str]]:
+    """The (low, high) rows of a pairs CSV, in file order, repeated rows included.
+
+    A file without header has exactly two columns, low then high. A header row names the columns:
+    ``low`` and ``high`` (or names starting so, such as ``low_path,high_path``), in any position,
+    among any others (``name,low,high``). Blank rows are skipped; anything else that is not a
+    pair of paths raises ``BatchError`` naming the line.
+    """
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = [(n, _trimmed(r)) for n, r in enumerate(csv.reader(fh), 1)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise BatchError(f"cannot read {path}: {exc}; give a CSV with columns low,high")
+    rows = [(n, r) for n, r in rows if r]
+    columns = _header(rows[0][1], path) if rows else None
+    if columns is not None:
+        rows = rows[1:]
+    pairs = []
+    for n, cells in rows:
+        if columns is None and len(cells) != 2:
+            raise BatchError(f"{path} line {n} has {len(cells)} columns; without a header a "
+                             f"pairs CSV has two, low,high (or name the columns low and high in "
+                             f"a header row)")
+        lo, hi = columns or (0, 1)
+        low = cells[lo] if lo < len(cells) else ""
+        high = cells[hi] if hi < len(cells) else ""
+        if not low or not high:
+            raise BatchError(f"{path} line {n} does not have two paths low,high")
+        pairs.append((low, high))
+    return pairs
+
+
+def _resolve(path: str, base: Path) -> str:
+    p = Path(path).expanduser()
+    return str(p if p.is_absolute() else base / p)
+
+
+def unique_pairs(rows: Iterable[Tuple[str, str]], base: Path) -> List[Pair]:
+    """One ``Pair`` per distinct (low, high) row, in first-seen order; relative paths from
+    ``base`` (the CSV's folder). A repeated row would write a second line for the same key."""
+    seen = set()
+    pairs = []
+    for low, high in rows:
+        if (low, high) not in seen:
+            seen.add((low, high))
+            pairs.append(Pair(low, high, _resolve(low, base), _resolve(high, base)))
+    return pairs
+
+
+# --------------------------------------------------------------------------- the output file
+
+def config_json(config: Config) -> Dict[str, Any]:
+    """``config`` as a result line records it (a JSON object)."""
+    return json.loads(dumps(to_jsonable(config)))
+
+
+def _flat(obj: Any, prefix: str = "") -> Dict[str, Any]:
+    if not isinstance(obj, dict):
+        return {prefix: obj}
+    out: Dict[str, Any] = {}
+    for k, v in obj.items():
+        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
+
+
+def config_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
+    """The parameters that differ, as "model homography (now similarity)", by dotted path."""
+    a, b = _flat(recorded), _flat(now)
+    absent = "absent"
+    return [f"{k} {json.dumps(a.get(k, absent))} (now {json.dumps(b.get(k, absent))})"
+            for k in sorted(set(a) | set(b)) if a.get(k, absent) != b.get(k, absent)]
+
+
+def _result_key(line: bytes) -> Optional[Tuple[Tuple[str, str], Dict[str, Any]]]:
+    """((low, high), object) of a batch result line, None for anything else."""
+    try:
+        obj = json.loads(line)
+        key = (obj["low"]["path"], obj["high"]["path"])
+    except (ValueError, KeyError, TypeError):
+        return None
+    if not all(isinstance(p, str) for p in key) or not ("error" in obj or "matched" in obj):
+        return None
+    return key, obj
+
+
+def scan_output(path: Path, config: Dict[str, Any]) -> Done:
+    """What the batch output ``path`` already holds, read without changing it.
+
+    Every line must be a result line of a run with configuration ``config`` (``config_json``):
+    anything else raises ``BatchError``, so a file that is not a batch output (notes, the pairs
+    CSV) is never appended to, and results of other options are never mixed in. Blank lines are
+    allowed. A last line without its newline, starting as result lines start, was torn by an
+    interruption: it is not counted (``cut_torn_line`` removes it).
+    """
+    if not path.is_file():
+        return NOTHING_DONE
+    pairs, errors = set(), set()
+    complete = 0
+    try:
+        with open(path, "rb") as fh:
+            for n, line in enumerate(fh, 1):
+                if not line.endswith(b"\n") and line.startswith(LINE_START):
+                    break  # torn by an interruption: the only line that may end so
+                if line.strip():
+                    found = _result_key(line)
+                    if found is None:
+                        raise BatchError(
+                            f"{path} line {n} is not a scalematch result; the output file must "
+                            f"be new or the output of an earlier batch (left unchanged)")
+                    key, obj = found
+                    if "config" in obj and obj["config"] != config:
+                        changes = config_changes(obj["config"], config)
+                        raise BatchError(
+                            f"{path} holds results made with other options ({'; '.join(changes[:3])}"
+                            f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
+                            f"options or write to another file")
+                    pairs.add(key)
+                    if "error" in obj:
+                        errors.add(key)
+                complete += len(line)
+    except OSError as exc:
+        raise BatchError(f"cannot read {path}: {exc.strerror or exc}")
+    return Done(frozenset(pairs), frozenset(errors), complete)
+
+
+def cut_torn_line(path: Path, done: Done) -> None:
+    """Remove what follows the complete lines of ``path`` (a line torn by an interruption)."""
+    if path.is_file() and path.stat().st_size > done.complete_bytes:
+        os.truncate(path, done.complete_bytes)
+
+
+# --------------------------------------------------------------------------- one pair
+
+def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0) -> Dict[str, Any]:
+    """The line of a pair that could not be matched (README.md, "## Output")."""
+    return {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": False,
+            "error": error, "seconds": round(seconds, 3), "config": to_jsonable(config),
+            "version": __version__}
+
+
+def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
+    """The batch line of ``pair``: the JSON of its match, or an error line; never raises."""
+    t0 = time.perf_counter()
+    try:
+        low = to_grey(read_image(pair.low_file, max_pixels=max_pixels))
+        high = to_grey(read_image(pair.high_file, max_pixels=max_pixels))
+        result = match(low, high, config)
+        return result_json(result, pair.low, pair.high, low.shape, high.shape)
+    except ValueError as exc:  # ImageError included: a bad image, too small, constant
+        error = str(exc)
+    except Exception as exc:  # a bad pair must never stop the batch
+        error = f"{type(exc).__name__}: {exc}"
+    return error_line(pair, error, config, time.perf_counter() - t0)
+
+
+def _outcome(future: Any, pair: Pair, config: Config) -> Dict[str, Any]:
+    """The line of a finished future; an error line when its worker failed (died, cancelled)."""
+    try:
+        return future.result()
+    except Exception as exc:
+        return error_line(pair, f"worker failed: {type(exc).__name__}: {exc}", config)
+
+
+def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
+            wait_first: Callable[[List[Any]], Iterable[Any]],
+            outcome: Callable[[Any, Pair], Dict[str, Any]], limit: Callable[[], int],
+            stop: Callable[[List[Any]], None]) -> Iterator[Dict[str, Any]]:
+    """Submit ``pairs`` with at most ``limit()`` unfinished at once; yield each line as its pair
+    finishes. ``wait_first(futures)`` blocks until at least one is done and returns the done;
+    ``stop(futures)`` is given the unfinished ones if the iteration ends early (Ctrl-C)."""
+    todo = iter(pairs)
+    pending: Dict[Any, Pair] = {}
+    more = True
+    try:
+        while True:
+            room = max(limit(), 1) - len(pending)
+            while more and room > 0:
+                pair = next(todo, None)
+                if pair is None:
+                    more = False
+                else:
+                    pending[submit(pair)] = pair
+                    room -= 1
+            if not pending:
+                return
+            for future in wait_first(list(pending)):
+                yield outcome(future, pending.pop(future))
+    finally:
+        if pending:
+            stop(list(pending))
+
+
+# --------------------------------------------------------------------------- runners
+
+def run_serial(pairs: Iterable[Pair], config: Config, max_pixels: int) -> Iterator[Dict[str, Any]]:
+    """The lines of ``pairs``, matched one after the other in this process."""
+    for pair in pairs:
+        yield match_pair(pair, config, max_pixels)
+
+
+def _watch_parent(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """End this process when ``parent_pid`` (its parent) ends, even by ``kill -9``.
+
+    On Linux the kernel sends SIGKILL on the parent's death (prctl PR_SET_PDEATHSIG); elsewhere,
+    and as a second guard, a daemon thread polls ``os.getppid()`` (a process whose parent died
+    is handed to another one).
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before we asked
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent_pid,), name="scalematch-parent-watch",
+                     daemon=True).start()
+
+
+def _init_worker(parent_pid: int) -> None:
+    """Worker set-up: die with the main process; one OpenCV thread (the processes are the
+    parallelism); Ctrl-C is left to the main process, which stops the pool."""
+    import cv2
+
+    die_with_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    cv2.setNumThreads(1)
+
+
+def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int,
+             jobs: int) -> Iterator[Dict[str, Any]]:
+    """The lines of ``pairs``, matched by ``jobs`` worker processes, in the order they finish.
+
+    Workers die with this process (``die_with_parent``). When the iteration stops early (Ctrl-C,
+    or the consumer closes it) the workers are terminated at once; the pairs they held get no
+    line, so a resumed batch redoes them.
+    """
+    ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
+    pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
+                                                  initargs=(os.getpid(),))
+
+    def stop(_: List[Any]) -> None:
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
+
+    try:
+        yield from bounded(
+            pairs,
+            submit=lambda pair: pool.submit(match_pair, pair, config, max_pixels),
+            wait_first=lambda fs: concurrent.futures.wait(
+                fs, return_when=concurrent.futures.FIRST_COMPLETED).done,
+            outcome=lambda fut, pair: _outcome(fut, pair, config),
+            limit=lambda: IN_FLIGHT_PER_WORKER * jobs, stop=stop)
+    finally:
+        pool.shutdown(wait=True)
+
+
+def connect(address: str, timeout: float = DASK_CONNECT_TIMEOUT_S) -> Any:
+    """A ``distributed.Client`` of the Dask scheduler at ``address`` (e.g. tcp://host:8786)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise BatchError("a Dask scheduler needs dask.distributed, which is not installed; "
+                         "install it with: pip install 'scalematch[dask]'") from None
+    try:
+        return Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        raise BatchError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+
+
+def match_pair_on_worker(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
+    """``match_pair`` as a Dask task: one OpenCV thread per task (the worker threads are the
+    parallelism, as the processes of the local pool)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    return match_pair(pair, config, max_pixels)
+
+
+def _dask_threads(client: Any) -> Callable[[], int]:
+    """Worker threads of the cluster (at least 1), asked again every DASK_RECHECK_S seconds."""
+    state = {"at": -float("inf"), "n": 1}
+
+    def threads() -> int:
+        if time.monotonic() - state["at"] > DASK_RECHECK_S:
+            state["n"] = max(1, sum(client.nthreads().values()))
+            state["at"] = time.monotonic()
+        return state["n"]
+    return threads
+
+
+def _dask_wait_first(client: Any, futures: List[Any]) -> Iterable[Any]:
+    """The done ones of ``futures`` once at least one is (``distributed.wait`` uses the current
+    client: this one, not a default the caller may not have set)."""
+    from distributed import wait
+
+    with client.as_current():
+        return wait(futures, return_when="FIRST_COMPLETED").done
+
+
+def run_dask(pairs: Iterable[Pair], config: Config, max_pixels: int,
+             client: Any) -> Iterator[Dict[str, Any]]:
+    """The lines of ``pairs``, matched on the Dask cluster of ``client``, in the order they finish.
+
+    The workers must have scalematch installed (the same version) and see the image files under
+    the paths given (relative paths are resolved on this machine). When the iteration stops early
+    the unfinished tasks are cancelled; their pairs get no line, so a resumed batch redoes them.
+    """
+    threads = _dask_threads(client)
+    yield from bounded(
+        pairs,
+        submit=lambda pair: client.submit(match_pair_on_worker, pair, config, max_pixels,
+                                          pure=False),
+        wait_first=lambda fs: _dask_wait_first(client, fs),
+        outcome=lambda fut, pair: _outcome(fut, pair, config),
+        limit=lambda: IN_FLIGHT_PER_WORKER * threads(), stop=client.cancel)
