@@ -8,7 +8,9 @@
 2. Times ``scalematch batch`` run as a user runs it (a subprocess: start-up and worker start
    included) on those pairs with the local pool at ``--jobs 1`` and ``--jobs 2``, and with
    ``--scheduler`` on a ``LocalCluster`` of 2 single-thread worker processes on 127.0.0.1
-   (started beforehand, as a user's cluster is). pairs/s = pairs / wall time.
+   (started beforehand, as a user's cluster is). pairs/s = pairs / wall time. ``--jobs 1``
+   matches in the main process, where OpenCV uses all cores by default: it is run both so and
+   with one OpenCV thread (OPENCV_FOR_THREADS_NUM=1), the one-worker baseline of the scaling.
 3. Runs ``--jobs 2`` over ``--memory-pairs`` pairs (the same images under hard-linked names, so
    every row is a distinct pair) and samples the main process's resident memory (VmRSS in
    /proc/PID/status, Linux) each time another 500 lines are written, and its peak (VmHWM).
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -86,17 +89,26 @@ def load() -> str:
     return "/".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def timed_run(csv_path: Path, out: Path, extra: Tuple[str, ...]) -> Dict[str, object]:
-    """Wall time of one batch run, its lines and the load average before and after."""
+def _child_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def timed_run(csv_path: Path, out: Path, extra: Tuple[str, ...],
+              env: Optional[Dict[str, str]] = None) -> Dict[str, object]:
+    """Wall time of one batch run, the CPU time of its processes (the main process and its
+    pool workers: not Dask workers), its lines, and the load average before and after."""
     out.unlink(missing_ok=True)
     before = load()
+    cpu0 = _child_cpu()
     t0 = time.perf_counter()
-    subprocess.run(batch_cmd(csv_path, out, *extra), check=False)
+    subprocess.run(batch_cmd(csv_path, out, *extra), check=False, env=env, cwd=csv_path.parent)
     wall = time.perf_counter() - t0
+    cpu = _child_cpu() - cpu0
     lines = out.read_text().splitlines()
     matched = sum('"matched": true' in x for x in lines)
-    return {"wall": wall, "lines": len(lines), "matched": matched, "before": before,
-            "after": load()}
+    return {"wall": wall, "cpu": cpu, "lines": len(lines), "matched": matched,
+            "before": before, "after": load()}
 
 
 def _status(pid: int) -> Optional[Dict[str, int]]:
@@ -117,7 +129,8 @@ def memory_run(csv_path: Path, out: Path, env: Dict[str, str]) -> Dict[str, obje
     out.unlink(missing_ok=True)
     before = load()
     t0 = time.perf_counter()
-    proc = subprocess.Popen(batch_cmd(csv_path, out, "--jobs", "2"), env=env)
+    # run from the pairs' folder: `python -m` puts the working directory first on sys.path
+    proc = subprocess.Popen(batch_cmd(csv_path, out, "--jobs", "2"), env=env, cwd=csv_path.parent)
     samples: List[Tuple[int, int]] = []
     peak = 0
     next_at = RSS_EVERY
@@ -153,27 +166,33 @@ def main() -> None:
         if not args.skip_throughput:
             from distributed import LocalCluster
 
-            print("| runner | run | wall s | pairs/s | lines | matched | load before | after |")
-            print("|---|---|---|---|---|---|---|---|")
+            print("| runner | run | wall s | pairs/s | CPU s | lines | matched | load before | "
+                  "after |")
+            print("|---|---|---|---|---|---|---|---|---|")
+            one_thread = dict(os.environ, OPENCV_FOR_THREADS_NUM="1")
             with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                               host="127.0.0.1", dashboard_address=None) as cluster:
-                runners = [("local pool, --jobs 1", ("--jobs", "1")),
-                           ("local pool, --jobs 2", ("--jobs", "2")),
-                           ("Dask LocalCluster, 2 workers", ("--scheduler",
-                                                             cluster.scheduler_address))]
+                runners = [
+                    ("--jobs 1, one OpenCV thread (1 worker)", ("--jobs", "1"), one_thread),
+                    ("--jobs 1 as shipped (OpenCV's threads)", ("--jobs", "1"), None),
+                    ("local pool, --jobs 2", ("--jobs", "2"), None),
+                    ("Dask LocalCluster, 2 workers", ("--scheduler", cluster.scheduler_address),
+                     None)]
                 for r in range(args.repeats):
-                    for name, extra in runners:
-                        m = timed_run(csv_path, out, extra)
+                    for name, extra, env in runners:
+                        m = timed_run(csv_path, out, extra, env)
+                        cpu = f"{m['cpu']:.1f}" if "--scheduler" not in extra else "-"
                         print(f"| {name} | {r + 1} | {m['wall']:.1f} | "
-                              f"{args.pairs / m['wall']:.2f} | {m['lines']} | {m['matched']} | "
-                              f"{m['before']} | {m['after']} |", flush=True)
+                              f"{args.pairs / m['wall']:.2f} | {cpu} | {m['lines']} | "
+                              f"{m['matched']} | {m['before']} | {m['after']} |", flush=True)
         big = repeat_pairs(folder, args.pairs, args.memory_pairs)
         env = dict(os.environ)
         if args.code is not None:
             env["PYTHONPATH"] = str(args.code.resolve())
+        code = subprocess.run([sys.executable, "-c", "import scalematch; print(scalematch.__file__)"],
+                              env=env, cwd=folder, capture_output=True, text=True).stdout.strip()
         m = memory_run(big, out, env)
-        print(f"\n{args.memory_pairs} pairs, --jobs 2"
-              f"{f' (code: {args.code})' if args.code else ''}: {m['lines']} lines in "
+        print(f"\n{args.memory_pairs} pairs, --jobs 2 (code: {code}): {m['lines']} lines in "
               f"{m['wall']:.0f} s, load average {m['before']} before, {m['after']} after\n")
         print("| lines written | main process RSS, MB |")
         print("|---|---|")
