@@ -47,6 +47,9 @@ class MatchResult:
     timings: Dict[str, float] = field(repr=False)  #: stage name -> seconds
     config: Any = field(repr=False)  #: the Config used
     evidence: Dict[str, float] = field(default_factory=dict, repr=False)  #: decision figures
+    #: "given": the first image given is the coarser one; "swapped": the second is (the
+    #: transform and the inliers always go from the finer image to the coarser one)
+    order: str = "given"
 
     @property
     def n_inliers(self) -> int:
