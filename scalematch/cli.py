@@ -34,10 +34,12 @@ EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
 
 #: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
 #: left out (not listed, "No such command") when the module is absent or cannot be imported.
+#: ``lab`` is the lab's group; the other three are short aliases of its commands.
 LAZY_COMMANDS = {
-    "bench": ("scalematch.bench", "bench_command"),
-    "repeatability": ("scalematch.repeatability", "repeatability_command"),
-    "covariance": ("scalematch.mahalanobis", "covariance_command"),
+    "lab": ("scalematch.lab.cli", "lab"),
+    "bench": ("scalematch.lab.bench", "bench_command"),
+    "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
+    "covariance": ("scalematch.lab.covariance", "covariance_command"),
 }
 
 #: Named threshold options: (option, Config path, type, help). An option is offered only when

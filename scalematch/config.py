@@ -9,13 +9,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Optional, Tuple
 
-from .constraints import OrientationParams, SemiLocalParams
-from .decision import DecisionParams
-from .descriptors import GradientParams, JetParams
-from .detector import HarrisParams, PAPER_SCALES
-from .estimator import RansacParams
-from .matcher import MatcherParams
-from .views import ViewParams
+from .stages.constraints import OrientationParams, SemiLocalParams
+from .stages.decision import DecisionParams
+from .stages.descriptors import GradientParams, JetParams
+from .stages.detector import HarrisParams, PAPER_SCALES
+from .stages.estimator import RansacParams
+from .stages.matcher import MatcherParams
+from .stages.views import ViewParams
 
 #: Models the robust estimator can fit (paper section 5 and "Further examples").
 MODELS = ("similarity", "affine", "homography", "fundamental")

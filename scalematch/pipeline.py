@@ -3,7 +3,7 @@
 ``match(low, high, config)`` runs, for each scale s of the high-resolution image: detection
 (scale-adapted Harris), description, candidate matching against the low image's points (found
 once, at s = 1), geometric constraints, and robust estimation; the scale with the most inliers
-wins (ALGORITHM.md step 7) and :mod:`scalematch.decision` says whether the evidence is enough.
+wins (ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says whether the evidence is enough.
 """
 
 from __future__ import annotations
@@ -16,17 +16,17 @@ from typing import Callable, List, Optional, Tuple
 import numpy as np
 
 from .config import Config
-from .constraints import orientation_groups, semi_local_filter
-from .decision import Decision, decide
-from .descriptors import Described, describe_gradients, describe_jets
-from .detector import Keypoints, detect_on_level
-from .estimator import MIN_SAMPLE, Estimate, estimate
-from .mahalanobis import load_covariance, whiten
-from .matcher import match_descriptors
-from .result import MatchResult, ScaleRow, similarity_parts
-from .scalespace import Level, as_float_image, scale_space
-from .synthetic import compose
-from .views import View, keep_inside, to_high, view_plan, views_of
+from .geometry import compose, similarity_parts
+from .result import MatchResult, ScaleRow
+from .stages.constraints import orientation_groups, semi_local_filter
+from .stages.decision import Decision, decide
+from .stages.descriptors import Described, describe_gradients, describe_jets
+from .stages.detector import Keypoints, detect_on_level
+from .stages.estimator import MIN_SAMPLE, Estimate, estimate
+from .stages.mahalanobis import load_covariance, whiten
+from .stages.matcher import match_descriptors
+from .stages.scalespace import Level, as_float_image, scale_space
+from .stages.views import View, keep_inside, to_high, view_plan, views_of
 
 #: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
 #: Harris filters (4 sigma~ = 8 px) see mostly border.

@@ -17,15 +17,15 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import Dict, Optional, Sequence, Tuple, Union
+from typing import Dict, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
 
+from .chart import bar_chart
+from .geometry import footprint, similarity_parts
 from .imageio import to_bgr8
-from .plot import bar_chart
-from .result import MatchResult, similarity_parts
-from .synthetic import apply
+from .result import MatchResult
 
 PathLike = Union[str, Path]
 
@@ -47,21 +47,6 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX
 def _as3(t: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=np.float64)
     return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-
-
-def footprint(transform: np.ndarray, high_shape: Tuple[int, ...]) -> Optional[np.ndarray]:
-    """(4, 2) low-resolution px of the high image's corners (edges at -0.5), or None.
-
-    None when the transform sends a corner to infinity or behind the camera (homographies).
-    """
-    h, w = high_shape[:2]
-    corners = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
-    t3 = _as3(transform)
-    den = np.hstack([corners, np.ones((4, 1))]) @ t3[2]
-    if np.any(den <= 1e-12):
-        return None
-    out = apply(transform, corners)
-    return out if np.all(np.isfinite(out)) else None
 
 
 def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,

@@ -10,10 +10,10 @@ import pytest
 
 from scalematch import Config, match
 from scalematch.config import ProbeParams
-from scalematch.decision import mean_transfer_gap
-from scalematch.evaluation import reprojection_error
-from scalematch.result import similarity_parts
-from scalematch.synthetic import apply, make_zoom_pair
+from scalematch.geometry import apply, similarity_parts
+from scalematch.lab.evaluation import reprojection_error
+from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.stages.decision import mean_transfer_gap
 
 #: tolerances of issue 4: ratio within 3 %, angle within 1 degree, error under 2 px
 RATIO_TOL = 0.03
