@@ -26,11 +26,11 @@ test: $(STAMP)
 
 ## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
 bench: $(STAMP)
-	$(BIN)/scalematch bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
+	$(BIN)/scalematch lab bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
 
 ## the repeatability study of issue 2 (needs ../shared)
 repeatability: $(STAMP)
-	$(BIN)/scalematch repeatability --out-dir docs
+	$(BIN)/scalematch lab repeatability --out-dir docs
 
 clean:
 	rm -rf $(VENV) out bench-out

@@ -1,8 +1,10 @@
 """scalematch: match a low-resolution image against a high-resolution one with unknown zoom.
 
 Implements Dufournaud, Schmid & Horaud, "Image Matching with Scale Adjustment", CVIU 93 (2004).
-The pipeline, by module: ``scalespace`` -> ``detector`` -> descriptors -> matching ->
-constraints -> estimation -> ``pipeline`` (scale selection and decision) -> ``render``/``cli``.
+The pipeline, by module: ``stages/scalespace`` -> ``stages/detector`` -> ``stages/descriptors`` ->
+``stages/mahalanobis`` -> ``stages/matcher`` -> ``stages/constraints`` -> ``stages/estimator``
+-> ``stages/decision``, run by ``pipeline``; then ``render``/``cli``. The research code (synthetic
+pairs, benchmark, studies) is ``scalematch.lab``, which this package never imports.
 """
 
 import os as _os
@@ -15,7 +17,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
 from .config import Config  # noqa: E402
-from .detector import HarrisParams, Keypoints, PAPER_SCALES, detect  # noqa: E402
+from .stages.detector import HarrisParams, Keypoints, PAPER_SCALES, detect  # noqa: E402
 from .imageio import ImageError, read_grey  # noqa: E402
 from .pipeline import match  # noqa: E402
 from .result import MatchResult, ScaleRow  # noqa: E402

@@ -193,11 +193,17 @@ def config_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
 
 
 def _result_key(line: bytes) -> Optional[Tuple[Tuple[str, str], Dict[str, Any]]]:
-    """((low, high), object) of a batch result line, None for anything else."""
+    """((low, high) as given in the CSV, object) of a batch result line, None for anything else.
+
+    A line's ``low``/``high`` are the coarser and the finer image as found: with ``order``
+    "swapped" they are the CSV's high and low.
+    """
     try:
         obj = json.loads(line)
         key = (obj["low"]["path"], obj["high"]["path"])
-    except (ValueError, KeyError, TypeError):
+        if obj.get("order") == "swapped":
+            key = key[::-1]
+    except (ValueError, KeyError, TypeError, AttributeError):
         return None
     if not all(isinstance(p, str) for p in key) or not ("error" in obj or "matched" in obj):
         return None

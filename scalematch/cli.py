@@ -22,7 +22,7 @@ import click
 import numpy as np
 
 from . import __version__
-from .config import MODELS, MODES, Config
+from .config import MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, to_jsonable
 
@@ -32,10 +32,12 @@ EXIT_INTERRUPTED = 130
 
 #: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
 #: left out (not listed, "No such command") when the module is absent or cannot be imported.
+#: ``lab`` is the lab's group; the other three are short aliases of its commands.
 LAZY_COMMANDS = {
-    "bench": ("scalematch.bench", "bench_command"),
-    "repeatability": ("scalematch.repeatability", "repeatability_command"),
-    "covariance": ("scalematch.mahalanobis", "covariance_command"),
+    "lab": ("scalematch.lab.cli", "lab"),
+    "bench": ("scalematch.lab.bench", "bench_command"),
+    "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
+    "covariance": ("scalematch.lab.covariance", "covariance_command"),
 }
 
 class FiniteFloatRange(click.FloatRange):
@@ -195,12 +197,19 @@ def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: O
 
 def result_json(result: MatchResult, low_path: str, high_path: str,
                 low_shape: Tuple[int, ...], high_shape: Tuple[int, ...]) -> Dict[str, Any]:
-    """The JSON object of one match (README.md, "## Output"); plain types, nan -> None."""
+    """The JSON object of one match (README.md, "## Output"); plain types, nan -> None.
+
+    ``low``/``high`` describe the coarser and the finer image as found: with ``order``
+    "swapped" the first image given is the finer one, and they are exchanged.
+    """
+    if result.order == "swapped":
+        low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
     t = result.transform
     return {
         "matched": bool(result.matched),
         "reason": None if result.matched else (result.reason or "no reliable match"),
         "model": result.model,
+        "order": result.order,
         "transform": None if t is None else to_jsonable(np.asarray(t, dtype=np.float64)),
         "resolution_ratio": to_jsonable(float(result.resolution_ratio)),
         "rotation_deg": to_jsonable(float(result.rotation_deg)),
@@ -233,9 +242,11 @@ def summary(result: MatchResult) -> str:
         if result.model == "fundamental":
             return (f"matched (fundamental): {result.n_inliers} inliers at scale "
                     f"{result.best_scale:g}, {secs}")
+        swapped = ", order swapped (the first image is the finer one)" \
+            if result.order == "swapped" else ""
         return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
                 f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers at scale "
-                f"{result.best_scale:g}, {secs}")
+                f"{result.best_scale:g}{swapped}, {secs}")
     best = f", best scale {result.best_scale:g}" if np.isfinite(result.best_scale) else ""
     return f"no reliable match: {result.reason or 'the evidence is too weak'}{best}, {secs}"
 
@@ -384,6 +395,13 @@ def matching_options(f: Callable) -> Callable:
         click.option("--mode", type=click.Choice(MODES), default="default", show_default=True,
                      help="'paper': the method as published (jets, Mahalanobis, semi-local "
                           "constraints, scales 1-8)."),
+        click.option("--order", type=click.Choice(ORDERS), default="auto", show_default=True,
+                     help="'auto': find which image is the finer one (the given order is tried "
+                          "first, then the other; the JSON says which). 'given': LOW is the "
+                          "coarser image."),
+        click.option("--views/--no-views", "views", default=True, show_default=True,
+                     help="When nothing matches, simulate tilted views of the finer image "
+                          "(oblique shots; slower on pairs that do not match)."),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
@@ -425,7 +443,9 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                 thresholds[p] = value
     try:
         config = build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
-                              kwargs.pop("seed"), thresholds, kwargs.pop("settings"))
+                              kwargs.pop("seed"), thresholds,
+                              tuple(kwargs.pop("settings")) + (f"order={kwargs.pop('order')}",
+                                                               f"views.enabled={kwargs.pop('views')}"))
     except ValueError as exc:
         raise InputError(str(exc))
     for _, paths, typ, _ in THRESHOLD_OPTIONS:  # a --set value for a named threshold
@@ -494,9 +514,12 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
     try:
         if _show_progress(quiet):
-            with click.progressbar(length=len(config.scales), label="matching scales",
+            # steps: each scale detected, then each matched; the length grows when the search
+            # goes on to the other order or to tilted views
+            with click.progressbar(length=2 * len(config.scales), label="matching",
                                    file=sys.stderr, show_pos=True) as bar:
                 def progress(done: int, total: int) -> None:
+                    bar.length = max(total, done)
                     bar.update(done - bar.pos)
                 result = _run_match(low_grey, high_grey, config, progress)
         else:

@@ -9,17 +9,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Optional, Tuple
 
-from .constraints import OrientationParams, SemiLocalParams
-from .decision import DecisionParams
-from .descriptors import GradientParams, JetParams
-from .detector import HarrisParams, PAPER_SCALES
-from .estimator import RansacParams
-from .matcher import MatcherParams
+from .stages.constraints import OrientationParams, SemiLocalParams
+from .stages.decision import DecisionParams
+from .stages.descriptors import GradientParams, JetParams
+from .stages.detector import HarrisParams, PAPER_SCALES
+from .stages.estimator import RansacParams
+from .stages.matcher import MatcherParams
+from .stages.views import ViewParams
 
 #: Models the robust estimator can fit (paper section 5 and "Further examples").
 MODELS = ("similarity", "affine", "homography", "fundamental")
 #: "default": the improved pipeline; "paper": jets + Mahalanobis + semi-local constraints.
 MODES = ("default", "paper")
+#: "auto": find which image is the finer one (the given order first, then the other);
+#: "given": the first image is the coarser one, as in version 0.1.
+ORDERS = ("auto", "given")
 
 
 def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float, ...]:
@@ -74,8 +78,13 @@ class Config:
     ransac: RansacParams = field(default_factory=RansacParams)
     probe: ProbeParams = field(default_factory=ProbeParams)
     decision: DecisionParams = field(default_factory=DecisionParams)
+    order: str = "auto"  #: see ORDERS
+    #: simulated tilted views of the finer image, tried when the plain search finds nothing
+    views: ViewParams = field(default_factory=ViewParams)
 
     def __post_init__(self) -> None:
+        if self.order not in ORDERS:
+            raise ValueError(f"order must be one of {ORDERS}, got {self.order!r}")
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
         if self.model not in MODELS:

@@ -3,29 +3,31 @@
 ``match(low, high, config)`` runs, for each scale s of the high-resolution image: detection
 (scale-adapted Harris), description, candidate matching against the low image's points (found
 once, at s = 1), geometric constraints, and robust estimation; the scale with the most inliers
-wins (ALGORITHM.md step 7) and :mod:`scalematch.decision` says whether the evidence is enough.
+wins (ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says whether the evidence is enough.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
-from typing import Callable, List, Optional
+from dataclasses import dataclass, field, replace
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .config import Config
-from .constraints import orientation_groups, semi_local_filter
-from .decision import Decision, decide
-from .descriptors import Described, describe_gradients, describe_jets
-from .detector import Keypoints, detect_on_level
-from .estimator import Estimate, estimate
+from .geometry import compose, similarity_parts
 from .imageio import grey_levels
-from .mahalanobis import load_covariance, whiten
-from .matcher import match_descriptors
-from .result import MatchResult, ScaleRow, similarity_parts
-from .scalespace import Level, as_float_image, scale_space
+from .result import MatchResult, ScaleRow
+from .stages.constraints import orientation_groups, semi_local_filter
+from .stages.decision import Decision, decide
+from .stages.descriptors import Described, describe_gradients, describe_jets
+from .stages.detector import Keypoints, detect_on_level
+from .stages.estimator import MIN_SAMPLE, Estimate, estimate
+from .stages.mahalanobis import load_covariance, whiten
+from .stages.matcher import Candidates, match_descriptors
+from .stages.scalespace import Level, as_float_image, scale_space
+from .stages.views import View, keep_inside, to_high, view_plan, views_of
 
 #: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
 #: Harris filters (4 sigma~ = 8 px) see mostly border.
@@ -64,6 +66,21 @@ def _constrain(config: Config, high: Described, low: Described, cand, level: Lev
     return orientation_groups(dtheta, config.orientation)
 
 
+def distinct_pairs(src: np.ndarray, dst: np.ndarray):
+    """The distinct rows of the point pairs (src, dst), (K, 2) each, in their first order.
+
+    A keypoint with several dominant orientations is described once per orientation, so the
+    same pair of positions can be matched more than once; counting it once keeps the inlier
+    count and the a-contrario test honest.
+    """
+    if len(src) == 0:
+        return src, dst
+    rows = np.round(np.hstack([src, dst]), 3)
+    _, first = np.unique(rows, axis=0, return_index=True)
+    keep = np.sort(first)
+    return src[keep], dst[keep]
+
+
 def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
                 low_image: np.ndarray, config: Config) -> ScaleOutcome:
     """Candidate matching, constraints and robust estimation at one scale."""
@@ -74,8 +91,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     kept = 0
     if len(cand):
         for mask in _constrain(config, high, low, cand, level, low_image):
-            src = high.xy[cand.i[mask]]
-            dst = low.xy[cand.j[mask]]
+            src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
             est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
                 best, best_src, best_dst, kept = est, src, dst, int(mask.sum())
@@ -83,7 +99,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     ratio = angle = float("nan")
     if n_in and config.model != "fundamental":
         ratio, angle, _ = similarity_parts(best.transform)
-    initial = len(cand)
+    initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
                    inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,
                    rotation_deg=angle)
@@ -105,7 +121,25 @@ def probe_score(high: Described, low: Described, config: Config) -> float:
     only when the fit's ratio agrees with the scale: rotation alone cannot rank scales where
     the scene's edges share a few directions (facades), geometry can.
     """
-    cand = match_descriptors(high.desc, low.desc, config.matcher)
+    return _score(high, low, match_descriptors(high.desc, low.desc, config.matcher), config)
+
+
+def probe_scores(highs: Sequence[Described], low: Described, config: Config) -> List[float]:
+    """``probe_score`` of several scales with one nearest-neighbour search (the same result:
+    each candidate depends on its own row only; one large product is faster than many small)."""
+    if not highs:
+        return []
+    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
+    bounds = np.cumsum([0] + [len(h) for h in highs])
+    out = []
+    for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
+        rows = (cand.i >= lo) & (cand.i < hi)
+        part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
+        out.append(_score(h, low, part, config))
+    return out
+
+
+def _score(high: Described, low: Described, cand: Candidates, config: Config) -> float:
     if len(cand) == 0:
         return 0.0
     if config.mode == "paper":
@@ -125,18 +159,6 @@ def probe_score(high: Described, low: Described, config: Config) -> float:
     return best
 
 
-def log10_binomial_tail(n: int, k: int, p: float) -> float:
-    """log10 P(X >= k) for X ~ Binomial(n, p)."""
-    if k <= 0:
-        return 0.0
-    if k > n:
-        return -math.inf
-    logs = [math.lgamma(n + 1) - math.lgamma(i + 1) - math.lgamma(n - i + 1)
-            + i * math.log(p) + (n - i) * math.log1p(-p) for i in range(k, n + 1)]
-    top = max(logs)
-    return (top + math.log(sum(math.exp(v - top) for v in logs))) / math.log(10)
-
-
 def select_scales(scores: List[float], keep: int) -> List[int]:
     """Indices of the ``keep`` best-scoring scales and their immediate neighbours."""
     order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
@@ -146,6 +168,7 @@ def select_scales(scores: List[float], keep: int) -> List[int]:
     return sorted(chosen)
 
 
+
 def _check_images(low: np.ndarray, high: np.ndarray) -> None:
     for name, img in (("low", low), ("high", high)):
         if min(img.shape) < MIN_SIDE_PX:
@@ -153,9 +176,173 @@ def _check_images(low: np.ndarray, high: np.ndarray) -> None:
                              f"at least {MIN_SIDE_PX} px on each side is needed")
 
 
+@dataclass(frozen=True)
+class LowFeatures:
+    """The low-resolution image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
+
+    image: np.ndarray = field(repr=False)  #: (H, W) float32
+    described: Described = field(repr=False)
+
+
+def describe_low(low: np.ndarray, config: Config, whitening) -> LowFeatures:
+    level = Level(s=1.0, d=1.0, blur=0.0, image=low)
+    return LowFeatures(low, _describe(level, detect_on_level(level, config.harris_low), config,
+                                      whitening))
+
+
+def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
+    """The keypoints of a simulated view that lie away from its empty corners."""
+    if view.inside_distance is None or len(kp) == 0:
+        return kp
+    ok = keep_inside(view, kp.xy, margin_px * kp.s)
+    return Keypoints(s=kp.s, xy=kp.xy[ok], response=kp.response[ok])
+
+
+@dataclass(frozen=True)
+class Probed:
+    """A view of the high image detected at every scale and scored by the probe."""
+
+    view: View = field(repr=False)
+    #: per scale: (keypoints, descriptors of the probe points, or of all points without probe)
+    detected: Tuple = field(repr=False)
+    usable: Tuple[int, ...]  #: scales with described points
+    run: Tuple[int, ...]  #: scales to match in full
+    score: float  #: the best probe score over the scales (inf when the probe is off)
+    probing: bool
+
+
+def _space(config: Config) -> dict:
+    return dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
+                decimate=config.harris.decimate)
+
+
+def probe_view(view: View, low: LowFeatures, config: Config, whitening,
+               step: Callable[[], None] = lambda: None) -> Probed:
+    """Detect every scale of one view; score each from its strongest points (paper 5).
+
+    ``step()`` is called once per scale detected.
+    """
+    scales = sorted(config.scales)
+    probing = config.probe.enabled and len(scales) > config.probe.keep
+    detected = []
+    for level in scale_space(view.image, scales, **_space(config)):
+        if min(level.image.shape) < MIN_SIDE_PX // 2:
+            detected.append((Keypoints.empty(level.s), None))
+        else:
+            kp = _inside(view, detect_on_level(level, config.harris), config.views.edge_margin_px)
+            part = _head(kp, config.probe.points) if probing else kp
+            detected.append((kp, _describe(level, part, config, whitening)))
+        step()
+    usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
+    if probing:
+        scores = probe_scores([detected[i][1] for i in usable], low.described, config)
+        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
+        best = max(scores, default=0.0)
+    else:
+        run, best = usable, math.inf
+    return Probed(view, tuple(detected), tuple(usable), tuple(run), best, probing)
+
+
+def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
+                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+    """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
+
+    ``step()`` is called once per scale matched or skipped.
+    """
+    scales = sorted(config.scales)
+    detected = probed.detected
+    full = {}
+    # the selected scales are described in full (their levels computed again: holding every
+    # level of a large high image in memory would cost several full-resolution copies)
+    levels = scale_space(probed.view.image, [scales[i] for i in probed.run], **_space(config))
+    for i, level in zip(probed.run, levels):
+        kp = detected[i][0]
+        desc = _describe(level, kp, config, whitening) if probed.probing else detected[i][1]
+        full[i] = _full_scale(level, kp, desc, low.described, low.image, config)
+    outcomes: List[ScaleOutcome] = []
+    for n, s in enumerate(scales):
+        if n in full:
+            outcomes.append(full[n])
+        else:
+            # skipped: the probe judged it hopeless (not: too small, or no points at all)
+            row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
+                           inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
+            outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
+        step()
+    return outcomes
+
+
+def search_scales(view: View, low: LowFeatures, config: Config, whitening,
+                  step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+    """Steps 1-6 at every scale of one view of the high image (the paper's one-to-many search).
+
+    With the probe on, every scale is detected and scored from its strongest points, and only
+    the best scales and their neighbours are matched in full.
+    """
+    return finish_view(probe_view(view, low, config, whitening, step), low, config, whitening,
+                       step)
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One search: a direction (which image is taken as the finer one) and a view of it."""
+
+    swapped: bool  #: True: the second image given was found to be the coarser one
+    view: View = field(repr=False)
+    outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
+    verdict: Decision = field(repr=False)
+
+
+def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.ndarray, str]:
+    """(transform, inliers (N, 4), model) of a tilted view's match, in high-image pixels.
+
+    The view's similarity composed with the view's compression is an affine map; it is refit
+    on the inliers mapped back to the high image (an affine map, or a homography when that is
+    the model asked for), so the answer is exact rather than limited to the sampled tilts.
+    """
+    v = attempt.verdict
+    if attempt.view.is_identity:
+        return v.transform, v.inliers, config.model
+    src = to_high(attempt.view, v.inliers[:, :2])
+    dst = v.inliers[:, 2:4]
+    model = "homography" if config.model == "homography" else "affine"
+    # every candidate of the winning scale, not only the view's similarity inliers: the sampled
+    # tilt differs from the true one, so the similarity holds on part of the image only
+    best = next(o for o in attempt.outcomes if o.row.s == v.best_scale)
+    est = estimate(model, to_high(attempt.view, best.src), best.dst, config.ransac,
+                   seed=config.seed)
+    if est.transform is not None and est.n_inliers >= len(src):
+        return est.transform, np.hstack([to_high(attempt.view, best.src)[est.inliers],
+                                         best.dst[est.inliers]]), model
+    est = estimate(model, src, dst, config.ransac, seed=config.seed)
+    if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
+        composed = compose(v.transform, attempt.view.to_view) if v.transform.shape == (2, 3) \
+            else v.transform @ np.vstack([attempt.view.to_view, [0.0, 0.0, 1.0]])
+        return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
+    inl = est.inliers
+    return est.transform, np.hstack([src[inl], dst[inl]]), model
+
+
+def _as_finer_to_coarser(t: np.ndarray, inliers: np.ndarray, swapped: bool, model: str):
+    """Flip a match whose transform implies a ratio below 1 (the 'high' image is the coarser)."""
+    ratio = similarity_parts(t)[0]
+    if model == "fundamental" or not (math.isfinite(ratio) and ratio < 1.0):
+        return t, inliers, swapped
+    t3 = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
+    inv = np.linalg.inv(t3)
+    inv = inv[:2] if t.shape == (2, 3) else inv / inv[2, 2]
+    return inv, inliers[:, [2, 3, 0, 1]], not swapped
+
+
 def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
           progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
     """Match a low-resolution image against a high-resolution one of the same scene.
+
+    The search runs progressively and stops at the first reliable match (MODS, Mishkin et al.
+    2015): the given order (``low`` coarser than ``high``) on the image itself; then, with
+    ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
+    the finer image (``config.views``), in both orders. The a-contrario test counts every search
+    made, so trying more cannot make a chance transform look reliable.
 
     Parameters
     ----------
@@ -165,88 +352,91 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     config : Config
         Every parameter; recorded in the result.
     progress : callable, optional
-        ``progress(done, total)`` after each scale.
+        ``progress(done, total)`` after each scale detected or matched; ``total`` grows when
+        the search goes on to the other order or to tilted views.
 
     Returns
     -------
     MatchResult
         ``matched`` False with a ``reason`` when the evidence is too weak: a wrong transform
         reported as a match is the worst outcome, so the decision errs on the side of no.
+        ``order`` says whether the images were found in the order given; ``transform`` always
+        maps the finer image's pixels to the coarser image's.
     """
     t0 = time.perf_counter()
-    timings = {}
     low = as_float_image(grey_levels(low, "low"))  # ValueError: bool, NaN, constant
     high = as_float_image(grey_levels(high, "high"))
     _check_images(low, high)
     whitening = load_covariance(config.covariance_path).whitening() if config.mode == "paper" else None
+    images = {False: (low, high), True: (high, low)}
+    directions = (False, True) if config.order == "auto" else (False,)
+    plain = [[(1.0, 0.0)]]
+    passes = plain + (view_plan(config.views) if config.model != "fundamental" else [])
+    per_search = 2 * len(config.scales)  # progress steps: detect + match each scale
+    feats = {}
+    count = {"done": 0, "total": 0}
 
-    low_level = Level(s=1.0, d=1.0, blur=0.0, image=low)
-    low_kp = detect_on_level(low_level, config.harris_low)
-    low_desc = _describe(low_level, low_kp, config, whitening)
-    timings["low_image"] = time.perf_counter() - t0
-
-    t1 = time.perf_counter()
-    scales = sorted(config.scales)
-    total = 2 * len(scales)  # progress: probing each scale, then matching it
-    space = dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
-                 decimate=config.harris.decimate)
-    probing = config.probe.enabled and len(scales) > config.probe.keep
-    detected = []  # (keypoints, descriptors of the probe points or all) per scale
-    for n, level in enumerate(scale_space(high, scales, **space)):
-        if min(level.image.shape) < MIN_SIDE_PX // 2:
-            detected.append((Keypoints.empty(level.s), None))
-        else:
-            kp = detect_on_level(level, config.harris)
-            part = _head(kp, config.probe.points) if probing else kp
-            detected.append((kp, _describe(level, part, config, whitening)))
+    def step() -> None:
+        count["done"] += 1
         if progress is not None:
-            progress(n + 1, total)
-    timings["high_image"] = time.perf_counter() - t1
+            progress(count["done"], count["total"])
 
-    t2 = time.perf_counter()
-    usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
-    if probing:
-        scores = [probe_score(detected[i][1], low_desc, config) for i in usable]
-        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
-    else:
-        run = usable
-    full = {}
-    # the selected scales are described in full (their levels computed again: holding every
-    # level of a large high image in memory would cost several full-resolution copies)
-    for i, level in zip(run, scale_space(high, [scales[i] for i in run], **space)):
-        kp = detected[i][0]
-        desc = _describe(level, kp, config, whitening) if probing else detected[i][1]
-        full[i] = _full_scale(level, kp, desc, low_desc, low, config)
-    outcomes: List[ScaleOutcome] = []
-    for n, s in enumerate(scales):
-        if n in full:
-            outcomes.append(full[n])
-        else:
-            # skipped: the probe judged it hopeless (not: too small, or no points at all)
-            row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
-                           inliers=0, outlier_pct=100.0, skipped=n in usable)
-            outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
-        if progress is not None:
-            progress(len(scales) + n + 1, total)
-    timings["matching"] = time.perf_counter() - t2
-
-    t3 = time.perf_counter()
-    verdict: Decision = decide(outcomes, low.shape, high.shape, config)
-    timings["decision"] = time.perf_counter() - t3
-    timings["total"] = time.perf_counter() - t0
-    rows = tuple(o.row for o in outcomes)
-    if not verdict.matched:
-        return MatchResult(matched=False, reason=verdict.reason, model=config.model, transform=None,
-                           resolution_ratio=float("nan"), rotation_deg=float("nan"),
-                           translation=(float("nan"), float("nan")),
-                           best_scale=verdict.best_scale, inliers=np.zeros((0, 4)), scales=rows,
-                           timings=timings, config=config, evidence=verdict.evidence)
-    t = verdict.transform
-    if config.model == "fundamental":
+    attempts: List[Attempt] = []
+    searches = 0  # every view probed counts: the best ones are chosen among them all
+    winner: Optional[Attempt] = None
+    for views in passes:
+        found: List[Attempt] = []
+        for swapped in directions:
+            lo_img, hi_img = images[swapped]
+            if swapped not in feats:
+                feats[swapped] = describe_low(lo_img, config, whitening)
+            count["total"] += len(views) * per_search // 2
+            probed = [probe_view(v, feats[swapped], config, whitening, step)
+                      for v in views_of(hi_img, views, config.views)]
+            searches += len(probed)
+            chosen = sorted(probed, key=lambda p: -p.score)
+            if len(views) > 1 or not views[0] == (1.0, 0.0):  # a pass of simulated views
+                chosen = [p for p in chosen[:config.views.full_searches]
+                          if p.score >= config.views.min_probe_score]
+            count["total"] += len(chosen) * per_search // 2
+            for p in chosen:
+                outcomes = tuple(finish_view(p, feats[swapped], config, whitening, step))
+                verdict = decide(outcomes, lo_img.shape, p.view.image.shape, config,
+                                 searches=searches)
+                attempt = Attempt(swapped, p.view, outcomes, verdict)
+                attempts.append(attempt)
+                if verdict.matched:
+                    found.append(attempt)
+                    if verdict.evidence["log10_nfa"] <= config.decision.max_log_nfa_alone:
+                        break  # overwhelming: no other view of this pass can do better
+            if found:
+                break
+        if found:
+            winner = max(found, key=lambda a: a.verdict.evidence["inliers"])
+            break
+    timings = {"total": time.perf_counter() - t0}
+    if winner is None:
+        first = attempts[0]
+        tried = searches
+        more = f" ({tried} searches: both orders, tilted views)" if tried > 1 else ""
+        return MatchResult(matched=False, reason=first.verdict.reason + more, model=config.model,
+                           transform=None, resolution_ratio=float("nan"),
+                           rotation_deg=float("nan"), translation=(float("nan"), float("nan")),
+                           best_scale=first.verdict.best_scale, inliers=np.zeros((0, 4)),
+                           scales=tuple(o.row for o in first.outcomes), timings=timings,
+                           config=config, evidence=dict(first.verdict.evidence, searches=tried),
+                           order="given")
+    t, inliers, model = _refit_in_high(winner, config)
+    t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
+    evidence = dict(winner.verdict.evidence, searches=searches,
+                    view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)
+    if model == "fundamental":
         ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))
     else:
         ratio, angle, tr = similarity_parts(t)
-    return MatchResult(matched=True, reason="", model=config.model, transform=t,
+    return MatchResult(matched=True, reason="", model=model, transform=t,
                        resolution_ratio=ratio, rotation_deg=angle, translation=tr,
-                       best_scale=verdict.best_scale, inliers=verdict.inliers, scales=rows,
-                       timings=timings, config=config, evidence=verdict.evidence)
+                       best_scale=winner.verdict.best_scale, inliers=inliers,
+                       scales=tuple(o.row for o in winner.outcomes), timings=timings,
+                       config=config, evidence=evidence,
+                       order="swapped" if swapped else "given")

@@ -17,15 +17,15 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import Dict, Optional, Sequence, Tuple, Union
+from typing import Dict, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
 
+from .chart import bar_chart
+from .geometry import footprint, similarity_parts
 from .imageio import to_bgr8
-from .plot import bar_chart
-from .result import MatchResult, similarity_parts
-from .synthetic import apply
+from .result import MatchResult
 
 PathLike = Union[str, Path]
 
@@ -47,21 +47,6 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX
 def _as3(t: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=np.float64)
     return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-
-
-def footprint(transform: np.ndarray, high_shape: Tuple[int, ...]) -> Optional[np.ndarray]:
-    """(4, 2) low-resolution px of the high image's corners (edges at -0.5), or None.
-
-    None when the transform sends a corner to infinity or behind the camera (homographies).
-    """
-    h, w = high_shape[:2]
-    corners = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
-    t3 = _as3(transform)
-    den = np.hstack([corners, np.ones((4, 1))]) @ t3[2]
-    if np.any(den <= 1e-12):
-        return None
-    out = apply(transform, corners)
-    return out if np.all(np.isfinite(out)) else None
 
 
 def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
@@ -292,6 +277,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     the reason, the CSV only its header). ``low_path``/``high_path`` name the inputs in the
     pictures. Returns name -> path written. Raises ``OSError`` when ``out_dir`` is not writable.
     """
+    if result.order == "swapped":  # the pictures show the finer image on the coarser one
+        low_path, high_path, low, high = high_path, low_path, high, low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in

@@ -47,6 +47,9 @@ class MatchResult:
     timings: Dict[str, float] = field(repr=False)  #: stage name -> seconds
     config: Any = field(repr=False)  #: the Config used
     evidence: Dict[str, float] = field(default_factory=dict, repr=False)  #: decision figures
+    #: "given": the first image given is the coarser one; "swapped": the second is (the
+    #: transform and the inliers always go from the finer image to the coarser one)
+    order: str = "given"
 
     @property
     def n_inliers(self) -> int:
@@ -55,25 +58,6 @@ class MatchResult:
     @property
     def seconds(self) -> float:
         return float(self.timings.get("total", sum(self.timings.values())))
-
-
-def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
-    """(resolution ratio 1/h, rotation in degrees, translation) of a 2x3 or 3x3 transform.
-
-    For affine and homography matrices the linear part's sqrt(|det|) stands for h, the angle is
-    atan2(T[1,0], T[0,0]) as for a similarity.
-    """
-    t = np.asarray(t, dtype=np.float64)
-    a = t[:2, :2]
-    if t.shape == (3, 3):
-        a = a / t[2, 2]
-        tr = (t[0, 2] / t[2, 2], t[1, 2] / t[2, 2])
-    else:
-        tr = (t[0, 2], t[1, 2])
-    h = math.sqrt(abs(float(np.linalg.det(a))))
-    ratio = 1.0 / h if h > 0 else float("inf")
-    angle = math.degrees(math.atan2(a[1, 0], a[0, 0]))
-    return ratio, angle, (float(tr[0]), float(tr[1]))
 
 
 def to_jsonable(obj: Any) -> Any:

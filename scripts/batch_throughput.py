@@ -50,7 +50,7 @@ POLL_S = 0.05
 def make_pairs(folder: Path, n: int) -> Path:
     """``n`` tiny zoom pairs cut from data/raccoon.jpg, and pairs.csv listing them."""
     from scalematch.imageio import read_grey
-    from scalematch.synthetic import make_zoom_pair
+    from scalematch.lab.synthetic import make_zoom_pair
 
     photo = read_grey(ROOT / "data" / "raccoon.jpg")
     rows = []

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 
 from scalematch import Config, match
-from scalematch.datasets import boat_pairs, find_shared
-from scalematch.evaluation import reprojection_error
-from scalematch.synthetic import apply
+from scalematch.geometry import apply
+from scalematch.lab.datasets import boat_pairs, find_shared
+from scalematch.lab.evaluation import reprojection_error
 
 
 def ncc(high: np.ndarray, low: np.ndarray, t: np.ndarray) -> float:

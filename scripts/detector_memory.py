@@ -17,7 +17,7 @@ import scalematch  # noqa: F401  (first: sets the BLAS threads before numpy load
 import cv2
 import numpy as np
 
-from scalematch.detector import PAPER_SCALES, detect
+from scalematch.stages.detector import PAPER_SCALES, detect
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT.parent / "shared" / "data" / "photos" / "jpegtest_012mp-bus.jpg"

@@ -21,7 +21,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # runs from a checkout without installing
 
-from scalematch.synthetic import compose, zoom_warp  # noqa: E402
+from scalematch.geometry import compose  # noqa: E402
+from scalematch.lab.synthetic import zoom_warp  # noqa: E402
 RATIO = 3.0  #: resolution ratio: high-res px per low-res px
 ANGLE_DEG = 25.0  #: rotation of low relative to high (zoom_warp's convention)
 CROP = (420, 150, 480, 360)  #: x0, y0, width, height of the high-resolution crop, photo px

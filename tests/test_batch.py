@@ -21,7 +21,7 @@ import pytest
 from scalematch.batch import (NOTHING_DONE, BatchError, Pair, bounded, config_changes,
                               config_json, cut_torn_line, read_pairs, scan_output, unique_pairs)
 from scalematch.config import Config
-from scalematch.synthetic import make_zoom_pair
+from scalematch.lab.synthetic import make_zoom_pair
 from test_cli import JSON_KEYS, assert_one_line_error, run
 
 #: (width, height) of the tiny synthetic pairs, px: a match takes ~0.1 s.
@@ -114,6 +114,15 @@ def test_scan_output_counts_results_and_their_errors(tmp_path):
     done = scan_output(out, config_json(Config()))
     assert done.pairs == {("a", "b"), ("c", "d")} and done.errors == {("c", "d")}
     assert done.complete_bytes == out.stat().st_size
+
+
+def test_a_swapped_line_is_the_pair_as_given(tmp_path):
+    # the CSV row fine.png,coarse.png gave the finer image first: its line names the images as
+    # found (low: the coarser), with order "swapped"
+    swapped = json.loads(_line("coarse.png", "fine.png"))
+    swapped["order"] = "swapped"
+    out = write(tmp_path / "r.jsonl", json.dumps(swapped) + "\n")
+    assert scan_output(out, config_json(Config())).pairs == {("fine.png", "coarse.png")}
 
 
 def test_a_torn_last_line_is_not_counted_and_is_cut(tmp_path):

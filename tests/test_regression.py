@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from scalematch import match
-from scalematch.evaluation import reprojection_error
-from scalematch.result import similarity_parts
-from scalematch.synthetic import make_zoom_pair
+from scalematch.geometry import similarity_parts
+from scalematch.lab.evaluation import reprojection_error
+from scalematch.lab.synthetic import make_zoom_pair
 
 CASES = [(r, seed) for r in (2.0, 3.0, 4.0, 5.0, 6.0) for seed in (10, 11)]
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from scalematch.config import Config
-from scalematch.render import (OUTLINE, footprint, matches_image, overlay, scale_plot,
-                               write_outputs)
-from scalematch.result import MatchResult, ScaleRow, similarity_parts
-from scalematch.synthetic import apply, compose, zoom_warp
+from scalematch.geometry import apply, compose, footprint, similarity_parts
+from scalematch.lab.synthetic import zoom_warp
+from scalematch.render import OUTLINE, matches_image, overlay, scale_plot, write_outputs
+from scalematch.result import MatchResult, ScaleRow
 
 RATIO, ANGLE = 3.0, 25.0
 CROP = (300, 200, 480, 360)  # x0, y0, w, h of the high-resolution crop of the photo

@@ -1,0 +1,102 @@
+"""Plane geometry shared by the stages, the pictures and the lab: one definition of each map.
+
+Conventions (README "Conventions"): points are (x, y) in OpenCV pixels, pixel centres at
+integers, so a W x H image's edge runs through (-0.5, -0.5) .. (W - 0.5, H - 0.5). A transform
+is a 2x3 affine (similarity) or a 3x3 homography mapping a high-resolution pixel to a
+low-resolution pixel. Angles are degrees, counter-clockwise in (x, y) with y down (so clockwise
+on screen).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple
+
+import numpy as np
+
+#: Points per side of the grid spanning the high image (EVALUATION.md: 21x21).
+GRID_POINTS = 21
+
+
+def similarity_matrix(scale: float, angle_deg: float, tx: float = 0.0, ty: float = 0.0) -> np.ndarray:
+    """2x3 matrix of x' = scale * R(angle) x + t (angle counter-clockwise on screen is negative)."""
+    a = math.radians(angle_deg)
+    c, s = scale * math.cos(a), scale * math.sin(a)
+    return np.array([[c, -s, tx], [s, c, ty]], dtype=np.float64)
+
+
+def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
+    """(resolution ratio 1/h, rotation in degrees, translation) of a 2x3 or 3x3 transform.
+
+    For affine and homography matrices the linear part's sqrt(|det|) stands for h, the angle is
+    atan2(T[1,0], T[0,0]) as for a similarity.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    a = t[:2, :2]
+    if t.shape == (3, 3):
+        a = a / t[2, 2]
+        tr = (t[0, 2] / t[2, 2], t[1, 2] / t[2, 2])
+    else:
+        tr = (t[0, 2], t[1, 2])
+    h = math.sqrt(abs(float(np.linalg.det(a))))
+    ratio = 1.0 / h if h > 0 else float("inf")
+    angle = math.degrees(math.atan2(a[1, 0], a[0, 0]))
+    return ratio, angle, (float(tr[0]), float(tr[1]))
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """2x3 of ``a o b`` (apply b first, then a)."""
+    a3 = np.vstack([a, [0, 0, 1]])
+    b3 = np.vstack([b, [0, 0, 1]])
+    return (a3 @ b3)[:2]
+
+
+def apply(t: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Map (N, 2) points by a 2x3 affine or a 3x3 homography."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    t = np.asarray(t, dtype=np.float64)
+    if t.shape == (2, 3):
+        return xy @ t[:, :2].T + t[:, 2]
+    p = np.hstack([xy, np.ones((xy.shape[0], 1))]) @ t.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def grid(shape: Tuple[int, int], n: int = GRID_POINTS) -> np.ndarray:
+    """(n*n, 2) points (x, y) spanning an image of ``shape`` (H, W), corners included."""
+    h, w = int(shape[0]), int(shape[1])
+    xs = np.linspace(0.0, w - 1.0, n)
+    ys = np.linspace(0.0, h - 1.0, n)
+    gx, gy = np.meshgrid(xs, ys)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def footprint(t: np.ndarray, high_shape: Tuple[int, ...], edges: bool = True
+              ) -> Optional[np.ndarray]:
+    """(4, 2) low-resolution px of the high image's four corners, clockwise from top-left.
+
+    Parameters
+    ----------
+    t : (2, 3) or (3, 3) array
+        High px -> low px.
+    high_shape : tuple
+        (H, W, ...) of the high image.
+    edges : bool
+        True (the convention): the image's outline, corners at (-0.5, -0.5) .. (W - 0.5,
+        H - 0.5), as drawn in the overlay. False: the centres of the corner pixels, (0, 0) ..
+        (W - 1, H - 1), which the decision's area test was measured with (it keeps that, so no
+        decision changes).
+
+    Returns
+    -------
+    (4, 2) array or None
+        None when a homography sends a corner to infinity or behind the camera (or the result is
+        not finite): such a transform has no footprint.
+    """
+    h, w = high_shape[:2]
+    lo, hi_x, hi_y = (-0.5, w - 0.5, h - 0.5) if edges else (0.0, w - 1.0, h - 1.0)
+    corners = np.array([[lo, lo], [hi_x, lo], [hi_x, hi_y], [lo, hi_y]], dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    if t.shape == (3, 3) and np.any(np.hstack([corners, np.ones((4, 1))]) @ t[2] <= 1e-12):
+        return None
+    out = apply(t, corners)
+    return out if np.all(np.isfinite(out)) else None

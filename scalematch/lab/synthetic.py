@@ -1,0 +1,446 @@
+"""Synthetic zoom pairs with exact ground truth (EVALUATION.md, "Synthetic zoom pairs").
+
+``zoom_warp`` is the camera model: blur by 0.5*sqrt(r^2 - 1), rotate by theta and shrink by r in
+one affine warp onto a canvas that holds the whole rotated image. Everything else that cuts
+pairs (crops, grey-level change, noise, window cut) builds on it.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
+
+import cv2
+import numpy as np
+
+from ..geometry import apply, compose, similarity_matrix
+from ..stages.scalespace import CAMERA_BLUR_PX
+
+
+def zoom_warp(image: np.ndarray, ratio: float, angle_deg: float,
+              interpolation: int = cv2.INTER_LINEAR) -> Tuple[np.ndarray, np.ndarray]:
+    """Blur, rotate by ``angle_deg`` and shrink by ``ratio`` with one warp; return (image, A).
+
+    The output canvas holds the whole rotated, shrunk image; ``A`` (2x3) maps a pixel of
+    ``image`` to its pixel in the output (OpenCV convention, pixel centres at integers).
+    """
+    img = np.asarray(image)
+    blur = CAMERA_BLUR_PX * math.sqrt(max(ratio * ratio - 1.0, 0.0))
+    if blur > 0.05:
+        img = cv2.GaussianBlur(img, (0, 0), blur, borderType=cv2.BORDER_REFLECT_101)
+    h, w = img.shape[:2]
+    lin = similarity_matrix(1.0 / ratio, angle_deg)
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    mapped = apply(lin, corners)
+    lo = mapped.min(axis=0)
+    hi = mapped.max(axis=0)
+    size = np.ceil(hi - lo).astype(int) + 1
+    a = lin.copy()
+    a[:, 2] = -lo
+    out = cv2.warpAffine(img, a, (int(size[0]), int(size[1])), flags=interpolation,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out, a
+
+
+# --------------------------------------------------------------------------------------------
+# Zoom pairs cut from a real photo (EVALUATION.md steps 1-3)
+# --------------------------------------------------------------------------------------------
+
+#: Size (width, height) of the high-resolution crop, px (EVALUATION.md step 1: "about 640x480").
+HIGH_SIZE = (640, 480)
+#: Largest low-resolution image (width, height), px (EVALUATION.md step 2: a finite sensor).
+LOW_MAX = (1024, 768)
+#: Candidate crop positions; the most textured is kept (EVALUATION.md step 1).
+N_CROP_CANDIDATES = 6
+#: Margin kept between a crop and the photo border, as a fraction of the photo side
+#: ("away from the border": avoids lens vignetting and the rotated canvas' black corners).
+BORDER_MARGIN_FRAC = 0.05
+#: Grey-level gain range (EVALUATION.md step 2).
+GAIN_RANGE = (0.75, 1.2)
+#: Grey-level offset range, grey levels (EVALUATION.md step 2).
+OFFSET_RANGE = (-15.0, 15.0)
+#: Range of the std of the additive Gaussian noise, grey levels (EVALUATION.md step 2: "up to 3").
+NOISE_STD_RANGE = (0.0, 3.0)
+#: Rotation range, degrees, [lo, hi) (EVALUATION.md step 2).
+ANGLE_RANGE = (-180.0, 180.0)
+
+
+@dataclass(frozen=True, eq=False)
+class ZoomPair:
+    """A low/high pair with its ground truth (or none, for an unrelated pair).
+
+    ``truth`` maps a ``high`` pixel to a ``low`` pixel (OpenCV pixel centres at integers): a 2x3
+    similarity for synthetic pairs, a 3x3 homography for real pairs such as boat, None when the
+    two images show different scenes. Grey levels are float32 in the 8-bit range.
+    """
+
+    low: np.ndarray = field(repr=False)  #: (H, W) float32, the low-resolution image
+    high: np.ndarray = field(repr=False)  #: (h, w) float32, the high-resolution image
+    truth: Optional[np.ndarray] = field(repr=False)  #: 2x3 or 3x3 float64, high px -> low px
+    ratio: float  #: resolution ratio r (high px per low px); nan when unknown
+    angle_deg: float  #: rotation of low relative to high, degrees; nan when unknown
+    gain: float = 1.0  #: grey-level gain applied to low
+    offset: float = 0.0  #: grey-level offset applied to low
+    noise_std: float = 0.0  #: std of the Gaussian noise added to low, grey levels
+    source: str = ""  #: where low comes from (photo name, "boat 1->3", ...)
+    crop_xy: Tuple[int, int] = (0, 0)  #: top-left of ``high`` in its photo, px
+    window_xy: Tuple[int, int] = (0, 0)  #: top-left of ``low`` in the warped canvas, px
+    high_source: str = ""  #: where high comes from ("" = same as ``source``)
+    tilt: float = 1.0  #: tilt of the low view (1: a plain zoom pair)
+    longitude_deg: float = 0.0  #: direction of the tilt, degrees
+
+
+def _translation(tx: float, ty: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, tx], [0.0, 1.0, ty]])
+
+
+def crop_size(photo_shape: Tuple[int, int], high_size: Tuple[int, int] = HIGH_SIZE) -> Tuple[int, int]:
+    """(w, h) of the high crop: ``high_size`` but at most half of the photo on each side."""
+    ph, pw = photo_shape[:2]
+    return min(int(high_size[0]), pw // 2), min(int(high_size[1]), ph // 2)
+
+
+def texture_score(crop: np.ndarray, ratio: float) -> float:
+    """Mean gradient magnitude (grey levels/px) of ``crop`` (h, w) once shrunk by ``ratio``.
+
+    What the low image will see of the crop (EVALUATION.md step 1): the crop is reduced with
+    ``cv2.INTER_AREA`` and differentiated with 3x3 Sobel kernels (divided by 8 to be per pixel).
+    """
+    w = max(int(round(crop.shape[1] / ratio)), 3)
+    h = max(int(round(crop.shape[0] / ratio)), 3)
+    small = cv2.resize(np.asarray(crop, np.float32), (w, h), interpolation=cv2.INTER_AREA)
+    gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    return float(np.mean(np.sqrt(gx * gx + gy * gy)))
+
+
+def choose_crop(photo: np.ndarray, ratio: float, rng: np.random.Generator,
+                high_size: Tuple[int, int] = HIGH_SIZE,
+                n_candidates: int = N_CROP_CANDIDATES) -> Tuple[int, int, int, int]:
+    """(x, y, w, h) of the most textured of ``n_candidates`` random crops away from the border.
+
+    Parameters
+    ----------
+    photo : (H, W) array
+    ratio : float
+        The zoom ratio; texture is measured on the crop shrunk by it (``texture_score``).
+    rng : numpy Generator
+        Draws the ``n_candidates`` positions (2 integers each).
+    """
+    ph, pw = photo.shape[:2]
+    w, h = crop_size(photo.shape, high_size)
+    if w < 16 or h < 16:
+        raise ValueError(f"photo {pw}x{ph} is too small to cut a high-resolution crop from")
+    mx = min(int(BORDER_MARGIN_FRAC * pw), (pw - w) // 2)
+    my = min(int(BORDER_MARGIN_FRAC * ph), (ph - h) // 2)
+    return most_textured_crop(photo, (w, h), (mx, my), n_candidates, ratio, rng)
+
+
+def most_textured_crop(photo: np.ndarray, size: Tuple[int, int], margin: Tuple[int, int],
+                       n_candidates: int, ratio: float,
+                       rng: np.random.Generator) -> Tuple[int, int, int, int]:
+    """(x, y, w, h): the most textured (``texture_score``) of ``n_candidates`` random crops.
+
+    Each candidate draws x in [mx, W - w - mx], then y in [my, H - h - my] (``margin`` = (mx,
+    my)); the first of equally textured crops wins.
+    """
+    ph, pw = photo.shape[:2]
+    (w, h), (mx, my) = size, margin
+    best, best_score = None, -1.0
+    for _ in range(max(n_candidates, 1)):
+        x = int(rng.integers(mx, pw - w - mx + 1))
+        y = int(rng.integers(my, ph - h - my + 1))
+        score = texture_score(photo[y:y + h, x:x + w], ratio)
+        if score > best_score:
+            best, best_score = (x, y, w, h), score
+    return best
+
+
+def window_offset(canvas_wh: Tuple[int, int], footprint: np.ndarray, low_max: Tuple[int, int],
+                  rng: np.random.Generator) -> Tuple[int, int, int, int]:
+    """(x, y, w, h) of a window at most ``low_max`` of the canvas holding the whole footprint.
+
+    Parameters
+    ----------
+    canvas_wh : (int, int)
+        Canvas width and height, px.
+    footprint : (N, 2) array
+        Points (x, y) that must lie inside the window (the high image's corners in the canvas).
+    low_max : (int, int)
+        Largest window (width, height); a canvas that fits is kept whole.
+    rng : numpy Generator
+        Draws the offset uniformly among the windows that hold the footprint (2 integers).
+    """
+    cw, ch = int(canvas_wh[0]), int(canvas_wh[1])
+    ww, wh = min(cw, int(low_max[0])), min(ch, int(low_max[1]))
+    lo = np.floor(footprint.min(axis=0)).astype(int)
+    hi = np.ceil(footprint.max(axis=0)).astype(int)
+    out = []
+    for lo_k, hi_k, win, canvas in ((lo[0], hi[0], ww, cw), (lo[1], hi[1], wh, ch)):
+        first = max(0, hi_k - win + 1)
+        last = min(lo_k, canvas - win)
+        if first > last:
+            raise ValueError(f"the high image's footprint ({hi_k - lo_k + 1} px) does not fit in "
+                             f"a {win} px window; use a larger ratio or a smaller high_size")
+        out.append(int(rng.integers(first, last + 1)))
+    return out[0], out[1], ww, wh
+
+
+def degrade(image: np.ndarray, gain: float, offset: float, noise_std: float,
+            rng: np.random.Generator) -> np.ndarray:
+    """gain * image + offset + N(0, noise_std^2), rounded and clipped to 0..255, float32."""
+    out = image.astype(np.float32) * np.float32(gain) + np.float32(offset)
+    if noise_std > 0:
+        out += rng.normal(0.0, noise_std, size=out.shape).astype(np.float32)
+    return np.clip(np.rint(out), 0, 255).astype(np.float32)
+
+
+def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], ratio: float,
+                        rng: np.random.Generator, low_max: Tuple[int, int] = LOW_MAX,
+                        source: str = "") -> ZoomPair:
+    """A zoom pair whose high image is the crop ``(x, y, w, h)`` of ``photo`` (steps 2-3).
+
+    ``low`` is the whole photo blurred, rotated by a random angle and shrunk by ``ratio``
+    (``zoom_warp``), cut to a window of at most ``low_max`` holding the crop's footprint
+    (``window_offset``), then changed in grey level and noise (``degrade``; doing the cut first
+    only saves work). The truth is ``T(-window) o A_warp o T(crop)``. ``rng`` draws, in order:
+    the angle, gain, offset, noise std, window offset and the noise.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if photo.ndim != 2:
+        raise ValueError(f"photo must be a grey (H, W) array, got shape {photo.shape}")
+    if not ratio >= 1.0:
+        raise ValueError(f"ratio must be >= 1, got {ratio}")
+    x, y, w, h = (int(v) for v in crop)
+    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    canvas, warp = zoom_warp(photo, ratio, angle)
+    to_canvas = compose(warp, _translation(x, y))
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
+                                   low_max, rng)
+    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
+    truth = compose(_translation(-wx, -wy), to_canvas)
+    return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
+                    gain=gain, offset=offset, noise_std=noise_std, source=source,
+                    crop_xy=(x, y), window_xy=(wx, wy))
+
+
+def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
+                   high_size: Tuple[int, int] = HIGH_SIZE, low_max: Tuple[int, int] = LOW_MAX,
+                   source: str = "") -> ZoomPair:
+    """Cut a synthetic zoom pair with exact ground truth from one photo (EVALUATION.md 1-3).
+
+    ``high`` is the most textured of 6 random crops (``choose_crop``); ``low`` is the whole photo
+    blurred, rotated by a random angle and shrunk by ``ratio``, cut to at most ``low_max`` around
+    the high image's footprint, with a grey-level change and noise (``zoom_pair_from_crop``).
+
+    Parameters
+    ----------
+    photo : (H, W) float32 array
+        Grey levels in the 8-bit range.
+    ratio : float
+        Resolution ratio r >= 1 (high px per low px).
+    rng : numpy Generator
+        All randomness: crop positions, angle, gain, offset, noise std, window, noise.
+    high_size, low_max : (int, int)
+        (width, height) of the high crop and the largest low image, px.
+    source : str
+        A name recorded in the pair (e.g. the photo file name).
+
+    Returns
+    -------
+    ZoomPair
+        ``truth`` is a 2x3 float64 similarity, high px -> low px.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if photo.ndim != 2:
+        raise ValueError(f"photo must be a grey (H, W) array, got shape {photo.shape}")
+    if not ratio >= 1.0:
+        raise ValueError(f"ratio must be >= 1, got {ratio}")
+    crop = choose_crop(photo, ratio, rng, high_size)
+    return zoom_pair_from_crop(photo, crop, ratio, rng, low_max, source)
+
+
+def make_unrelated_pair(photo_low: np.ndarray, photo_high: np.ndarray, ratio: float,
+                        rng: np.random.Generator, high_size: Tuple[int, int] = HIGH_SIZE,
+                        low_max: Tuple[int, int] = LOW_MAX, source_low: str = "",
+                        source_high: str = "") -> ZoomPair:
+    """The low image of ``photo_low`` against a high crop of ``photo_high`` (truth None).
+
+    Both are made exactly as in ``make_zoom_pair`` (the high crop is the most textured of 6);
+    use two photos of different scenes, so that any match claimed is false.
+    """
+    low_pair = make_zoom_pair(photo_low, ratio, rng, high_size, low_max, source_low)
+    x, y, w, h = choose_crop(np.asarray(photo_high, np.float32), ratio, rng, high_size)
+    high = np.ascontiguousarray(np.asarray(photo_high, np.float32)[y:y + h, x:x + w])
+    return replace(low_pair, high=high, truth=None, crop_xy=(x, y),
+                   high_source=source_high or "other photo")
+
+
+def unrelated_indices(sources: Sequence[str], ratios: Sequence[float], count: int,
+                      rng: np.random.Generator, scene_of: Callable[[str], str]) -> List[Tuple[int, int]]:
+    """``count`` index pairs (i, j): low of pair i against high of pair j, never one scene.
+
+    Only pairs of the same ratio are combined, and only when ``scene_of(source)`` differs (two
+    photos of one scene could truly match). Combinations are drawn without replacement (one
+    permutation by ``rng``); fewer than ``count`` come back when there are not enough.
+    """
+    scenes = [scene_of(s) for s in sources]
+    combos = [(i, j) for i in range(len(sources)) for j in range(len(sources))
+              if ratios[i] == ratios[j] and scenes[i] != scenes[j]]
+    order = rng.permutation(len(combos))[:max(int(count), 0)]
+    return [combos[k] for k in order]
+
+
+def unrelated_from_pairs(pairs: Sequence[ZoomPair], count: int, rng: np.random.Generator,
+                         scene_of: Callable[[str], str]) -> List[ZoomPair]:
+    """Recombine zoom pairs into ``count`` unrelated pairs: low of one, high of another scene.
+
+    Parameters
+    ----------
+    pairs : sequence of ZoomPair
+        Pairs with a ``source`` each (e.g. from ``pairs_from_photos``).
+    count : int
+    rng : numpy Generator
+        Draws the combinations (``unrelated_indices``).
+    scene_of : callable
+        ``source`` -> scene name, e.g. ``datasets.scene_of``.
+
+    Returns
+    -------
+    list of ZoomPair
+        ``truth`` None, ``high_source`` naming where the high image comes from.
+    """
+    idx = unrelated_indices([p.source for p in pairs], [p.ratio for p in pairs], count, rng,
+                            scene_of)
+    return [replace(pairs[i], high=pairs[j].high, truth=None, crop_xy=pairs[j].crop_xy,
+                    high_source=pairs[j].source) for i, j in idx]
+
+
+def pair_rng(seed: int, source: str, ratio: float) -> np.random.Generator:
+    """The generator of one pair: from ``seed``, the source name and the ratio only.
+
+    A pair therefore does not depend on which other photos or ratios are in the run: a run on
+    the first 10 photos makes the same pairs as the full run does for them.
+    """
+    key = zlib.crc32(source.encode("utf-8"))
+    return np.random.default_rng([int(seed), key, int(round(float(ratio) * 1000))])
+
+
+def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float], seed: int = 0,
+                      high_size: Tuple[int, int] = HIGH_SIZE,
+                      low_max: Tuple[int, int] = LOW_MAX) -> Iterator[ZoomPair]:
+    """Zoom pairs from photo files: for each path in the order given, each ratio in order.
+
+    Each photo is read once (grey float32, EXIF orientation applied, ``imageio.read_grey``), and
+    each pair is made by ``make_zoom_pair`` with the generator ``pair_rng(seed, file name,
+    ratio)``, so the output is deterministic given ``seed`` and independent of the other
+    paths and ratios. ``source`` is the file name.
+
+    Yields
+    ------
+    ZoomPair
+    """
+    from ..imageio import read_grey  # light import, kept local so this module stays pure numpy
+
+    ratios = [float(r) for r in ratios]
+    for path in paths:
+        p = Path(path)
+        photo = read_grey(p)
+        for r in ratios:
+            yield make_zoom_pair(photo, r, pair_rng(seed, p.name, r), high_size, low_max,
+                                 source=p.name)
+
+
+# --------------------------------------------------------------------------------------------
+# Tilted zoom pairs (docs/EVALUATION-TILT.md): zoom x rotation x tilt, exact truth
+# --------------------------------------------------------------------------------------------
+
+#: Tilts of the tilted zoom pairs (Morel & Yu 2009 sample t = sqrt(2)^k; 4 is a view 75.5 deg
+#: off the normal)
+TILTS = (1.41, 2.0, 2.83, 4.0)
+#: Longitude range of the tilt, degrees, [lo, hi)
+LONGITUDE_RANGE = (0.0, 180.0)
+
+
+def tilted_linear(ratio: float, angle_deg: float, tilt: float, longitude_deg: float) -> np.ndarray:
+    """2x2 ``(1/r) R(theta) R(phi)^T diag(1/t, 1) R(phi)``: compress by t along phi, then zoom
+    out by r and turn by theta (every affine map with positive determinant has this form)."""
+    rot = similarity_matrix(1.0, angle_deg)[:, :2]
+    turn = similarity_matrix(1.0, longitude_deg)[:, :2]
+    return (1.0 / ratio) * rot @ turn.T @ np.diag([1.0 / tilt, 1.0]) @ turn
+
+
+def affine_warp(image: np.ndarray, linear: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Warp ``image`` by the 2x2 shrinking map ``linear`` with anti-aliasing; (canvas, A 2x3).
+
+    ``linear = U diag(s1, s2) V^T`` (SVD): the image is turned by V^T onto a canvas, blurred by
+    ``CAMERA_BLUR_PX * sqrt(1/s_k^2 - 1)`` along each axis (the camera model of ``zoom_warp``,
+    per direction), then mapped by ``U diag(s1, s2)``. ``A`` maps an ``image`` pixel to the
+    output pixel (OpenCV convention); the output canvas holds the whole warped image.
+    """
+    img = np.asarray(image, np.float32)
+    u, sv, vt = np.linalg.svd(np.asarray(linear, np.float64))
+    if np.linalg.det(vt) < 0:  # keep both factors rotations (linear has det > 0)
+        vt[1] *= -1.0
+        u[:, 1] *= -1.0
+    h, w = img.shape[:2]
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+
+    def _onto_canvas(lin: np.ndarray, pts: np.ndarray) -> Tuple[np.ndarray, Tuple[int, int]]:
+        m = np.hstack([lin, np.zeros((2, 1))])
+        mapped = apply(m, pts)
+        m[:, 2] = -mapped.min(axis=0)
+        size = np.ceil(mapped.max(axis=0) - mapped.min(axis=0)).astype(int) + 1
+        return m, (int(size[0]), int(size[1]))
+
+    turn, size1 = _onto_canvas(vt, corners)
+    turned = cv2.warpAffine(img, turn, size1, flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    sx, sy = (CAMERA_BLUR_PX * math.sqrt(max(1.0 / (v * v) - 1.0, 0.0)) for v in sv)
+    turned = cv2.GaussianBlur(turned, (0, 0), sigmaX=max(sx, 0.01), sigmaY=max(sy, 0.01))
+    shrink, size2 = _onto_canvas(u @ np.diag(sv), apply(turn, corners))
+    out = cv2.warpAffine(turned, shrink, size2, flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out, compose(shrink, turn)
+
+
+def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.random.Generator,
+                     high_size: Tuple[int, int] = HIGH_SIZE, low_max: Tuple[int, int] = LOW_MAX,
+                     source: str = "") -> ZoomPair:
+    """A zoom pair whose low image also sees the scene obliquely (docs/EVALUATION-TILT.md).
+
+    As ``make_zoom_pair`` (most textured of 6 crops, measured at the mean shrink
+    ``ratio * sqrt(tilt)``; grey-level change, noise, a window of at most ``low_max``), but the
+    photo is warped by ``tilted_linear(ratio, theta, tilt, phi)`` with theta uniform in
+    [-180, 180) and phi in [0, 180). The directional ratios are ``ratio`` and ``ratio * tilt``.
+    ``truth`` is the exact 2x3 affine map high px -> low px. ``rng`` draws, in order: the crop
+    positions, theta, phi, gain, offset, noise std, the window offset and the noise.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if not (ratio >= 1.0 and tilt >= 1.0):
+        raise ValueError(f"ratio and tilt must be >= 1, got {ratio}, {tilt}")
+    x, y, w, h = choose_crop(photo, ratio * math.sqrt(tilt), rng, high_size)
+    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    longitude = float(rng.uniform(*LONGITUDE_RANGE))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    canvas, warp = affine_warp(photo, tilted_linear(ratio, angle, tilt, longitude))
+    to_canvas = compose(warp, _translation(x, y))
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
+                                   low_max, rng)
+    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
+    return ZoomPair(low=low, high=high, truth=compose(_translation(-wx, -wy), to_canvas),
+                    ratio=float(ratio), angle_deg=angle, gain=gain, offset=offset,
+                    noise_std=noise_std, source=source, crop_xy=(x, y), window_xy=(wx, wy),
+                    tilt=float(tilt), longitude_deg=longitude)

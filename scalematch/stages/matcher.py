@@ -1,0 +1,115 @@
+"""Stage 4: candidate matches between descriptors (ALGORITHM.md step 4, paper eq. mahalanobis).
+
+Descriptors are compared by Euclidean distance; the Mahalanobis distance of the paper becomes a
+Euclidean one once the jets are whitened by Lambda^-1/2 (see :mod:`scalematch.stages.mahalanobis`).
+How candidates are selected is the named parameter ``MatcherParams.selection``:
+
+* ``"nn"``: the nearest neighbour of each high-resolution point;
+* ``"knn"``: its ``k`` nearest neighbours (one-to-many candidates for the later constraints);
+* ``"threshold"``: every neighbour (up to ``k``) closer than ``max_distance``;
+* ``"ratio"``: the nearest neighbour when it is clearly nearer than the second (Lowe 2004).
+
+``max_distance`` (when finite) applies to every selection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SELECTIONS = ("nn", "knn", "threshold", "ratio")
+
+#: rows of the distance matrix computed at once (bounds memory at ~rows x n_low floats)
+_CHUNK = 2048
+
+
+@dataclass(frozen=True)
+class MatcherParams:
+    selection: str = "ratio"  #: one of SELECTIONS
+    k: int = 2  #: neighbours for "knn" / "threshold"
+    ratio: float = 0.9  #: nearest / second-nearest distance for "ratio" (Lowe 2004: 0.8)
+    max_distance: float = float("inf")  #: absolute distance limit (descriptor units)
+    mutual: bool = False  #: keep only matches that are also nearest the other way round
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Candidate matches: row ``i`` of the high descriptors with row ``j`` of the low ones."""
+
+    i: np.ndarray = field(repr=False)  #: (K,) int, index into the high-resolution descriptors
+    j: np.ndarray = field(repr=False)  #: (K,) int, index into the low-resolution descriptors
+    distance: np.ndarray = field(repr=False)  #: (K,) float32, descriptor distance
+    second: np.ndarray = field(repr=False)  #: (K,) float32, distance to the 2nd nearest (ratio)
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    @staticmethod
+    def empty() -> "Candidates":
+        z = np.zeros(0, int)
+        return Candidates(z, z, np.zeros(0, np.float32), np.zeros(0, np.float32))
+
+
+def _knn(a: np.ndarray, b: np.ndarray, k: int):
+    """k nearest rows of b for each row of a: (indices (N, k), distances (N, k)), sorted."""
+    k = min(k, b.shape[0])
+    bb = np.einsum("ij,ij->i", b, b)
+    idx = np.empty((a.shape[0], k), int)
+    dist = np.empty((a.shape[0], k), np.float32)
+    for lo in range(0, a.shape[0], _CHUNK):
+        aa = a[lo:lo + _CHUNK]
+        d2 = aa @ b.T
+        d2 *= -2.0
+        d2 += bb[None, :]
+        d2 += np.einsum("ij,ij->i", aa, aa)[:, None]
+        rows = np.arange(aa.shape[0])
+        if k <= 3:  # repeated argmin is several times faster than argpartition for small k
+            cols = np.empty((aa.shape[0], k), int)
+            vals = np.empty((aa.shape[0], k), d2.dtype)
+            for r in range(k):
+                c = np.argmin(d2, axis=1)
+                cols[:, r], vals[:, r] = c, d2[rows, c]
+                d2[rows, c] = np.inf
+        else:
+            part = np.argpartition(d2, k - 1, axis=1)[:, :k]
+            pd = np.take_along_axis(d2, part, axis=1)
+            order = np.argsort(pd, axis=1)
+            cols, vals = np.take_along_axis(part, order, axis=1), np.take_along_axis(pd, order, 1)
+        idx[lo:lo + _CHUNK] = cols
+        dist[lo:lo + _CHUNK] = np.sqrt(np.maximum(vals, 0))
+    return idx, dist
+
+
+def match_descriptors(high: np.ndarray, low: np.ndarray,
+                      params: MatcherParams = MatcherParams()) -> Candidates:
+    """Candidate matches from high-resolution descriptors (N, D) to low ones (M, D)."""
+    if params.selection not in SELECTIONS:
+        raise ValueError(f"selection must be one of {SELECTIONS}, got {params.selection!r}")
+    if high.shape[0] == 0 or low.shape[0] == 0:
+        return Candidates.empty()
+    a = np.asarray(high, np.float32)
+    b = np.asarray(low, np.float32)
+    k = max(params.k, 2) if params.selection in ("knn", "threshold", "ratio") else 2
+    idx, dist = _knn(a, b, k)
+    n = a.shape[0]
+    second = dist[:, 1] if dist.shape[1] > 1 else np.full(n, np.inf, np.float32)
+    if params.selection == "ratio":
+        keep = dist[:, 0] <= params.ratio * second
+        i = np.nonzero(keep)[0]
+        j, d, sec = idx[i, 0], dist[i, 0], second[i]
+    elif params.selection == "nn":
+        i, j, d, sec = np.arange(n), idx[:, 0], dist[:, 0], second
+    else:  # knn / threshold: every listed neighbour, one-to-many
+        kk = idx.shape[1]
+        i = np.repeat(np.arange(n), kk)
+        j, d = idx.ravel(), dist.ravel()
+        sec = np.repeat(second, kk)
+    keep = d <= params.max_distance
+    i, j, d, sec = i[keep], j[keep], d[keep], sec[keep]
+    if params.mutual and i.size:
+        back, _ = _knn(b[j], a, 1)
+        ok = back[:, 0] == i
+        i, j, d, sec = i[ok], j[ok], d[ok], sec[ok]
+    return Candidates(i=i.astype(int), j=j.astype(int), distance=d.astype(np.float32),
+                      second=sec.astype(np.float32))

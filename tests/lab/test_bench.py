@@ -1,0 +1,26 @@
+"""The benchmark runner end to end on a tiny run (needs ../shared; skipped when absent)."""
+
+from __future__ import annotations
+
+import csv
+
+from scalematch.lab.bench import run_benchmark, write_benchmarks_doc
+
+
+def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
+    # the first four photos (sorted) are one scene; the fifth gives unrelated pairs a partner
+    report = run_benchmark(shared=shared_dir, out_dir=tmp_path / "out", ratios=(4,), photos=5,
+                           seed=0, methods=("scalematch", "sift"), unrelated=2, boat=False,
+                           large=False, batch=False, log=lambda _: None)
+    assert not report.skipped
+    rows = list(csv.DictReader(open(report.csv_path)))
+    synthetic = [r for r in rows if r["kind"] == "synthetic"]
+    assert len(synthetic) == 5 * 2  # five photos, two methods, one ratio
+    # both methods recover these textured x4 pairs (EVALUATION.md success: error < 3 px)
+    assert all(r["success"] == "True" for r in synthetic), synthetic
+    unrelated = [r for r in rows if r["kind"] == "unrelated" and r["method"] == "scalematch"]
+    assert unrelated and all(r["claimed"] == "False" for r in unrelated)
+    assert report.plot_path.is_file() and "scalematch" in report.table
+    page = write_benchmarks_doc(report, tmp_path / "docs" / "TINY.md")
+    assert (page.parent / "tiny.png").is_file()
+    assert "![success rate against ratio](tiny.png)" in page.read_text()

@@ -1,0 +1,63 @@
+"""Robust estimation (estimator.py): known transforms recovered among outliers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scalematch.geometry import apply, similarity_matrix
+from scalematch.stages.estimator import RansacParams, estimate, residuals
+
+
+def _data(t, n_in=60, n_out=140, noise=0.3, seed=0):
+    rng = np.random.default_rng(seed)
+    src = rng.uniform(0, 640, (n_in + n_out, 2))
+    dst = apply(t, src) + rng.normal(0, noise, (n_in + n_out, 2))
+    dst[n_in:] = rng.uniform(0, 1024, (n_out, 2))  # 70 % outliers
+    return src, dst
+
+
+def test_similarity_among_outliers():
+    t = similarity_matrix(0.2, 37.0, 300.0, 150.0)
+    src, dst = _data(t)
+    est = estimate("similarity", src, dst, seed=1)
+    assert est.inliers[:60].mean() >= 0.95 and est.inliers[60:].sum() <= 2
+    g = np.array([[0, 0], [639, 0], [639, 479], [0, 479]], float)
+    assert np.abs(apply(est.transform, g) - apply(t, g)).max() < 0.5
+
+
+@pytest.mark.parametrize("model", ["affine", "homography"])
+def test_affine_and_homography(model):
+    t = np.array([[0.25, 0.05, 100.0], [-0.03, 0.22, 80.0], [1e-5, 2e-5, 1.0]])
+    if model == "affine":
+        t = t[:2]
+    src, dst = _data(t, seed=2)
+    est = estimate(model, src, dst, seed=1)
+    assert est.transform.shape == ((2, 3) if model == "affine" else (3, 3))
+    assert est.inliers[:60].mean() >= 0.95
+    assert np.median(residuals(model, est.transform, src[:60], dst[:60])) < 0.6
+
+
+def test_fundamental_epipolar_residuals_small_on_inliers():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-5, 5, (80, 3)) + [0, 0, 20]  # 3-D points in front of two cameras
+    k = np.array([[500, 0, 320], [0, 500, 240], [0, 0, 1.0]])
+    p1 = (k @ x.T).T
+    r = np.array([[0.98, -0.17, 0], [0.17, 0.98, 0], [0, 0, 1.0]])
+    p2 = (k @ (r @ x.T + np.array([[2.0], [0.3], [0.0]]))).T
+    src, dst = p1[:, :2] / p1[:, 2:], p2[:, :2] / p2[:, 2:]
+    est = estimate("fundamental", src, dst, seed=0)
+    assert est.transform.shape == (3, 3)
+    assert np.median(residuals("fundamental", est.transform, src, dst)) < 0.5
+
+
+def test_too_few_points_is_an_empty_estimate():
+    est = estimate("homography", np.zeros((3, 2)), np.zeros((3, 2)))
+    assert est.transform is None and est.n_inliers == 0
+
+
+def test_same_seed_same_answer():
+    src, dst = _data(similarity_matrix(0.5, -120.0, 10.0, 20.0), seed=4)
+    a = estimate("similarity", src, dst, RansacParams(), seed=7)
+    b = estimate("similarity", src, dst, RansacParams(), seed=7)
+    assert np.array_equal(a.transform, b.transform) and np.array_equal(a.inliers, b.inliers)
