@@ -150,7 +150,7 @@ def memory_run(csv_path: Path, out: Path, env: Dict[str, str]) -> Dict[str, obje
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--pairs", type=int, default=200)
-    parser.add_argument("--memory-pairs", type=int, default=2000)
+    parser.add_argument("--memory-pairs", type=int, default=2000, help="0: no memory run")
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--code", type=Path, default=None,
                         help="run the memory measurement with the scalematch package in DIR")
@@ -185,6 +185,8 @@ def main() -> None:
                         print(f"| {name} | {r + 1} | {m['wall']:.1f} | "
                               f"{args.pairs / m['wall']:.2f} | {cpu} | {m['lines']} | "
                               f"{m['matched']} | {m['before']} | {m['after']} |", flush=True)
+        if not args.memory_pairs:
+            return
         big = repeat_pairs(folder, args.pairs, args.memory_pairs)
         env = dict(os.environ)
         if args.code is not None:

@@ -353,6 +353,14 @@ def _complete_lines(path: Path) -> int:
     return path.read_bytes().count(b"\n") if path.exists() else 0
 
 
+def test_a_worker_whose_parent_is_gone_exits_at_once():
+    # die_with_parent(pid) in a process whose parent is not pid: the parent died before the
+    # worker got to ask, so the worker must end there and then
+    code = "from scalematch.batch import die_with_parent; die_with_parent(-1); print('alive')"
+    run_ = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert run_.returncode == 1 and "alive" not in run_.stdout
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_kill_9_leaves_no_worker_alive_and_resume_loses_nothing(images, tmp_path):
     n = 24  # distinct pairs (hard links of the tiny pair): ~1 s of work for 2 workers
