@@ -383,7 +383,8 @@ def cli() -> None:
       scalematch batch pairs.csv --output results.jsonl --jobs 4
 
     \b
-    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage, 3 a batch pair errored,
+    130 interrupted.
     """
 
 
@@ -501,7 +502,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
       scalematch low.png high.png --ransac-threshold 2 --set harris.threshold=50
 
     \b
-    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
+    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage, 130 interrupted.
     """
     config = _config_from(kwargs)
     low_img = _load(low, max_pixels)
