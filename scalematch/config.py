@@ -54,6 +54,25 @@ class ProbeParams:
 
 
 @dataclass(frozen=True)
+class ModelCheckParams:
+    """A similarity answer is checked against richer models on the same candidates.
+
+    A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
+    measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
+    tens of px off away from its inliers. When an affine map or a homography fitted to the
+    winning scale's candidates explains clearly more of them, that model is reported instead
+    (``MatchResult.model`` says which); on plain zoom pairs the similarity is exact and stays.
+    """
+
+    enabled: bool = True  #: False: the similarity is always the answer when asked for
+    models: Tuple[str, ...] = ("affine", "homography")  #: tried in this order (simplest first)
+    #: a richer model is taken when its inliers reach ``min_gain`` x the similarity's and at
+    #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
+    min_gain: float = 1.25
+    min_extra: int = 10
+
+
+@dataclass(frozen=True)
 class Config:
     """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper."""
 
@@ -81,6 +100,7 @@ class Config:
     order: str = "auto"  #: see ORDERS
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)
+    model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
 
     def __post_init__(self) -> None:
         if self.order not in ORDERS:

@@ -19,7 +19,7 @@ from .config import Config
 from .geometry import compose, similarity_parts
 from .result import MatchResult, ScaleRow
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Decision, decide
+from .stages.decision import Decision, decide, folded
 from .stages.descriptors import Described, describe_gradients, describe_jets
 from .stages.detector import Keypoints, detect_on_level
 from .stages.estimator import MIN_SAMPLE, Estimate, estimate
@@ -322,6 +322,29 @@ def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.nda
     return est.transform, np.hstack([src[inl], dst[inl]]), model
 
 
+def _richer_model(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attempt,
+                  config: Config):
+    """(transform, inliers, model): a richer model when the similarity explains too little.
+
+    The candidates of the winning scale are refit with each of ``config.model_check.models``;
+    the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
+    whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
+    """
+    check = config.model_check
+    if not check.enabled or model != "similarity" or not attempt.view.is_identity:
+        return t, inliers, model
+    best = next(o for o in attempt.outcomes if o.row.s == attempt.verdict.best_scale)
+    k = len(inliers)
+    for richer in check.models:
+        est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
+        if est.transform is None or folded(est.transform):
+            continue
+        if est.n_inliers >= check.min_gain * k and est.n_inliers - k >= check.min_extra:
+            inl = est.inliers
+            return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
+    return t, inliers, model
+
+
 def _as_finer_to_coarser(t: np.ndarray, inliers: np.ndarray, swapped: bool, model: str):
     """Flip a match whose transform implies a ratio below 1 (the 'high' image is the coarser)."""
     ratio = similarity_parts(t)[0]
@@ -425,6 +448,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                            config=config, evidence=dict(first.verdict.evidence, searches=tried),
                            order="given")
     t, inliers, model = _refit_in_high(winner, config)
+    t, inliers, model = _richer_model(t, inliers, model, winner, config)
     t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
     evidence = dict(winner.verdict.evidence, searches=searches,
                     view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)

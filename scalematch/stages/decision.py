@@ -109,7 +109,7 @@ def _inside_fraction(t, high_shape, low_shape) -> float:
     return float(ok.mean())
 
 
-def _folded(t: np.ndarray) -> bool:
+def folded(t: np.ndarray) -> bool:
     """True when the transform's linear part flips orientation (negative determinant)."""
     t = np.asarray(t, np.float64)
     a = t[:2, :2] / t[2, 2] if t.shape == (3, 3) else t[:2, :2]
@@ -189,7 +189,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
     inside = _inside_fraction(t, high_shape, low_shape)
     evidence.update({"footprint_area_px": area, "footprint_inside": inside})
-    if _folded(t):
+    if folded(t):
         return no("the transform folds the high image over (a mirror image): not a view of it")
     if area < params.min_area_px:
         return no(f"the high image would cover only {area:.0f} px^2 of the low image")
