@@ -71,7 +71,12 @@ class Config:
     harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
     gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
     jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
-    covariance_path: Optional[str] = None  #: Lambda for the jets (None: data/jet_covariance.json)
+    #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged
+    #: scalematch/data/jet_covariance.json)
+    covariance_path: Optional[str] = None
+    #: recorded by match() in the paper mode: which Lambda was used ("packaged" or the resolved
+    #: path, and the first 12 hex digits of the file's SHA-256); "" before a match
+    covariance_used: str = ""
     matcher: MatcherParams = field(default_factory=MatcherParams)
     orientation: OrientationParams = field(default_factory=OrientationParams)  #: default mode
     semi_local: SemiLocalParams = field(default_factory=SemiLocalParams)  #: paper mode

@@ -310,7 +310,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     low = as_float_image(low)
     high = as_float_image(high)
     _check_images(low, high)
-    whitening = load_covariance(config.covariance_path).whitening() if config.mode == "paper" else None
+    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
+    config = replace(config, covariance_used=cov.source) if cov is not None else config
+    whitening = cov.whitening() if cov is not None else None
     images = {False: (low, high), True: (high, low)}
     directions = (False, True) if config.order == "auto" else (False,)
     plain = [[(1.0, 0.0)]]
