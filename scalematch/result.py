@@ -51,6 +51,16 @@ class MatchResult:
     #: transform and the inliers always go from the finer image to the coarser one)
     order: str = "given"
 
+    def __post_init__(self) -> None:
+        # frozen means frozen: the arrays are read-only copies, so a result cannot be edited
+        # in place (a caller's own array stays writable)
+        for name in ("transform", "inliers"):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.array(value)
+                value.setflags(write=False)
+                object.__setattr__(self, name, value)
+
     @property
     def n_inliers(self) -> int:
         return int(self.inliers.shape[0])
