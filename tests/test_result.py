@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+import scalematch
+from scalematch.cli import cli
 from scalematch.config import Config
-from scalematch.result import MatchResult, ScaleRow
+from scalematch.result import MatchResult, ScaleRow, dumps
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def hand_result(t=None) -> MatchResult:
@@ -39,3 +46,28 @@ def test_the_arrays_of_a_result_are_read_only_copies():
     # a result without a transform (no match) still has a read-only (0, 4) inliers array
     none = dataclasses.replace(r, matched=False, transform=None, inliers=np.zeros((0, 4)))
     assert none.transform is None and none.n_inliers == 0 and not none.inliers.flags.writeable
+
+
+def test_the_json_of_a_hand_built_result_has_plain_types_and_no_nan():
+    d = hand_result().to_dict("low.png", "high.png", (100, 200), (400, 800))
+    assert d["order"] == "given" and d["matched"] is True and d["reason"] is None
+    assert d["transform"] == [[0.5, 0.0, 5.0], [0.0, 0.5, -3.0]]
+    assert d["scales"][0]["ratio"] is None  # nan -> null
+    assert d["low"] == {"path": "low.png", "width": 200, "height": 100}
+    text = hand_result().to_json("low.png", "high.png", (100, 200), (400, 800))
+    assert text.endswith("}\n") and json.loads(text) == d
+    assert "\n" not in hand_result().to_json("a", "b", (1, 1), (1, 1), indent=None).rstrip("\n")
+
+
+def test_the_library_json_is_the_command_line_file(tmp_path):
+    """``scalematch.match(...).to_json(...)`` is the CLI's --json file (but for the clock)."""
+    low, high = str(ROOT / "data" / "demo_low.png"), str(ROOT / "data" / "demo_high.png")
+    path = tmp_path / "r.json"
+    run = CliRunner().invoke(cli, [low, high, "--json", str(path), "--quiet"])
+    assert run.exit_code == 0, run.output
+    file_text = path.read_text()
+    from_file = json.loads(file_text)
+    low_img, high_img = scalematch.read_grey(low), scalematch.read_grey(high)
+    lib = scalematch.match(low_img, high_img).to_dict(low, high, low_img.shape, high_img.shape)
+    lib["seconds"], lib["timings"] = from_file["seconds"], from_file["timings"]
+    assert dumps(lib, indent=2) + "\n" == file_text
