@@ -23,10 +23,10 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
+from .stages.detector import MIN_SIDE_PX
+
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
 DEFAULT_MAX_PIXELS = 100_000_000
-#: Smallest usable side, px: below this no interest point survives the border and the scales.
-MIN_SIDE = 32
 
 
 class ImageError(ValueError):
@@ -208,7 +208,7 @@ def _too_many(p: Path, w: int, h: int, max_pixels: int) -> ImageError:
 # --------------------------------------------------------------------------- reading
 
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
-               min_side: int = MIN_SIDE) -> np.ndarray:
+               min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
 
     Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
@@ -265,7 +265,7 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
 
 
 def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
-              min_side: int = MIN_SIDE) -> np.ndarray:
+              min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Read ``path`` as a float32 grey image in 8-bit grey levels (EXIF orientation applied).
 
     See ``read_image`` for the checks and the errors.

@@ -21,16 +21,12 @@ from .result import MatchResult, ScaleRow
 from .stages.constraints import orientation_groups, semi_local_filter
 from .stages.decision import Decision, decide
 from .stages.descriptors import Described, describe_gradients, describe_jets
-from .stages.detector import Keypoints, detect_on_level
+from .stages.detector import MIN_SIDE_PX, Keypoints, detect_on_level
 from .stages.estimator import MIN_SAMPLE, Estimate, estimate
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
-
-#: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
-#: Harris filters (4 sigma~ = 8 px) see mostly border.
-MIN_SIDE_PX = 24
 
 
 @dataclass(frozen=True)

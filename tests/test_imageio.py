@@ -145,3 +145,18 @@ def test_to_bgr8_layouts(bgr):
                 np.dstack([bgr, np.zeros(bgr.shape[:2], np.uint8)])):
         out = to_bgr8(img)
         assert out.dtype == np.uint8 and out.shape == bgr.shape
+
+
+def test_one_minimum_side_for_reading_and_matching(tmp_path, bgr):
+    """Reading a file and matching arrays refuse the same sizes (stages.detector.MIN_SIDE_PX)."""
+    from scalematch.pipeline import match
+    from scalematch.stages.detector import MIN_SIDE_PX
+
+    ok = write(tmp_path / "ok.png", cv2.imencode(".png", bgr[:MIN_SIDE_PX, :60])[1].tobytes())
+    assert read_grey(ok).shape == (MIN_SIDE_PX, 60)
+    small = write(tmp_path / "small.png",
+                  cv2.imencode(".png", bgr[:MIN_SIDE_PX - 1, :60])[1].tobytes())
+    with pytest.raises(ImageError, match=f"at least {MIN_SIDE_PX} px"):
+        read_grey(small)
+    with pytest.raises(ValueError, match=f"at least {MIN_SIDE_PX} px"):
+        match(np.zeros((MIN_SIDE_PX - 1, 60), np.float32), np.zeros((100, 100), np.float32))

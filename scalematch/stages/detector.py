@@ -27,6 +27,12 @@ from .filters import gaussian_derivative
 from .scalespace import Level, gaussian_blur, scale_space
 
 
+#: Smallest image side the matcher accepts, px (the one minimum: reading an image and matching
+#: arrays both check it): below it the 16 px descriptor window and the Harris filters
+#: (4 sigma~ = 8 px) see mostly border.
+MIN_SIDE_PX = 24
+
+
 @dataclass(frozen=True)
 class HarrisParams:
     """Parameters of the scale-adapted Harris detector; lengths in pixels at s = 1."""
