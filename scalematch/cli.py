@@ -28,6 +28,7 @@ from . import __version__
 from .config import MODELS, MODES, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, dumps
+from .stages.estimator import model_of
 
 #: Exit codes (documented in --help and README.md).
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
@@ -191,8 +192,8 @@ def summary(result: MatchResult) -> str:
     """The one-line verdict on stderr."""
     secs = f"{result.seconds:.1f} s"
     if result.matched:
-        if result.model == "fundamental":
-            return (f"matched (fundamental): {result.n_inliers} inliers at scale "
+        if not model_of(result.model).has_ratio:
+            return (f"matched ({result.model}): {result.n_inliers} inliers at scale "
                     f"{result.best_scale:g}, {secs}")
         return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
                 f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers at scale "

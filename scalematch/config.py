@@ -13,12 +13,12 @@ from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
-from .stages.estimator import RansacParams
+from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.matcher import MatcherParams
 from .stages.views import ViewParams
 
-#: Models the robust estimator can fit (paper section 5 and "Further examples").
-MODELS = ("similarity", "affine", "homography", "fundamental")
+#: Names of the models the robust estimator can fit (the records: ``stages.estimator.MODELS``).
+MODELS = tuple(_MODEL_RECORDS)
 #: "default": the improved pipeline; "paper": jets + Mahalanobis + semi-local constraints.
 MODES = ("default", "paper")
 #: "auto": find which image is the finer one (the given order first, then the other);
