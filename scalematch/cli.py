@@ -157,7 +157,7 @@ def set_path(config: Any, path: str, value: Any) -> Any:
 def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: Optional[int],
                  thresholds: Dict[str, Any], settings: Sequence[str]) -> Config:
     """The Config of the command-line options; ``ValueError`` with a message when one is bad."""
-    config = Config.paper() if mode == "paper" else Config()
+    config = Config.preset(mode)  # the modes are presets of the same names
     changes: Dict[str, Any] = {}
     if model is not None:
         changes["model"] = model

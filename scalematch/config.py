@@ -7,7 +7,7 @@ gathers them and is recorded with every result (``MatchResult.config``, the JSON
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Optional, Tuple
+from typing import Callable, Dict, Optional, Tuple
 
 from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
@@ -100,9 +100,45 @@ class Config:
     @staticmethod
     def paper(**changes) -> "Config":
         """The paper's method as published: scales 1..8, jets, Mahalanobis, constraints."""
-        base = Config(mode="paper", scales=PAPER_SCALES,
-                      # the paper: Mahalanobis nearest neighbours, then the constraints decide
-                      matcher=MatcherParams(selection="knn", k=3),
-                      # "In practice we run the latter algorithm at all scales" (section 5)
-                      probe=ProbeParams(enabled=False))
-        return replace(base, **changes)
+        return Config.preset("paper", **changes)
+
+    @staticmethod
+    def preset(name: str, **changes) -> "Config":
+        """The configuration called ``name`` in :data:`PRESETS`, with ``changes`` applied.
+
+        >>> Config.preset("paper", seed=3).scales
+        (1, 2, 3, 4, 5, 6, 7, 8)
+        >>> Config.preset("default-no-probe").probe.enabled
+        False
+        """
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; one of {', '.join(PRESETS)}")
+        return replace(PRESETS[name](), **changes)
+
+
+def _paper() -> Config:
+    return Config(mode="paper", scales=PAPER_SCALES,
+                  # the paper: Mahalanobis nearest neighbours, then the constraints decide
+                  matcher=MatcherParams(selection="knn", k=3),
+                  # "In practice we run the latter algorithm at all scales" (section 5)
+                  probe=ProbeParams(enabled=False))
+
+
+#: Named configurations: the two modes, and the steps between them that the lab's ablation
+#: measures (``scalematch lab bench --methods``; docs/ABLATION.md says what each step bought).
+#: Each value makes its Config; ``Config.preset(name, **changes)`` is the way to get one.
+PRESETS: Dict[str, Callable[[], Config]] = {
+    "default": Config,
+    "paper": _paper,
+    # the paper's pipeline on the default's scales (1-12.7, third octaves)
+    "paper-finer-scales": lambda: replace(_paper(), scales=Config().scales),
+    # the default's descriptors and constraints on the paper's scales 1-8, every scale run
+    "default-paper-scales": lambda: Config(scales=PAPER_SCALES, probe=ProbeParams(enabled=False)),
+    # the default, every scale run (no probe)
+    "default-no-probe": lambda: Config(probe=ProbeParams(enabled=False)),
+    # the default on 15 scales 1-11.3 (quarter octaves)
+    "default-quarter-octaves": lambda: Config(scales=geometric_scales(1.0, 12.0, 4)),
+    # the default without the rotation-consistency filter: one group holding every candidate
+    "default-no-rotation-check": lambda: Config(
+        orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1)),
+}
