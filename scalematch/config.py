@@ -27,7 +27,11 @@ ORDERS = ("auto", "given")
 
 
 def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float, ...]:
-    """Scales lo .. hi spaced by 2^(1/steps_per_octave), rounded to 3 decimals."""
+    """Scales lo .. hi spaced by 2^(1/steps_per_octave), rounded to 3 decimals.
+
+    >>> geometric_scales(1.0, 4.0, 2)
+    (1.0, 1.414, 2.0, 2.828, 4.0)
+    """
     out = []
     k = 0
     while True:
@@ -55,7 +59,21 @@ class ProbeParams:
 
 @dataclass(frozen=True)
 class Config:
-    """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper."""
+    """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper.
+
+    Frozen: change a copy with :func:`dataclasses.replace` or ``Config.preset(name, **changes)``.
+
+    >>> from dataclasses import replace
+    >>> config = Config(seed=1)
+    >>> len(config.scales), config.scales[:4], config.harris.sigma_tilde
+    (12, (1.0, 1.26, 1.587, 2.0), 2.0)
+    >>> replace(config, harris=replace(config.harris, threshold=50.0)).harris.threshold
+    50.0
+    >>> Config(model="shear")
+    Traceback (most recent call last):
+    ...
+    ValueError: model must be one of ('similarity', 'affine', 'homography', 'fundamental'), got 'shear'
+    """
 
     mode: str = "default"  #: "default" or "paper" (see MODES)
     model: str = "similarity"  #: similarity | affine | homography | fundamental
@@ -107,7 +125,7 @@ class Config:
         """The configuration called ``name`` in :data:`PRESETS`, with ``changes`` applied.
 
         >>> Config.preset("paper", seed=3).scales
-        (1, 2, 3, 4, 5, 6, 7, 8)
+        (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
         >>> Config.preset("default-no-probe").probe.enabled
         False
         """

@@ -36,7 +36,12 @@ class ImageError(ValueError):
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
-    """Any decoded image array (H, W), (H, W, 3) BGR or (H, W, 4) BGRA -> float32 grey levels."""
+    """Any decoded image array (H, W), (H, W, 3) BGR or (H, W, 4) BGRA -> (H, W) float32 grey levels.
+
+    >>> bgr = np.array([[[0, 0, 255], [255, 255, 255]]], np.uint8)  # a red, a white pixel
+    >>> to_grey(bgr).astype(float).round(2).tolist()
+    [[76.24, 255.0]]
+    """
     img = np.asarray(image)
     scale = 1.0
     if img.dtype == np.uint16:
@@ -220,6 +225,35 @@ def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
               min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Read ``path`` as a float32 grey image in 8-bit grey levels (EXIF orientation applied).
 
-    See ``read_image`` for the checks and the errors.
+    Parameters
+    ----------
+    path : str or Path
+        Any format OpenCV decodes (PNG, JPEG, TIFF, BMP, WebP, ...); colour becomes BT.601 luma,
+        16-bit is scaled to 0..255, alpha is ignored.
+    max_pixels : int
+        Larger images are refused before decoding (their size is read from the header).
+    min_side : int
+        Smaller sides are refused, px.
+
+    Returns
+    -------
+    (H, W) float32 array
+
+    Raises
+    ------
+    ImageError
+        One line saying what is wrong and what to do (see :func:`read_image`).
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "grey.png")
+    >>> cv2.imwrite(path, np.full((40, 60), 200, np.uint8))
+    True
+    >>> img = read_grey(path)
+    >>> img.shape, img.dtype, float(img.max())
+    ((40, 60), dtype('float32'), 200.0)
+    >>> read_grey(os.path.join(os.path.dirname(path), "missing.png"))
+    Traceback (most recent call last):
+    ...
+    scalematch.imageio.ImageError: .../missing.png: no such file; check the path
     """
     return to_grey(read_image(path, max_pixels=max_pixels, min_side=min_side))

@@ -164,6 +164,14 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     -------
     list of Keypoints
         One per scale, in the order given; an image with no corners gives empty (0, 2) arrays.
+
+    >>> square = np.zeros((64, 64), np.float32)
+    >>> square[16:48, 16:48] = 255.0
+    >>> at_1, at_2 = detect(square, scales=(1, 2))
+    >>> len(at_1), sorted(at_1.xy.round().tolist())      # its four corners, (x, y) px
+    (4, [[17.0, 17.0], [17.0, 46.0], [46.0, 17.0], [46.0, 46.0]])
+    >>> len(detect(np.zeros((64, 64), np.float32))[0])   # flat: no point, not an error
+    0
     """
     levels = scale_space(image, scales, sigma=params.sigma,
                          min_level_sigma=params.min_level_sigma, decimate=params.decimate)
