@@ -43,7 +43,7 @@ import numpy as np
 from ..geometry import apply, similarity_matrix
 from ..stages.descriptors import GradientParams, JetParams, describe_gradients, describe_jets
 from ..stages.detector import HarrisParams, detect_one
-from ..stages.mahalanobis import DEFAULT_COVARIANCE, load_covariance, whiten
+from ..stages.mahalanobis import load_covariance, whiten
 from ..stages.scalespace import Level
 from .datasets import find_shared, list_photos, load_photo
 from .repeatability import choose_crop
@@ -377,8 +377,6 @@ def descriptor_study_command(images, n_photos, seed, out, silent):
                                    "folder with data/photos")
     if n_photos is not None:
         paths = paths[:n_photos]
-    if not DEFAULT_COVARIANCE.is_file():
-        raise click.ClickException(f"{DEFAULT_COVARIANCE} is missing: run `scalematch covariance`")
     total = len(paths)
     counter = iter(range(1, total + 1))
     progress = None if silent else (
