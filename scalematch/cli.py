@@ -25,7 +25,7 @@ import click
 import numpy as np
 
 from . import __version__
-from .config import MODELS, MODES, Config
+from .config import MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, dumps
 from .stages.estimator import model_of
@@ -195,9 +195,11 @@ def summary(result: MatchResult) -> str:
         if not model_of(result.model).has_ratio:
             return (f"matched ({result.model}): {result.n_inliers} inliers at scale "
                     f"{result.best_scale:g}, {secs}")
+        swapped = ", order swapped (the first image is the finer one)" \
+            if result.order == "swapped" else ""
         return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
                 f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers at scale "
-                f"{result.best_scale:g}, {secs}")
+                f"{result.best_scale:g}{swapped}, {secs}")
     best = f", best scale {result.best_scale:g}" if np.isfinite(result.best_scale) else ""
     return f"no reliable match: {result.reason or 'the evidence is too weak'}{best}, {secs}"
 
@@ -325,6 +327,13 @@ def matching_options(f: Callable) -> Callable:
         click.option("--mode", type=click.Choice(MODES), default="default", show_default=True,
                      help="'paper': the method as published (jets, Mahalanobis, semi-local "
                           "constraints, scales 1-8)."),
+        click.option("--order", type=click.Choice(ORDERS), default="auto", show_default=True,
+                     help="'auto': find which image is the finer one (the given order is tried "
+                          "first, then the other; the JSON says which). 'given': LOW is the "
+                          "coarser image."),
+        click.option("--views/--no-views", "views", default=True, show_default=True,
+                     help="When nothing matches, simulate tilted views of the finer image "
+                          "(oblique shots; slower on pairs that do not match)."),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
@@ -366,7 +375,9 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                 thresholds[p] = value
     try:
         return build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
-                            kwargs.pop("seed"), thresholds, kwargs.pop("settings"))
+                            kwargs.pop("seed"), thresholds,
+                            tuple(kwargs.pop("settings")) + (f"order={kwargs.pop('order')}",
+                                                             f"views.enabled={kwargs.pop('views')}"))
     except ValueError as exc:
         raise InputError(str(exc))
 
@@ -427,9 +438,12 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
     try:
         if _show_progress(quiet):
-            with click.progressbar(length=len(config.scales), label="matching scales",
+            # steps: each scale detected, then each matched; the length grows when the search
+            # goes on to the other order or to tilted views
+            with click.progressbar(length=2 * len(config.scales), label="matching",
                                    file=sys.stderr, show_pos=True) as bar:
                 def progress(done: int, total: int) -> None:
+                    bar.length = max(total, done)
                     bar.update(done - bar.pos)
                 result = _run_match(low_grey, high_grey, config, progress)
         else:

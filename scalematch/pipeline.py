@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from .stages.descriptors import Described, describe_gradients, describe_jets
 from .stages.detector import MIN_SIDE_PX, Keypoints, detect_on_level
 from .stages.estimator import MIN_SAMPLE, Estimate, estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
-from .stages.matcher import match_descriptors
+from .stages.matcher import Candidates, match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
 
@@ -116,7 +116,25 @@ def probe_score(high: Described, low: Described, config: Config) -> float:
     only when the fit's ratio agrees with the scale: rotation alone cannot rank scales where
     the scene's edges share a few directions (facades), geometry can.
     """
-    cand = match_descriptors(high.desc, low.desc, config.matcher)
+    return _score(high, low, match_descriptors(high.desc, low.desc, config.matcher), config)
+
+
+def probe_scores(highs: Sequence[Described], low: Described, config: Config) -> List[float]:
+    """``probe_score`` of several scales with one nearest-neighbour search (the same result:
+    each candidate depends on its own row only; one large product is faster than many small)."""
+    if not highs:
+        return []
+    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
+    bounds = np.cumsum([0] + [len(h) for h in highs])
+    out = []
+    for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
+        rows = (cand.i >= lo) & (cand.i < hi)
+        part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
+        out.append(_score(h, low, part, config))
+    return out
+
+
+def _score(high: Described, low: Described, cand: Candidates, config: Config) -> float:
     if len(cand) == 0:
         return 0.0
     if config.mode == "paper":
@@ -175,21 +193,34 @@ def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
     return Keypoints(s=kp.s, xy=kp.xy[ok], response=kp.response[ok])
 
 
-def search_scales(view: View, low: LowFeatures, config: Config, whitening,
-                  step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
-    """Steps 1-6 at every scale of one view of the high image (the paper's one-to-many search).
+@dataclass(frozen=True)
+class Probed:
+    """A view of the high image detected at every scale and scored by the probe."""
 
-    With the probe on, every scale is detected and scored from its strongest points, and only
-    the best scales and their neighbours are matched in full. ``step()`` is called once per
-    scale detected and once per scale matched (or skipped).
+    view: View = field(repr=False)
+    #: per scale: (keypoints, descriptors of the probe points, or of all points without probe)
+    detected: Tuple = field(repr=False)
+    usable: Tuple[int, ...]  #: scales with described points
+    run: Tuple[int, ...]  #: scales to match in full
+    score: float  #: the best probe score over the scales (inf when the probe is off)
+    probing: bool
+
+
+def _space(config: Config) -> dict:
+    return dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
+                decimate=config.harris.decimate)
+
+
+def probe_view(view: View, low: LowFeatures, config: Config, whitening,
+               step: Callable[[], None] = lambda: None) -> Probed:
+    """Detect every scale of one view; score each from its strongest points (paper 5).
+
+    ``step()`` is called once per scale detected.
     """
-    high = view.image
     scales = sorted(config.scales)
-    space = dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
-                 decimate=config.harris.decimate)
     probing = config.probe.enabled and len(scales) > config.probe.keep
-    detected = []  # (keypoints, descriptors of the probe points or all) per scale
-    for level in scale_space(high, scales, **space):
+    detected = []
+    for level in scale_space(view.image, scales, **_space(config)):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
             detected.append((Keypoints.empty(level.s), None))
         else:
@@ -199,16 +230,29 @@ def search_scales(view: View, low: LowFeatures, config: Config, whitening,
         step()
     usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
     if probing:
-        scores = [probe_score(detected[i][1], low.described, config) for i in usable]
+        scores = probe_scores([detected[i][1] for i in usable], low.described, config)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
+        best = max(scores, default=0.0)
     else:
-        run = usable
+        run, best = usable, math.inf
+    return Probed(view, tuple(detected), tuple(usable), tuple(run), best, probing)
+
+
+def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
+                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+    """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
+
+    ``step()`` is called once per scale matched or skipped.
+    """
+    scales = sorted(config.scales)
+    detected = probed.detected
     full = {}
     # the selected scales are described in full (their levels computed again: holding every
     # level of a large high image in memory would cost several full-resolution copies)
-    for i, level in zip(run, scale_space(high, [scales[i] for i in run], **space)):
+    levels = scale_space(probed.view.image, [scales[i] for i in probed.run], **_space(config))
+    for i, level in zip(probed.run, levels):
         kp = detected[i][0]
-        desc = _describe(level, kp, config, whitening) if probing else detected[i][1]
+        desc = _describe(level, kp, config, whitening) if probed.probing else detected[i][1]
         full[i] = _full_scale(level, kp, desc, low.described, low.image, config)
     outcomes: List[ScaleOutcome] = []
     for n, s in enumerate(scales):
@@ -217,10 +261,21 @@ def search_scales(view: View, low: LowFeatures, config: Config, whitening,
         else:
             # skipped: the probe judged it hopeless (not: too small, or no points at all)
             row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
-                           inliers=0, outlier_pct=100.0, skipped=n in usable)
+                           inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         step()
     return outcomes
+
+
+def search_scales(view: View, low: LowFeatures, config: Config, whitening,
+                  step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+    """Steps 1-6 at every scale of one view of the high image (the paper's one-to-many search).
+
+    With the probe on, every scale is detected and scored from its strongest points, and only
+    the best scales and their neighbours are matched in full.
+    """
+    return finish_view(probe_view(view, low, config, whitening, step), low, config, whitening,
+                       step)
 
 
 @dataclass(frozen=True)
@@ -313,9 +368,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     directions = (False, True) if config.order == "auto" else (False,)
     plain = [[(1.0, 0.0)]]
     passes = plain + (view_plan(config.views) if model_of(config.model).has_ratio else [])
-    per_search = 2 * len(config.scales)
+    per_search = 2 * len(config.scales)  # progress steps: detect + match each scale
     feats = {}
-    count = {"done": 0, "total": per_search}
+    count = {"done": 0, "total": 0}
 
     def step() -> None:
         count["done"] += 1
@@ -323,6 +378,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
             progress(count["done"], count["total"])
 
     attempts: List[Attempt] = []
+    searches = 0  # every view probed counts: the best ones are chosen among them all
     winner: Optional[Attempt] = None
     for views in passes:
         found: List[Attempt] = []
@@ -330,13 +386,20 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
             lo_img, hi_img = images[swapped]
             if swapped not in feats:
                 feats[swapped] = describe_low(lo_img, config, whitening)
-            for view in views_of(hi_img, views, config.views):
-                if attempts:
-                    count["total"] += per_search
-                outcomes = tuple(search_scales(view, feats[swapped], config, whitening, step))
-                verdict = decide(outcomes, lo_img.shape, view.image.shape, config,
-                                 searches=len(attempts) + 1)
-                attempt = Attempt(swapped, view, outcomes, verdict)
+            count["total"] += len(views) * per_search // 2
+            probed = [probe_view(v, feats[swapped], config, whitening, step)
+                      for v in views_of(hi_img, views, config.views)]
+            searches += len(probed)
+            chosen = sorted(probed, key=lambda p: -p.score)
+            if len(views) > 1 or not views[0] == (1.0, 0.0):  # a pass of simulated views
+                chosen = [p for p in chosen[:config.views.full_searches]
+                          if p.score >= config.views.min_probe_score]
+            count["total"] += len(chosen) * per_search // 2
+            for p in chosen:
+                outcomes = tuple(finish_view(p, feats[swapped], config, whitening, step))
+                verdict = decide(outcomes, lo_img.shape, p.view.image.shape, config,
+                                 searches=searches)
+                attempt = Attempt(swapped, p.view, outcomes, verdict)
                 attempts.append(attempt)
                 if verdict.matched:
                     found.append(attempt)
@@ -350,7 +413,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     timings = {"total": time.perf_counter() - t0}
     if winner is None:
         first = attempts[0]
-        tried = len(attempts)
+        tried = searches
         more = f" ({tried} searches: both orders, tilted views)" if tried > 1 else ""
         return MatchResult(matched=False, reason=first.verdict.reason + more, model=config.model,
                            transform=None, resolution_ratio=float("nan"),
@@ -361,7 +424,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                            order="given")
     t, inliers, model = _refit_in_high(winner, config)
     t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
-    evidence = dict(winner.verdict.evidence, searches=len(attempts),
+    evidence = dict(winner.verdict.evidence, searches=searches,
                     view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)
     if not model_of(model).has_ratio:
         ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))

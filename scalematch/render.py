@@ -278,6 +278,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     the reason, the CSV only its header). ``low_path``/``high_path`` name the inputs in the
     pictures. Returns name -> path written. Raises ``OSError`` when ``out_dir`` is not writable.
     """
+    if result.order == "swapped":  # the pictures show the finer image on the coarser one
+        low_path, high_path, low, high = high_path, low_path, high, low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in

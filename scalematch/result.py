@@ -74,10 +74,13 @@ class MatchResult:
                 high_shape: Sequence[int]) -> Dict[str, Any]:
         """The documented JSON object of this match (README.md, "## Output"): plain types only.
 
+        ``low``/``high`` describe the coarser and the finer image as found: with ``order``
+        "swapped" the first image given is the finer one, and they are exchanged.
+
         Parameters
         ----------
         low_path, high_path : str
-            The inputs as the user named them (recorded, not read).
+            The inputs as the user named them, in the order given (recorded, not read).
         low_shape, high_shape : (H, W) tuples
             The images' sizes in px, after EXIF orientation.
 
@@ -92,6 +95,8 @@ class MatchResult:
         """
         from . import __version__
 
+        if self.order == "swapped":
+            low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
         t = self.transform
         return {
             "matched": bool(self.matched),

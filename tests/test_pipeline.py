@@ -12,7 +12,9 @@ from scalematch import Config, match
 from scalematch.config import ProbeParams
 from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
-from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
+from scalematch.pipeline import distinct_pairs
+from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
 
 #: tolerances of issue 4: ratio within 3 %, angle within 1 degree, error under 2 px
@@ -150,3 +152,78 @@ def test_flat_pair_is_no_reliable_match():
 def test_too_small_image_is_a_clear_error():
     with pytest.raises(ValueError, match="at least"):
         match(np.zeros((10, 10), np.float32), np.zeros((100, 100), np.float32))
+
+
+# ------------------------------------------------------------- issue 9: order, overlap, tilt
+
+def _error(result, pair):
+    return reprojection_error(result.transform, pair.truth, pair.high.shape, pair.low.shape)
+
+
+def test_swapped_order_is_found_and_reported(raccoon):
+    pair = _pair(raccoon, 3.0, 4)
+    result = match(pair.high, pair.low)  # the finer image given first
+    assert result.matched, result.reason
+    assert result.order == "swapped"
+    # the transform still maps the finer image (here: the first given) into the coarser one
+    assert _error(result, pair) < ERROR_TOL_PX
+    assert abs(result.resolution_ratio / 3.0 - 1) < RATIO_TOL
+    # the inliers too: columns 0-1 in the finer image, 2-3 in the coarser
+    mapped = apply(result.transform, result.inliers[:, :2])
+    assert np.median(np.linalg.norm(mapped - result.inliers[:, 2:], axis=1)) < 1.5
+
+
+def test_given_order_keeps_the_old_behaviour(raccoon):
+    pair = _pair(raccoon, 3.0, 4)
+    config = Config(order="given", views=ViewParams(enabled=False))
+    assert not match(pair.high, pair.low, config).matched
+    given = match(pair.low, pair.high, config)
+    assert given.matched and given.order == "given"
+
+
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_near_equal_resolution_either_way(raccoon, ratio):
+    pair = _pair(raccoon, 1.25, 5)
+    low, high = (pair.high, pair.low) if ratio < 1 else (pair.low, pair.high)
+    result = match(low, high)
+    assert result.matched, result.reason
+    assert result.order == ("swapped" if ratio < 1 else "given")
+    assert abs(result.resolution_ratio / 1.25 - 1) < RATIO_TOL
+    assert _error(result, pair) < ERROR_TOL_PX
+
+
+def test_partial_overlap_with_overwhelming_evidence_is_a_match(raccoon):
+    pair = _pair(raccoon, 2.0, 6)
+    foot = apply(pair.truth, np.array([[0, 0], [319, 0], [319, 239], [0, 239]], float))
+    # cut the low image through the footprint: 70 % of it falls outside
+    cut = int(round(foot[:, 0].min() + 0.3 * (foot[:, 0].max() - foot[:, 0].min())))
+    low = np.ascontiguousarray(pair.low[:, :cut])
+    result = match(low, pair.high)
+    assert result.matched, result.reason
+    assert result.evidence["footprint_inside"] < 0.5
+    assert reprojection_error(result.transform, pair.truth, pair.high.shape, low.shape) < 1.0
+
+
+@pytest.mark.parametrize("tilt,seed", [(2.83, 1), (4.0, 2)])
+def test_tilted_views_solve_an_oblique_zoom(raccoon, tilt, seed):
+    pair = make_tilted_pair(raccoon, 2.0, tilt, np.random.default_rng(seed), high_size=(320, 240))
+    result = match(pair.low, pair.high)
+    assert result.matched, result.reason
+    assert result.model == "affine" and result.evidence["view_tilt"] > 1
+    assert _error(result, pair) < ERROR_TOL_PX
+
+
+def test_inliers_count_distinct_point_pairs(raccoon):
+    pair = _pair(raccoon, 4.0, 3)
+    result = match(pair.low, pair.high)
+    assert result.matched
+    rows = np.round(result.inliers, 3)
+    assert len(np.unique(rows, axis=0)) == len(rows) == result.evidence["inliers"]
+
+
+def test_distinct_pairs_drops_repeated_rows():
+    src = np.array([[1.0, 2.0], [1.0, 2.0], [3.0, 4.0], [1.0, 2.0]])
+    dst = np.array([[5.0, 6.0], [5.0, 6.0], [7.0, 8.0], [9.0, 9.0]])
+    s, d = distinct_pairs(src, dst)
+    assert s.tolist() == [[1, 2], [3, 4], [1, 2]]  # first occurrences, in order
+    assert d.tolist() == [[5, 6], [7, 8], [9, 9]]

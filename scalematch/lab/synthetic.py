@@ -89,6 +89,8 @@ class ZoomPair:
     crop_xy: Tuple[int, int] = (0, 0)  #: top-left of ``high`` in its photo, px
     window_xy: Tuple[int, int] = (0, 0)  #: top-left of ``low`` in the warped canvas, px
     high_source: str = ""  #: where high comes from ("" = same as ``source``)
+    tilt: float = 1.0  #: tilt of the low view (1: a plain zoom pair)
+    longitude_deg: float = 0.0  #: direction of the tilt, degrees
 
 
 def _translation(tx: float, ty: float) -> np.ndarray:
@@ -355,3 +357,90 @@ def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float]
         for r in ratios:
             yield make_zoom_pair(photo, r, pair_rng(seed, p.name, r), high_size, low_max,
                                  source=p.name)
+
+
+# --------------------------------------------------------------------------------------------
+# Tilted zoom pairs (docs/EVALUATION-TILT.md): zoom x rotation x tilt, exact truth
+# --------------------------------------------------------------------------------------------
+
+#: Tilts of the tilted zoom pairs (Morel & Yu 2009 sample t = sqrt(2)^k; 4 is a view 75.5 deg
+#: off the normal)
+TILTS = (1.41, 2.0, 2.83, 4.0)
+#: Longitude range of the tilt, degrees, [lo, hi)
+LONGITUDE_RANGE = (0.0, 180.0)
+
+
+def tilted_linear(ratio: float, angle_deg: float, tilt: float, longitude_deg: float) -> np.ndarray:
+    """2x2 ``(1/r) R(theta) R(phi)^T diag(1/t, 1) R(phi)``: compress by t along phi, then zoom
+    out by r and turn by theta (every affine map with positive determinant has this form)."""
+    rot = similarity_matrix(1.0, angle_deg)[:, :2]
+    turn = similarity_matrix(1.0, longitude_deg)[:, :2]
+    return (1.0 / ratio) * rot @ turn.T @ np.diag([1.0 / tilt, 1.0]) @ turn
+
+
+def affine_warp(image: np.ndarray, linear: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Warp ``image`` by the 2x2 shrinking map ``linear`` with anti-aliasing; (canvas, A 2x3).
+
+    ``linear = U diag(s1, s2) V^T`` (SVD): the image is turned by V^T onto a canvas, blurred by
+    ``CAMERA_BLUR_PX * sqrt(1/s_k^2 - 1)`` along each axis (the camera model of ``zoom_warp``,
+    per direction), then mapped by ``U diag(s1, s2)``. ``A`` maps an ``image`` pixel to the
+    output pixel (OpenCV convention); the output canvas holds the whole warped image.
+    """
+    img = np.asarray(image, np.float32)
+    u, sv, vt = np.linalg.svd(np.asarray(linear, np.float64))
+    if np.linalg.det(vt) < 0:  # keep both factors rotations (linear has det > 0)
+        vt[1] *= -1.0
+        u[:, 1] *= -1.0
+    h, w = img.shape[:2]
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+
+    def _onto_canvas(lin: np.ndarray, pts: np.ndarray) -> Tuple[np.ndarray, Tuple[int, int]]:
+        m = np.hstack([lin, np.zeros((2, 1))])
+        mapped = apply(m, pts)
+        m[:, 2] = -mapped.min(axis=0)
+        size = np.ceil(mapped.max(axis=0) - mapped.min(axis=0)).astype(int) + 1
+        return m, (int(size[0]), int(size[1]))
+
+    turn, size1 = _onto_canvas(vt, corners)
+    turned = cv2.warpAffine(img, turn, size1, flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    sx, sy = (CAMERA_BLUR_PX * math.sqrt(max(1.0 / (v * v) - 1.0, 0.0)) for v in sv)
+    turned = cv2.GaussianBlur(turned, (0, 0), sigmaX=max(sx, 0.01), sigmaY=max(sy, 0.01))
+    shrink, size2 = _onto_canvas(u @ np.diag(sv), apply(turn, corners))
+    out = cv2.warpAffine(turned, shrink, size2, flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out, compose(shrink, turn)
+
+
+def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.random.Generator,
+                     high_size: Tuple[int, int] = HIGH_SIZE, low_max: Tuple[int, int] = LOW_MAX,
+                     source: str = "") -> ZoomPair:
+    """A zoom pair whose low image also sees the scene obliquely (docs/EVALUATION-TILT.md).
+
+    As ``make_zoom_pair`` (most textured of 6 crops, measured at the mean shrink
+    ``ratio * sqrt(tilt)``; grey-level change, noise, a window of at most ``low_max``), but the
+    photo is warped by ``tilted_linear(ratio, theta, tilt, phi)`` with theta uniform in
+    [-180, 180) and phi in [0, 180). The directional ratios are ``ratio`` and ``ratio * tilt``.
+    ``truth`` is the exact 2x3 affine map high px -> low px. ``rng`` draws, in order: the crop
+    positions, theta, phi, gain, offset, noise std, the window offset and the noise.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if not (ratio >= 1.0 and tilt >= 1.0):
+        raise ValueError(f"ratio and tilt must be >= 1, got {ratio}, {tilt}")
+    x, y, w, h = choose_crop(photo, ratio * math.sqrt(tilt), rng, high_size)
+    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    longitude = float(rng.uniform(*LONGITUDE_RANGE))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    canvas, warp = affine_warp(photo, tilted_linear(ratio, angle, tilt, longitude))
+    to_canvas = compose(warp, _translation(x, y))
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
+                                   low_max, rng)
+    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
+    return ZoomPair(low=low, high=high, truth=compose(_translation(-wx, -wy), to_canvas),
+                    ratio=float(ratio), angle_deg=angle, gain=gain, offset=offset,
+                    noise_std=noise_std, source=source, crop_xy=(x, y), window_xy=(wx, wy),
+                    tilt=float(tilt), longitude_deg=longitude)

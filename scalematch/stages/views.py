@@ -37,6 +37,13 @@ class ViewParams:
     longitude_step_deg: float = 72.0
     #: anti-aliasing blur along the compressed axis: c * sqrt(t^2 - 1) px (Morel & Yu: c = 0.8)
     antialias_c: float = 0.8
+    #: views of a pass matched in full: the ones whose probe scores best (the others are only
+    #: detected and probed, which costs about half a search)
+    full_searches: int = 3
+    #: ... and only when that score reaches this: measured on 16 unrelated pairs, no view's
+    #: probe score went above 4 in either order, while the views that solved tilted zoom pairs
+    #: scored 5 to 80 (a chance similarity fit of the probe's 100 points finds 2-4 inliers)
+    min_probe_score: float = 5.0
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0

@@ -37,3 +37,11 @@ def test_mean_transfer_gap_of_a_shift_is_the_shift():
     u[0, 2] += 1.0
     assert mean_transfer_gap(t, u, (480, 640)) == __import__("pytest").approx(1.0)
     assert mean_transfer_gap(t, t, (480, 640)) == 0.0
+
+
+def test_a_mirror_transform_is_folded_and_a_turn_is_not():
+    from scalematch.stages.decision import _folded
+
+    assert _folded(np.array([[-0.5, 0.0, 10.0], [0.0, 0.5, 3.0]]))  # x mirrored
+    assert not _folded(np.array([[0.0, -0.5, 10.0], [0.5, 0.0, 3.0]]))  # turned by 90 deg
+    assert _folded(np.array([[0.5, 0.0, 1.0], [0.0, -0.5, 2.0], [0.0, 0.0, 1.0]]))
