@@ -125,6 +125,8 @@ def test_paper_mode_matches_a_ratio_3_pair(raccoon):
     r = match(pair.low, pair.high, Config.paper())
     _check_known_answer(r, pair)
     assert r.config.mode == "paper" and r.config.scales == (1, 2, 3, 4, 5, 6, 7, 8)
+    # which Lambda was used is recorded with the result (the packaged one, by its hash)
+    assert r.config.covariance_used.startswith("packaged sha256:")
 
 
 def test_unrelated_pair_is_no_reliable_match(raccoon):
