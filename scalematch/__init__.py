@@ -5,6 +5,21 @@ The pipeline, by module: ``stages/scalespace`` -> ``stages/detector`` -> ``stage
 ``stages/mahalanobis`` -> ``stages/matcher`` -> ``stages/constraints`` -> ``stages/estimator``
 -> ``stages/decision``, run by ``pipeline``; then ``render``/``cli``. The research code (synthetic
 pairs, benchmark, studies) is ``scalematch.lab``, which this package never imports.
+
+A scene and a copy shrunk 3 times and turned 20 degrees (``transform`` maps the finer image's
+pixels to the coarser one's):
+
+>>> import cv2, numpy as np
+>>> from scalematch.geometry import similarity_matrix
+>>> noise = np.random.default_rng(0).uniform(0, 255, (240, 320)).astype(np.float32)
+>>> scene = cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 3), None, 0, 255, cv2.NORM_MINMAX)
+>>> low = cv2.warpAffine(scene, similarity_matrix(1 / 3, 20.0, 30.0, 20.0), (160, 120),
+...                      flags=cv2.INTER_AREA)
+>>> r = match(low, scene)
+>>> r.matched, round(r.resolution_ratio, 1), round(r.rotation_deg), r.transform.shape
+(True, 3.0, 20, (2, 3))
+>>> match(np.full((60, 80), 128.0), np.full((120, 160), 90.0)).matched  # nothing to match
+False
 """
 
 import os as _os

@@ -31,11 +31,10 @@ from typing import (Any, Callable, Dict, FrozenSet, Hashable, Iterable, Iterator
                     Sequence, Tuple)
 
 from . import __version__
-from .cli import dumps, result_json
 from .config import Config
 from .imageio import read_image, to_grey
 from .pipeline import match
-from .result import to_jsonable
+from .result import dumps, to_jsonable
 
 #: Header names of the two path columns; a column named exactly so wins, else the one column
 #: whose name starts with it ("low_path", "high-res", ...). Any other columns are ignored.
@@ -272,7 +271,7 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
         low = to_grey(read_image(pair.low_file, max_pixels=max_pixels))
         high = to_grey(read_image(pair.high_file, max_pixels=max_pixels))
         result = match(low, high, config)
-        return result_json(result, pair.low, pair.high, low.shape, high.shape)
+        return result.to_dict(pair.low, pair.high, low.shape, high.shape)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
         error = str(exc)
     except Exception as exc:  # a bad pair must never stop the batch

@@ -3,7 +3,7 @@
 A white canvas with axes, ticks with numeric labels, grid lines, axis titles and a title, as a
 BGR image; no plotting library is needed. Lines and text are anti-aliased (``cv2.LINE_AA``). A bar
 with a missing value (NaN/inf) is not drawn, and a chart with no finite value says "no data".
-The lab's line charts (:mod:`scalematch.lab.plot`) draw on the same primitives.
+The lab's line charts (:mod:`scalematch.lab.plot`) use matplotlib, an optional extra.
 
 Pixel convention: OpenCV's, x to the right, y down; data y grows upwards on the canvas.
 """
@@ -91,15 +91,13 @@ class Frame:
     right: int
     bottom: int
     xlim: Tuple[float, float]  #: data x at left and right
-    ylim: Tuple[float, float]  #: data y at bottom and top (``inset`` px inside the box)
-    inset: int = 0  #: gap, px, between the box and the data range (keeps end markers whole)
+    ylim: Tuple[float, float]  #: data y at bottom and top
 
     def px(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Data (N,) x and y -> (N, 2) canvas px (float)."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        l, r = self.left + self.inset, self.right - self.inset
-        t, b = self.top + self.inset, self.bottom - self.inset
+        l, r, t, b = self.left, self.right, self.top, self.bottom
         u = l + (x - self.xlim[0]) / (self.xlim[1] - self.xlim[0]) * (r - l)
         v = b - (y - self.ylim[0]) / (self.ylim[1] - self.ylim[0]) * (b - t)
         return np.stack([u, v], axis=-1)

@@ -24,7 +24,8 @@ import numpy as np
 from . import __version__
 from .config import MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
-from .result import MatchResult, to_jsonable
+from .result import MatchResult, dumps
+from .stages.estimator import model_of
 
 #: Exit codes (documented in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS = 0, 1, 2, 3
@@ -172,7 +173,7 @@ def set_path(config: Any, path: str, value: Any) -> Any:
 def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: Optional[int],
                  thresholds: Dict[str, Any], settings: Sequence[str]) -> Config:
     """The Config of the command-line options; ``ValueError`` with a message when one is bad."""
-    config = Config.paper() if mode == "paper" else Config()
+    config = Config.preset(mode)  # the modes are presets of the same names
     changes: Dict[str, Any] = {}
     if model is not None:
         changes["model"] = model
@@ -197,40 +198,8 @@ def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: O
 
 def result_json(result: MatchResult, low_path: str, high_path: str,
                 low_shape: Tuple[int, ...], high_shape: Tuple[int, ...]) -> Dict[str, Any]:
-    """The JSON object of one match (README.md, "## Output"); plain types, nan -> None.
-
-    ``low``/``high`` describe the coarser and the finer image as found: with ``order``
-    "swapped" the first image given is the finer one, and they are exchanged.
-    """
-    if result.order == "swapped":
-        low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
-    t = result.transform
-    return {
-        "matched": bool(result.matched),
-        "reason": None if result.matched else (result.reason or "no reliable match"),
-        "model": result.model,
-        "order": result.order,
-        "transform": None if t is None else to_jsonable(np.asarray(t, dtype=np.float64)),
-        "resolution_ratio": to_jsonable(float(result.resolution_ratio)),
-        "rotation_deg": to_jsonable(float(result.rotation_deg)),
-        "translation": to_jsonable(list(result.translation)),
-        "best_scale": to_jsonable(float(result.best_scale)),
-        "inliers": result.n_inliers,
-        "matches": to_jsonable(np.round(np.asarray(result.inliers, np.float64).reshape(-1, 4), 3)),
-        "scales": [to_jsonable(row) for row in result.scales],
-        "seconds": round(result.seconds, 3),
-        "timings": to_jsonable({k: round(float(v), 3) for k, v in result.timings.items()}),
-        "evidence": to_jsonable(result.evidence),
-        "config": to_jsonable(result.config),
-        "version": __version__,
-        "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
-        "high": {"path": str(high_path), "width": int(high_shape[1]), "height": int(high_shape[0])},
-    }
-
-
-def dumps(obj: Dict[str, Any], indent: Optional[int] = None) -> str:
-    """JSON text; objects json cannot write (paths, numpy scalars left over) become strings."""
-    return json.dumps(to_jsonable(obj), indent=indent, default=str, allow_nan=False)
+    """The JSON object of one match: :meth:`MatchResult.to_dict` (kept for existing callers)."""
+    return result.to_dict(low_path, high_path, low_shape, high_shape)
 
 
 # --------------------------------------------------------------------------- human output
@@ -239,8 +208,8 @@ def summary(result: MatchResult) -> str:
     """The one-line verdict on stderr."""
     secs = f"{result.seconds:.1f} s"
     if result.matched:
-        if result.model == "fundamental":
-            return (f"matched (fundamental): {result.n_inliers} inliers at scale "
+        if not model_of(result.model).has_ratio:
+            return (f"matched ({result.model}): {result.n_inliers} inliers at scale "
                     f"{result.best_scale:g}, {secs}")
         swapped = ", order swapped (the first image is the finer one)" \
             if result.order == "swapped" else ""
@@ -532,11 +501,11 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     except OSError as exc:  # a file the configuration names is missing (e.g. --set ..._path=)
         raise InputError(str(exc))
 
-    payload = result_json(result, low, high, low_grey.shape, high_grey.shape)
+    text = result.to_json(low, high, low_grey.shape, high_grey.shape)
     if json_path == "-":
-        click.echo(dumps(payload, indent=2))
+        click.echo(text, nl=False)
     elif json_path:
-        write_text(Path(json_path), dumps(payload, indent=2) + "\n", "--json")
+        write_text(Path(json_path), text, "--json")
     written: Dict[str, Path] = {}
     if out_dir is not None:
         from .render import write_outputs

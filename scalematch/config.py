@@ -7,18 +7,18 @@ gathers them and is recorded with every result (``MatchResult.config``, the JSON
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Optional, Tuple
+from typing import Callable, Dict, Optional, Tuple
 
 from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
-from .stages.estimator import RansacParams
+from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.matcher import MatcherParams
 from .stages.views import ViewParams
 
-#: Models the robust estimator can fit (paper section 5 and "Further examples").
-MODELS = ("similarity", "affine", "homography", "fundamental")
+#: Names of the models the robust estimator can fit (the records: ``stages.estimator.MODELS``).
+MODELS = tuple(_MODEL_RECORDS)
 #: "default": the improved pipeline; "paper": jets + Mahalanobis + semi-local constraints.
 MODES = ("default", "paper")
 #: "auto": find which image is the finer one (the given order first, then the other);
@@ -27,7 +27,11 @@ ORDERS = ("auto", "given")
 
 
 def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float, ...]:
-    """Scales lo .. hi spaced by 2^(1/steps_per_octave), rounded to 3 decimals."""
+    """Scales lo .. hi spaced by 2^(1/steps_per_octave), rounded to 3 decimals.
+
+    >>> geometric_scales(1.0, 4.0, 2)
+    (1.0, 1.414, 2.0, 2.828, 4.0)
+    """
     out = []
     k = 0
     while True:
@@ -54,8 +58,41 @@ class ProbeParams:
 
 
 @dataclass(frozen=True)
+class ModelCheckParams:
+    """A similarity answer is checked against richer models on the same candidates.
+
+    A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
+    measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
+    tens of px off away from its inliers. When an affine map or a homography fitted to the
+    winning scale's candidates explains clearly more of them, that model is reported instead
+    (``MatchResult.model`` says which); on plain zoom pairs the similarity is exact and stays.
+    """
+
+    enabled: bool = True  #: False: the similarity is always the answer when asked for
+    models: Tuple[str, ...] = ("affine", "homography")  #: tried in this order (simplest first)
+    #: a richer model is taken when its inliers reach ``min_gain`` x the similarity's and at
+    #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
+    min_gain: float = 1.25
+    min_extra: int = 10
+
+
+@dataclass(frozen=True)
 class Config:
-    """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper."""
+    """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper.
+
+    Frozen: change a copy with :func:`dataclasses.replace` or ``Config.preset(name, **changes)``.
+
+    >>> from dataclasses import replace
+    >>> config = Config(seed=1)
+    >>> len(config.scales), config.scales[:4], config.harris.sigma_tilde
+    (12, (1.0, 1.26, 1.587, 2.0), 2.0)
+    >>> replace(config, harris=replace(config.harris, threshold=50.0)).harris.threshold
+    50.0
+    >>> Config(model="shear")
+    Traceback (most recent call last):
+    ...
+    ValueError: model must be one of ('similarity', 'affine', 'homography', 'fundamental'), got 'shear'
+    """
 
     mode: str = "default"  #: "default" or "paper" (see MODES)
     model: str = "similarity"  #: similarity | affine | homography | fundamental
@@ -71,7 +108,12 @@ class Config:
     harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
     gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
     jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
-    covariance_path: Optional[str] = None  #: Lambda for the jets (None: data/jet_covariance.json)
+    #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged
+    #: scalematch/data/jet_covariance.json)
+    covariance_path: Optional[str] = None
+    #: recorded by match() in the paper mode: which Lambda was used ("packaged" or the resolved
+    #: path, and the first 12 hex digits of the file's SHA-256); "" before a match
+    covariance_used: str = ""
     matcher: MatcherParams = field(default_factory=MatcherParams)
     orientation: OrientationParams = field(default_factory=OrientationParams)  #: default mode
     semi_local: SemiLocalParams = field(default_factory=SemiLocalParams)  #: paper mode
@@ -81,6 +123,7 @@ class Config:
     order: str = "auto"  #: see ORDERS
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)
+    model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
 
     def __post_init__(self) -> None:
         if self.order not in ORDERS:
@@ -95,9 +138,45 @@ class Config:
     @staticmethod
     def paper(**changes) -> "Config":
         """The paper's method as published: scales 1..8, jets, Mahalanobis, constraints."""
-        base = Config(mode="paper", scales=PAPER_SCALES,
-                      # the paper: Mahalanobis nearest neighbours, then the constraints decide
-                      matcher=MatcherParams(selection="knn", k=3),
-                      # "In practice we run the latter algorithm at all scales" (section 5)
-                      probe=ProbeParams(enabled=False))
-        return replace(base, **changes)
+        return Config.preset("paper", **changes)
+
+    @staticmethod
+    def preset(name: str, **changes) -> "Config":
+        """The configuration called ``name`` in :data:`PRESETS`, with ``changes`` applied.
+
+        >>> Config.preset("paper", seed=3).scales
+        (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+        >>> Config.preset("default-no-probe").probe.enabled
+        False
+        """
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; one of {', '.join(PRESETS)}")
+        return replace(PRESETS[name](), **changes)
+
+
+def _paper() -> Config:
+    return Config(mode="paper", scales=PAPER_SCALES,
+                  # the paper: Mahalanobis nearest neighbours, then the constraints decide
+                  matcher=MatcherParams(selection="knn", k=3),
+                  # "In practice we run the latter algorithm at all scales" (section 5)
+                  probe=ProbeParams(enabled=False))
+
+
+#: Named configurations: the two modes, and the steps between them that the lab's ablation
+#: measures (``scalematch lab bench --methods``; docs/ABLATION.md says what each step bought).
+#: Each value makes its Config; ``Config.preset(name, **changes)`` is the way to get one.
+PRESETS: Dict[str, Callable[[], Config]] = {
+    "default": Config,
+    "paper": _paper,
+    # the paper's pipeline on the default's scales (1-12.7, third octaves)
+    "paper-finer-scales": lambda: replace(_paper(), scales=Config().scales),
+    # the default's descriptors and constraints on the paper's scales 1-8, every scale run
+    "default-paper-scales": lambda: Config(scales=PAPER_SCALES, probe=ProbeParams(enabled=False)),
+    # the default, every scale run (no probe)
+    "default-no-probe": lambda: Config(probe=ProbeParams(enabled=False)),
+    # the default on 15 scales 1-11.3 (quarter octaves)
+    "default-quarter-octaves": lambda: Config(scales=geometric_scales(1.0, 12.0, 4)),
+    # the default without the rotation-consistency filter: one group holding every candidate
+    "default-no-rotation-check": lambda: Config(
+        orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1)),
+}

@@ -19,7 +19,15 @@ GRID_POINTS = 21
 
 
 def similarity_matrix(scale: float, angle_deg: float, tx: float = 0.0, ty: float = 0.0) -> np.ndarray:
-    """2x3 matrix of x' = scale * R(angle) x + t (angle counter-clockwise on screen is negative)."""
+    """2x3 matrix of x' = scale * R(angle) x + t (angle counter-clockwise on screen is negative).
+
+    Returns
+    -------
+    (2, 3) float64 array
+
+    >>> similarity_matrix(0.5, 90.0, 10.0, 0.0).round(6).tolist()
+    [[0.0, -0.5, 10.0], [0.5, 0.0, 0.0]]
+    """
     a = math.radians(angle_deg)
     c, s = scale * math.cos(a), scale * math.sin(a)
     return np.array([[c, -s, tx], [s, c, ty]], dtype=np.float64)
@@ -30,6 +38,24 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
 
     For affine and homography matrices the linear part's sqrt(|det|) stands for h, the angle is
     atan2(T[1,0], T[0,0]) as for a similarity.
+
+    Parameters
+    ----------
+    t : (2, 3) or (3, 3) array
+        High px -> low px.
+
+    Returns
+    -------
+    ratio : float
+        High-resolution pixels per low-resolution pixel (inf for a singular map).
+    angle : float
+        Degrees.
+    translation : (float, float)
+        Low px (divided by ``t[2, 2]`` for a homography).
+
+    >>> ratio, angle, (tx, ty) = similarity_parts(similarity_matrix(0.25, 30.0, 5.0, -2.0))
+    >>> round(ratio, 6), round(angle, 6), tx, ty
+    (4.0, 30.0, 5.0, -2.0)
     """
     t = np.asarray(t, dtype=np.float64)
     a = t[:2, :2]
@@ -45,14 +71,44 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
 
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """2x3 of ``a o b`` (apply b first, then a)."""
+    """2x3 of ``a o b`` (apply b first, then a).
+
+    Parameters
+    ----------
+    a, b : (2, 3) arrays
+
+    Returns
+    -------
+    (2, 3) float64 array
+
+    >>> shift = similarity_matrix(1.0, 0.0, 10.0, 0.0)
+    >>> half = similarity_matrix(0.5, 0.0)
+    >>> compose(half, shift).tolist()    # shift, then halve
+    [[0.5, 0.0, 5.0], [0.0, 0.5, 0.0]]
+    """
     a3 = np.vstack([a, [0, 0, 1]])
     b3 = np.vstack([b, [0, 0, 1]])
     return (a3 @ b3)[:2]
 
 
 def apply(t: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Map (N, 2) points by a 2x3 affine or a 3x3 homography."""
+    """Map (N, 2) points by a 2x3 affine or a 3x3 homography.
+
+    Parameters
+    ----------
+    t : (2, 3) or (3, 3) array
+    xy : (N, 2) array_like
+        Points (x, y); a single (2,) point is taken as (1, 2).
+
+    Returns
+    -------
+    (N, 2) float64 array
+
+    >>> apply(similarity_matrix(0.5, 0.0, 1.0, 2.0), [[10, 20], [0, 0]]).tolist()
+    [[6.0, 12.0], [1.0, 2.0]]
+    >>> apply([[2.0, 0, 0], [0, 2.0, 0], [0, 0, 2.0]], [3, 4]).tolist()  # a 3x3: divided by w
+    [[3.0, 4.0]]
+    """
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     t = np.asarray(t, dtype=np.float64)
     if t.shape == (2, 3):
@@ -62,7 +118,11 @@ def apply(t: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 def grid(shape: Tuple[int, int], n: int = GRID_POINTS) -> np.ndarray:
-    """(n*n, 2) points (x, y) spanning an image of ``shape`` (H, W), corners included."""
+    """(n*n, 2) points (x, y) spanning an image of ``shape`` (H, W), corners included.
+
+    >>> grid((3, 5), n=2).tolist()
+    [[0.0, 0.0], [4.0, 0.0], [0.0, 2.0], [4.0, 2.0]]
+    """
     h, w = int(shape[0]), int(shape[1])
     xs = np.linspace(0.0, w - 1.0, n)
     ys = np.linspace(0.0, h - 1.0, n)
@@ -91,6 +151,9 @@ def footprint(t: np.ndarray, high_shape: Tuple[int, ...], edges: bool = True
     (4, 2) array or None
         None when a homography sends a corner to infinity or behind the camera (or the result is
         not finite): such a transform has no footprint.
+
+    >>> footprint(similarity_matrix(0.5, 0.0), (4, 6)).tolist()  # a 6x4 image halved
+    [[-0.25, -0.25], [2.75, -0.25], [2.75, 1.75], [-0.25, 1.75]]
     """
     h, w = high_shape[:2]
     lo, hi_x, hi_y = (-0.5, w - 0.5, h - 0.5) if edges else (0.0, w - 1.0, h - 1.0)

@@ -5,29 +5,31 @@ Colour is turned to grey with ITU-R BT.601 luma (0.299 R + 0.587 G + 0.114 B, cv
 the alpha channel of RGBA images is ignored. Errors are ``ImageError`` with a one-line message
 that says what is wrong and what to do.
 
-Safety: the pixel count is read from the file header (PNG, JPEG, BMP, GIF, WebP, TIFF) and checked
-against ``max_pixels`` *before* the image is decoded, so a decompression bomb is refused without
-allocating it. Other formats are checked right after decoding.
+Safety: image files are untrusted input. Their header is read by Pillow (``Image.open`` reads
+the header only) and the pixel count checked against ``max_pixels`` *before* the image is
+decoded, so a decompression bomb is refused without allocating it; formats Pillow does not know
+are checked right after OpenCV decodes them. OpenCV decodes the pixels.
 
-EXIF orientation of JPEG files is read here and applied here (the file is decoded with
-``IMREAD_IGNORE_ORIENTATION``), so the result does not depend on whether the installed OpenCV
-applies it itself (OpenCV 5 ``imdecode`` does; some older builds did not).
+The EXIF orientation (JPEG, WebP, PNG ``eXIf`` before the pixels, TIFF) is read from the header by
+Pillow and applied here (the file is decoded with ``IMREAD_IGNORE_ORIENTATION``), so the result
+does not depend on whether the installed OpenCV applies it itself.
 """
 
 from __future__ import annotations
 
+import io
 import math
-import struct
+import warnings
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
 
+from .stages.detector import MIN_SIDE_PX
+
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
 DEFAULT_MAX_PIXELS = 100_000_000
-#: Smallest usable side, px: below this no interest point survives the border and the scales.
-MIN_SIDE = 32
 
 
 class ImageError(ValueError):
@@ -35,7 +37,12 @@ class ImageError(ValueError):
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
-    """Any decoded image array (H, W), (H, W, 3) BGR or (H, W, 4) BGRA -> float32 grey levels."""
+    """Any decoded image array (H, W), (H, W, 3) BGR or (H, W, 4) BGRA -> (H, W) float32 grey levels.
+
+    >>> bgr = np.array([[[0, 0, 255], [255, 255, 255]]], np.uint8)  # a red, a white pixel
+    >>> to_grey(bgr).astype(float).round(2).tolist()
+    [[76.24, 255.0]]
+    """
     img = np.asarray(image)
     scale = 1.0
     if img.dtype == np.uint16:
@@ -101,113 +108,63 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     return to_grey(img)
 
 
-# --------------------------------------------------------------------------- header parsing
+# --------------------------------------------------------------------------- the header
 
-def _jpeg_info(data: bytes) -> Tuple[Optional[Tuple[int, int]], int, int]:
-    """((width, height) or None, EXIF orientation 1..8, offset of the first SOS or -1)."""
-    size = None
-    orientation = 1
-    i = 2
-    n = len(data)
-    while i + 4 <= n:
-        if data[i] != 0xFF:
-            i += 1
-            continue
-        marker = data[i + 1]
-        if marker == 0xFF:  # fill byte
-            i += 1
-            continue
-        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
-            i += 2
-            continue
-        if marker == 0xDA:  # start of scan: the header is over
-            return size, orientation, i
-        (length,) = struct.unpack(">H", data[i + 2:i + 4])
-        seg = data[i + 4:i + 2 + length]
-        if marker in (0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE,
-                      0xCF) and len(seg) >= 5 and size is None:
-            h, w = struct.unpack(">HH", seg[1:5])
-            size = (w, h)
-        elif marker == 0xE1 and seg[:6] == b"Exif\x00\x00":
-            orientation = _exif_orientation(seg[6:]) or orientation
-        i += 2 + length
-    return size, orientation, -1
+class Header(NamedTuple):
+    """What Pillow reads from a file's header without decoding its pixels."""
+
+    size: Optional[Tuple[int, int]]  #: (width, height) px as stored, None when not recognised
+    orientation: int  #: EXIF orientation 1..8 (1: as stored)
+    scan: int  #: JPEG: offset of the first scan (its pixel data), else -1
 
 
-def _exif_orientation(tiff: bytes) -> Optional[int]:
-    """The Orientation tag (0x0112) of IFD0 of a TIFF/EXIF block, or None."""
+def header(data: bytes) -> Header:
+    """The header of an image file, read by Pillow (``Image.open`` is lazy: no pixel is decoded).
+
+    A file Pillow does not recognise gives ``size=None``: OpenCV may still decode it, and its
+    size is then checked after decoding. Pillow's own decompression-bomb limit
+    (``PIL.Image.MAX_IMAGE_PIXELS``, twice it refused outright) raises ``ImageError``.
+
+    >>> import cv2, numpy as np
+    >>> png = cv2.imencode(".png", np.zeros((30, 40), np.uint8))[1].tobytes()
+    >>> header(png)
+    Header(size=(40, 30), orientation=1, scan=-1)
+    """
+    from PIL import Image  # imported when a file is read (46 ms), not with scalematch
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Pillow warns about corrupt EXIF and large images
+        try:
+            with Image.open(io.BytesIO(data)) as im:
+                size = (int(im.size[0]), int(im.size[1]))
+                orientation = _orientation(im)
+                scan = int(im.tile[0][2]) if im.format == "JPEG" and im.tile else -1
+        except Image.DecompressionBombError:
+            limit = 2 * (Image.MAX_IMAGE_PIXELS or 0)
+            raise ImageError(f"image is above Pillow's decompression-bomb limit of "
+                             f"{limit / 1e6:.0f} MP (2 x PIL.Image.MAX_IMAGE_PIXELS); shrink it"
+                             ) from None
+        except Exception:  # noqa: BLE001 (untrusted bytes: any failure means "not recognised")
+            return Header(None, 1, -1)
+    return Header(size, orientation, scan)
+
+
+def _orientation(im) -> int:
+    """The EXIF Orientation tag (0x0112) of an opened ``PIL.Image``, from the header only
+    (``im.getexif()`` may decode a PNG to find it)."""
+    from PIL import Image
+
     try:
-        if tiff[:2] == b"II":
-            e = "<"
-        elif tiff[:2] == b"MM":
-            e = ">"
+        if "exif" in im.info:
+            exif = Image.Exif()
+            exif.load(im.info["exif"])
+            value = exif.get(0x0112, 1)
         else:
-            return None
-        (ifd,) = struct.unpack(e + "I", tiff[4:8])
-        (count,) = struct.unpack(e + "H", tiff[ifd:ifd + 2])
-        for k in range(count):
-            off = ifd + 2 + 12 * k
-            tag, typ = struct.unpack(e + "HH", tiff[off:off + 4])
-            if tag == 0x0112 and typ == 3:
-                (value,) = struct.unpack(e + "H", tiff[off + 8:off + 10])
-                return int(value) if 1 <= value <= 8 else None
-    except struct.error:
-        return None
-    return None
-
-
-def _tiff_size(data: bytes) -> Optional[Tuple[int, int]]:
-    e = "<" if data[:2] == b"II" else ">"
-    try:
-        (ifd,) = struct.unpack(e + "I", data[4:8])
-        (count,) = struct.unpack(e + "H", data[ifd:ifd + 2])
-        w = h = None
-        for k in range(count):
-            off = ifd + 2 + 12 * k
-            tag, typ = struct.unpack(e + "HH", data[off:off + 4])
-            if tag in (256, 257):
-                fmt = e + ("H" if typ == 3 else "I")
-                (v,) = struct.unpack(fmt, data[off + 8:off + 8 + struct.calcsize(fmt)])
-                if tag == 256:
-                    w = v
-                else:
-                    h = v
-        return (int(w), int(h)) if w and h else None
-    except struct.error:
-        return None
-
-
-def header_size(data: bytes) -> Optional[Tuple[int, int]]:
-    """(width, height) from the header of a PNG, JPEG, BMP, GIF, WebP or TIFF file, else None."""
-    try:
-        if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
-            w, h = struct.unpack(">II", data[16:24])
-            return int(w), int(h)
-        if data[:2] == b"\xff\xd8":
-            return _jpeg_info(data)[0]
-        if data[:2] == b"BM" and len(data) >= 26:
-            w, h = struct.unpack("<ii", data[18:26])
-            return abs(int(w)), abs(int(h))
-        if data[:6] in (b"GIF87a", b"GIF89a"):
-            w, h = struct.unpack("<HH", data[6:10])
-            return int(w), int(h)
-        if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
-            chunk = data[12:16]
-            if chunk == b"VP8X":
-                w = 1 + int.from_bytes(data[24:27], "little")
-                h = 1 + int.from_bytes(data[27:30], "little")
-                return w, h
-            if chunk == b"VP8L":
-                b = int.from_bytes(data[21:25], "little")
-                return 1 + (b & 0x3FFF), 1 + ((b >> 14) & 0x3FFF)
-            if chunk == b"VP8 ":
-                w, h = struct.unpack("<HH", data[26:30])
-                return int(w & 0x3FFF), int(h & 0x3FFF)
-        if data[:4] in (b"II*\x00", b"MM\x00*"):
-            return _tiff_size(data)
-    except struct.error:
-        return None
-    return None
+            value = getattr(im, "tag_v2", {}).get(0x0112, 1)  # TIFF: a tag of its own IFD
+        value = int(value)
+    except Exception:  # noqa: BLE001 (a corrupt EXIF block: shown as stored)
+        return 1
+    return value if 1 <= value <= 8 else 1
 
 
 def _orient(img: np.ndarray, orientation: int) -> np.ndarray:
@@ -239,7 +196,7 @@ def _too_many(p: Path, w: int, h: int, max_pixels: int) -> ImageError:
 # --------------------------------------------------------------------------- reading
 
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
-               min_side: int = MIN_SIDE) -> np.ndarray:
+               min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
 
     Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
@@ -258,18 +215,18 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     if not raw:
         raise ImageError(f"{p}: file is empty; give a PNG, JPEG, TIFF or other image file")
 
-    size = header_size(raw)
+    try:
+        head = header(raw)
+    except ImageError as exc:
+        raise ImageError(f"{p}: {exc}") from None
+    size = head.size
     if size is not None and max_pixels and size[0] * size[1] > max_pixels:
         raise _too_many(p, size[0], size[1], max_pixels)
-
-    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR
-    orientation = 1
-    if raw[:2] == b"\xff\xd8":
-        _, orientation, sos = _jpeg_info(raw)
-        if sos < 0 or raw.rfind(b"\xff\xd9") < sos:
-            raise ImageError(f"{p}: JPEG file is truncated (no end-of-image marker); "
-                             "copy or download it again")
-        flags |= cv2.IMREAD_IGNORE_ORIENTATION
+    if head.scan >= 0 and raw.rfind(b"\xff\xd9") < head.scan:
+        raise ImageError(f"{p}: JPEG file is truncated (no end-of-image marker); "
+                         "copy or download it again")
+    # orientation is applied below from the header, the same way for every format and build
+    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
 
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
@@ -285,7 +242,7 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
                              "corrupt); copy or download it again")
         raise ImageError(f"{p}: not an image OpenCV can decode; give a PNG, JPEG, TIFF, BMP or "
                          "WebP file")
-    img = _orient(img, orientation)
+    img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h > max_pixels:
         raise _too_many(p, w, h, max_pixels)
@@ -296,9 +253,38 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
 
 
 def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
-              min_side: int = MIN_SIDE) -> np.ndarray:
+              min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Read ``path`` as a float32 grey image in 8-bit grey levels (EXIF orientation applied).
 
-    See ``read_image`` for the checks and the errors.
+    Parameters
+    ----------
+    path : str or Path
+        Any format OpenCV decodes (PNG, JPEG, TIFF, BMP, WebP, ...); colour becomes BT.601 luma,
+        16-bit is scaled to 0..255, alpha is ignored.
+    max_pixels : int
+        Larger images are refused before decoding (their size is read from the header).
+    min_side : int
+        Smaller sides are refused, px.
+
+    Returns
+    -------
+    (H, W) float32 array
+
+    Raises
+    ------
+    ImageError
+        One line saying what is wrong and what to do (see :func:`read_image`).
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "grey.png")
+    >>> cv2.imwrite(path, np.full((40, 60), 200, np.uint8))
+    True
+    >>> img = read_grey(path)
+    >>> img.shape, img.dtype, float(img.max())
+    ((40, 60), dtype('float32'), 200.0)
+    >>> read_grey(os.path.join(os.path.dirname(path), "missing.png"))
+    Traceback (most recent call last):
+    ...
+    scalematch.imageio.ImageError: .../missing.png: no such file; check the path
     """
     return to_grey(read_image(path, max_pixels=max_pixels, min_side=min_side))

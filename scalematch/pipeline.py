@@ -20,18 +20,14 @@ from .geometry import compose, similarity_parts
 from .imageio import grey_levels
 from .result import MatchResult, ScaleRow
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Decision, decide
+from .stages.decision import Decision, decide, folded
 from .stages.descriptors import Described, describe_gradients, describe_jets
-from .stages.detector import Keypoints, detect_on_level
-from .stages.estimator import MIN_SAMPLE, Estimate, estimate
+from .stages.detector import MIN_SIDE_PX, Keypoints, detect_on_level
+from .stages.estimator import MIN_SAMPLE, Estimate, estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import Candidates, match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
-
-#: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
-#: Harris filters (4 sigma~ = 8 px) see mostly border.
-MIN_SIDE_PX = 24
 
 
 @dataclass(frozen=True)
@@ -97,7 +93,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
                 best, best_src, best_dst, kept = est, src, dst, int(mask.sum())
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
-    if n_in and config.model != "fundamental":
+    if n_in and model_of(config.model).has_ratio:
         ratio, angle, _ = similarity_parts(best.transform)
     initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
@@ -323,10 +319,33 @@ def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.nda
     return est.transform, np.hstack([src[inl], dst[inl]]), model
 
 
+def _richer_model(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attempt,
+                  config: Config):
+    """(transform, inliers, model): a richer model when the similarity explains too little.
+
+    The candidates of the winning scale are refit with each of ``config.model_check.models``;
+    the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
+    whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
+    """
+    check = config.model_check
+    if not check.enabled or model != "similarity" or not attempt.view.is_identity:
+        return t, inliers, model
+    best = next(o for o in attempt.outcomes if o.row.s == attempt.verdict.best_scale)
+    k = len(inliers)
+    for richer in check.models:
+        est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
+        if est.transform is None or folded(est.transform):
+            continue
+        if est.n_inliers >= check.min_gain * k and est.n_inliers - k >= check.min_extra:
+            inl = est.inliers
+            return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
+    return t, inliers, model
+
+
 def _as_finer_to_coarser(t: np.ndarray, inliers: np.ndarray, swapped: bool, model: str):
     """Flip a match whose transform implies a ratio below 1 (the 'high' image is the coarser)."""
     ratio = similarity_parts(t)[0]
-    if model == "fundamental" or not (math.isfinite(ratio) and ratio < 1.0):
+    if not model_of(model).has_ratio or not (math.isfinite(ratio) and ratio < 1.0):
         return t, inliers, swapped
     t3 = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
     inv = np.linalg.inv(t3)
@@ -367,11 +386,13 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     low = as_float_image(grey_levels(low, "low"))  # ValueError: bool, NaN, constant
     high = as_float_image(grey_levels(high, "high"))
     _check_images(low, high)
-    whitening = load_covariance(config.covariance_path).whitening() if config.mode == "paper" else None
+    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
+    config = replace(config, covariance_used=cov.source) if cov is not None else config
+    whitening = cov.whitening() if cov is not None else None
     images = {False: (low, high), True: (high, low)}
     directions = (False, True) if config.order == "auto" else (False,)
     plain = [[(1.0, 0.0)]]
-    passes = plain + (view_plan(config.views) if config.model != "fundamental" else [])
+    passes = plain + (view_plan(config.views) if model_of(config.model).has_ratio else [])
     per_search = 2 * len(config.scales)  # progress steps: detect + match each scale
     feats = {}
     count = {"done": 0, "total": 0}
@@ -427,10 +448,11 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                            config=config, evidence=dict(first.verdict.evidence, searches=tried),
                            order="given")
     t, inliers, model = _refit_in_high(winner, config)
+    t, inliers, model = _richer_model(t, inliers, model, winner, config)
     t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
     evidence = dict(winner.verdict.evidence, searches=searches,
                     view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)
-    if model == "fundamental":
+    if not model_of(model).has_ratio:
         ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))
     else:
         ratio, angle, tr = similarity_parts(t)

@@ -26,6 +26,7 @@ from .chart import bar_chart
 from .geometry import footprint, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult
+from .stages.estimator import model_of
 
 PathLike = Union[str, Path]
 
@@ -115,8 +116,8 @@ def summary_line(result: MatchResult) -> str:
     """One line for captions: ratio, angle and inliers, or the reason there is no match."""
     if not result.matched:
         return f"no reliable match: {result.reason}" if result.reason else "no reliable match"
-    if result.model == "fundamental":
-        return f"fundamental matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
+    if not model_of(result.model).has_ratio:
+        return f"{result.model} matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
     return (f"{result.model}: ratio {result.resolution_ratio:.2f}, rotation "
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, "
             f"best scale {result.best_scale:g}")
@@ -148,7 +149,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
     lines = [summary_line(result)]
-    if result.matched and t is not None and result.model != "fundamental":
+    if result.matched and t is not None and model_of(result.model).has_ratio:
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
         warped, mask = _warp_high(high_grey, t, (ww, hh))
         inside = mask > 0
@@ -167,7 +168,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
         for x, y in result.inliers[:, 2:4]:
             cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
                        cv2.LINE_AA, shift=4)
-        lines.append("dots = inliers in the low image (a fundamental matrix has no overlay)")
+        lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
     return caption(out, lines)
 
 

@@ -8,9 +8,10 @@ integer coordinates); ``transform`` maps a *high-resolution* pixel to a *low-res
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, field, is_dataclass
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -51,6 +52,16 @@ class MatchResult:
     #: transform and the inliers always go from the finer image to the coarser one)
     order: str = "given"
 
+    def __post_init__(self) -> None:
+        # frozen means frozen: the arrays are read-only copies, so a result cannot be edited
+        # in place (a caller's own array stays writable)
+        for name in ("transform", "inliers"):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.array(value)
+                value.setflags(write=False)
+                object.__setattr__(self, name, value)
+
     @property
     def n_inliers(self) -> int:
         return int(self.inliers.shape[0])
@@ -58,6 +69,63 @@ class MatchResult:
     @property
     def seconds(self) -> float:
         return float(self.timings.get("total", sum(self.timings.values())))
+
+    def to_dict(self, low_path: str, high_path: str, low_shape: Sequence[int],
+                high_shape: Sequence[int]) -> Dict[str, Any]:
+        """The documented JSON object of this match (README.md, "## Output"): plain types only.
+
+        ``low``/``high`` describe the coarser and the finer image as found: with ``order``
+        "swapped" the first image given is the finer one, and they are exchanged.
+
+        Parameters
+        ----------
+        low_path, high_path : str
+            The inputs as the user named them, in the order given (recorded, not read).
+        low_shape, high_shape : (H, W) tuples
+            The images' sizes in px, after EXIF orientation.
+
+        >>> r = MatchResult(matched=False, reason="too few inliers", model="similarity",
+        ...                 transform=None, resolution_ratio=float("nan"),
+        ...                 rotation_deg=float("nan"), translation=(float("nan"),) * 2,
+        ...                 best_scale=2.0, inliers=np.zeros((0, 4)), scales=(),
+        ...                 timings={"total": 0.5}, config={})
+        >>> d = r.to_dict("a.png", "b.png", (120, 160), (480, 640))
+        >>> d["matched"], d["reason"], d["resolution_ratio"], d["high"]
+        (False, 'too few inliers', None, {'path': 'b.png', 'width': 640, 'height': 480})
+        """
+        from . import __version__
+
+        if self.order == "swapped":
+            low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
+        t = self.transform
+        return {
+            "matched": bool(self.matched),
+            "reason": None if self.matched else (self.reason or "no reliable match"),
+            "model": self.model,
+            "order": self.order,
+            "transform": None if t is None else to_jsonable(np.asarray(t, dtype=np.float64)),
+            "resolution_ratio": to_jsonable(float(self.resolution_ratio)),
+            "rotation_deg": to_jsonable(float(self.rotation_deg)),
+            "translation": to_jsonable(list(self.translation)),
+            "best_scale": to_jsonable(float(self.best_scale)),
+            "inliers": self.n_inliers,
+            "matches": to_jsonable(np.round(np.asarray(self.inliers, np.float64).reshape(-1, 4), 3)),
+            "scales": [to_jsonable(row) for row in self.scales],
+            "seconds": round(self.seconds, 3),
+            "timings": to_jsonable({k: round(float(v), 3) for k, v in self.timings.items()}),
+            "evidence": to_jsonable(self.evidence),
+            "config": to_jsonable(self.config),
+            "version": __version__,
+            "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
+            "high": {"path": str(high_path), "width": int(high_shape[1]),
+                     "height": int(high_shape[0])},
+        }
+
+    def to_json(self, low_path: str, high_path: str, low_shape: Sequence[int],
+                high_shape: Sequence[int], indent: Optional[int] = 2) -> str:
+        """The text of ``scalematch LOW HIGH --json FILE``: :meth:`to_dict` as JSON, ending in a
+        newline (``indent=None``: one line, as ``batch`` writes)."""
+        return dumps(self.to_dict(low_path, high_path, low_shape, high_shape), indent) + "\n"
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -78,3 +146,8 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, (np.bool_,)):
         return bool(obj)
     return obj
+
+
+def dumps(obj: Dict[str, Any], indent: Optional[int] = None) -> str:
+    """JSON text; objects json cannot write (paths, numpy scalars left over) become strings."""
+    return json.dumps(to_jsonable(obj), indent=indent, default=str, allow_nan=False)

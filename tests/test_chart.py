@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from scalematch.chart import HIGHLIGHT_COLOUR, bar_chart, nice_ticks
+from scalematch.chart import HIGHLIGHT_COLOUR, bar_chart, format_tick, nice_ticks
 
 
 def _has_colour(img: np.ndarray, bgr, tol: int = 12, min_pixels: int = 20) -> bool:
@@ -45,3 +45,9 @@ def test_nice_ticks_cover_range_with_round_steps():
     assert np.allclose(nice_ticks(0, 150), [0, 25, 50, 75, 100, 125, 150])
     assert nice_ticks(5, 5).size >= 2
     assert np.allclose(nice_ticks(np.nan, 1), [0, 0.2, 0.4, 0.6, 0.8, 1.0])
+
+
+def test_format_tick():
+    assert format_tick(0.25, 0.25) == "0.25"
+    assert format_tick(2.0, 0.5) == "2.0"
+    assert format_tick(100.0, 25.0) == "100"

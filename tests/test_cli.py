@@ -24,7 +24,7 @@ HAS_PIPELINE = (ROOT / "scalematch" / "pipeline.py").is_file()
 needs_pipeline = pytest.mark.skipif(not HAS_PIPELINE, reason="scalematch/pipeline.py not yet there")
 
 #: Every key of the JSON contract (README.md, "## Output").
-JSON_KEYS = {"matched", "reason", "model", "transform", "resolution_ratio", "rotation_deg",
+JSON_KEYS = {"matched", "reason", "model", "order", "transform", "resolution_ratio", "rotation_deg",
              "translation", "best_scale", "inliers", "matches", "scales", "seconds", "config",
              "version", "low", "high"}
 SCALE_KEYS = {"s", "ratio", "points", "initial", "kept", "inliers", "outlier_pct"}

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import struct
+import zlib
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, header_size, read_grey,
-                                read_image, to_bgr8)
+from PIL import Image
+
+from scalematch.imageio import DEFAULT_MAX_PIXELS, ImageError, header, read_grey, read_image, to_bgr8
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -86,7 +88,19 @@ def test_exif_orientations_agree_with_opencv(tmp_path, bgr, orientation):
 def test_header_size_before_decoding(tmp_path, bgr):
     for ext in (".png", ".jpg", ".bmp", ".tif", ".webp"):
         data = cv2.imencode(ext, bgr)[1].tobytes()
-        assert header_size(data) == (160, 120), ext
+        assert header(data).size == (160, 120), ext
+    assert header(b"this is not an image").size is None
+
+
+def test_exif_orientation_of_a_png_is_applied_too(tmp_path, bgr):
+    """Pillow reads the orientation of every format from the header, not only JPEG's."""
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    path = tmp_path / "rot.png"
+    Image.fromarray(bgr[:, :, ::-1]).save(path, exif=exif.tobytes())
+    assert header(path.read_bytes()).orientation == 6
+    plain = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    np.testing.assert_allclose(read_grey(path), np.rot90(plain, k=-1), atol=1.0)
 
 
 def test_pixel_limit_names_size_limit_and_option(tmp_path, bgr):
@@ -99,12 +113,22 @@ def test_pixel_limit_names_size_limit_and_option(tmp_path, bgr):
     assert read_grey(path, max_pixels=DEFAULT_MAX_PIXELS).shape == (120, 160)
 
 
+def png_header_only(width: int, height: int) -> bytes:
+    """A PNG signature, a valid IHDR claiming width x height, then a scrap of pixel data."""
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", b"x" * 100)
+
+
 def test_pixel_limit_checked_from_header_without_decoding(tmp_path):
-    # a PNG header claiming 50000 x 50000 followed by garbage: refused for its size, not decoded
-    ihdr = struct.pack(">IIBBBBB", 50000, 50000, 8, 0, 0, 0, 0)
-    data = b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr + b"\0" * 4 + b"x" * 100
-    with pytest.raises(ImageError, match="50000x50000 = 2500.0 MP, above the limit of 100 MP"):
-        read_grey(write(tmp_path / "bomb.png", data))
+    # a PNG header claiming 12000 x 12000 followed by garbage: refused for its size, not decoded
+    with pytest.raises(ImageError, match="12000x12000 = 144.0 MP, above the limit of 100 MP"):
+        read_grey(write(tmp_path / "bomb.png", png_header_only(12000, 12000)))
+    # past Pillow's own guard (2 x PIL.Image.MAX_IMAGE_PIXELS): refused by it, one line too
+    with pytest.raises(ImageError, match="decompression-bomb limit") as err:
+        read_grey(write(tmp_path / "bomb.png", png_header_only(50000, 50000)))
+    assert "bomb.png" in str(err.value) and "\n" not in str(err.value)
 
 
 @pytest.mark.parametrize("case, needle", [
@@ -145,3 +169,70 @@ def test_to_bgr8_layouts(bgr):
                 np.dstack([bgr, np.zeros(bgr.shape[:2], np.uint8)])):
         out = to_bgr8(img)
         assert out.dtype == np.uint8 and out.shape == bgr.shape
+
+
+def test_one_minimum_side_for_reading_and_matching(tmp_path, bgr):
+    """Reading a file and matching arrays refuse the same sizes (stages.detector.MIN_SIDE_PX)."""
+    from scalematch.pipeline import match
+    from scalematch.stages.detector import MIN_SIDE_PX
+
+    ok = write(tmp_path / "ok.png", cv2.imencode(".png", bgr[:MIN_SIDE_PX, :60])[1].tobytes())
+    assert read_grey(ok).shape == (MIN_SIDE_PX, 60)
+    small = write(tmp_path / "small.png",
+                  cv2.imencode(".png", bgr[:MIN_SIDE_PX - 1, :60])[1].tobytes())
+    with pytest.raises(ImageError, match=f"at least {MIN_SIDE_PX} px"):
+        read_grey(small)
+    with pytest.raises(ValueError, match=f"at least {MIN_SIDE_PX} px"):
+        match(np.zeros((MIN_SIDE_PX - 1, 60), np.float32), np.zeros((100, 100), np.float32))
+
+
+# --------------------------------------------------------------------------- fuzzing the input path
+
+FORMATS = (".png", ".jpg", ".tif", ".webp", ".bmp")
+#: file magic numbers, so random tails reach each format's header parser
+MAGIC = (b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff\xe0", b"II*\x00", b"MM\x00*", b"RIFF\x00\x10\x00\x00WEBP",
+         b"BM", b"GIF89a", b"")
+
+
+def fuzz_cases(bgr: np.ndarray, seed: int = 0):
+    """(name, bytes, intact) for random and truncated files of every format, made here.
+
+    Valid files are written by OpenCV and by Pillow (whose TIFF and BMP lay out differently);
+    each is cut at two random points; random files start with a format's magic number or not.
+    """
+    rng = np.random.default_rng(seed)
+    small = bgr[:48, :64]
+    for ext in FORMATS:
+        encoded = {"cv2": cv2.imencode(ext, small)[1].tobytes()}
+        buf = __import__("io").BytesIO()
+        Image.fromarray(small[:, :, ::-1]).save(buf, format={".jpg": "JPEG", ".tif": "TIFF"}.get(
+            ext, ext[1:].upper()))
+        encoded["pil"] = buf.getvalue()
+        for writer, data in encoded.items():
+            if writer == "cv2":
+                yield f"intact-{writer}{ext}", data, True
+            for cut in sorted(rng.integers(1, len(data), size=2)):
+                yield f"cut{cut}-{writer}{ext}", data[:cut], False
+    for k, magic in enumerate(MAGIC):
+        tail = rng.integers(0, 256, size=int(rng.integers(0, 400)), dtype=np.uint8).tobytes()
+        yield f"random{k}.img", magic + tail, False
+
+
+def test_random_and_truncated_files_give_one_line_errors(tmp_path, bgr):
+    """Every broken file: exit 2 with one line 'Error: ...' on stderr, never a traceback."""
+    from click.testing import CliRunner
+
+    from scalematch.cli import cli
+
+    good = write(tmp_path / "good.png", cv2.imencode(".png", bgr)[1].tobytes())
+    cases = list(fuzz_cases(bgr))
+    assert len(cases) >= 30
+    for name, data, intact in cases:
+        path = write(tmp_path / name, data)
+        run = CliRunner().invoke(cli, [str(path), str(good), "--quiet"])
+        if intact:
+            assert run.exit_code in (0, 1), (name, run.output)
+            continue
+        lines = run.stderr.strip().splitlines()
+        assert run.exit_code == 2 and "Traceback" not in run.output, (name, run.output)
+        assert len(lines) == 1 and lines[0].startswith(f"Error: {path}: "), (name, run.stderr)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scalematch import Config, match
-from scalematch.config import ProbeParams
+from scalematch.config import ModelCheckParams, ProbeParams
 from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
@@ -125,6 +125,8 @@ def test_paper_mode_matches_a_ratio_3_pair(raccoon):
     r = match(pair.low, pair.high, Config.paper())
     _check_known_answer(r, pair)
     assert r.config.mode == "paper" and r.config.scales == (1, 2, 3, 4, 5, 6, 7, 8)
+    # which Lambda was used is recorded with the result (the packaged one, by its hash)
+    assert r.config.covariance_used.startswith("packaged sha256:")
 
 
 def test_unrelated_pair_is_no_reliable_match(raccoon):
@@ -249,3 +251,20 @@ def test_distinct_pairs_drops_repeated_rows():
     s, d = distinct_pairs(src, dst)
     assert s.tolist() == [[1, 2], [3, 4], [1, 2]]  # first occurrences, in order
     assert d.tolist() == [[5, 6], [7, 8], [9, 9]]
+
+
+def test_a_mild_tilt_is_answered_with_an_affine_map_not_a_poor_similarity(raccoon):
+    pair = make_tilted_pair(raccoon, 2.0, 1.41, np.random.default_rng(3), high_size=(320, 240))
+    result = match(pair.low, pair.high)
+    assert result.matched, result.reason
+    assert result.model in ("affine", "homography")
+    assert _error(result, pair) < ERROR_TOL_PX
+    # the similarity alone leaves several px: the check has something to catch
+    sim = match(pair.low, pair.high, Config(model_check=ModelCheckParams(enabled=False)))
+    assert sim.model == "similarity" and _error(sim, pair) > 2 * _error(result, pair)
+
+
+@pytest.mark.parametrize("ratio,seed", [(2.0, 7), (6.0, 8)])
+def test_plain_zoom_pairs_keep_the_similarity(raccoon, ratio, seed):
+    result = match(*(lambda p: (p.low, p.high))(_pair(raccoon, ratio, seed)))
+    assert result.matched and result.model == "similarity"

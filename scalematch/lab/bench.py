@@ -56,20 +56,20 @@ from .synthetic import ZoomPair, pair_rng, pairs_from_photos, unrelated_indices,
 RATIOS = (2, 3, 4, 6, 8, 10)
 #: scalematch configurations by name: the two modes, and the ablation steps from the paper's
 #: method to the default (``--methods`` takes any of them; docs/ABLATION.md reports what each
-#: step bought). Values: (one-line description, keyword arguments of ``_variant_config``).
-VARIANTS: Dict[str, Tuple[str, Dict[str, Any]]] = {
-    "scalematch": ("the default", {}),
+#: step bought). Values: (one-line description, name of the preset in ``config.PRESETS``).
+VARIANTS: Dict[str, Tuple[str, str]] = {
+    "scalematch": ("the default", "default"),
     "scalematch-paper": ("the paper: jets, Mahalanobis, semi-local constraints, scales 1-8",
-                         {"paper": True}),
+                         "paper"),
     "paper-finer-scales": ("the paper's pipeline on the default's scales (1-12.7, third octaves)",
-                           {"paper": True, "default_scales": True}),
+                           "paper-finer-scales"),
     "default-paper-scales": ("the default's descriptors and constraints on the paper's scales "
-                             "1-8, every scale run", {"paper_scales": True, "probe": False}),
-    "default-no-probe": ("the default, every scale run (no probe)", {"probe": False}),
+                             "1-8, every scale run", "default-paper-scales"),
+    "default-no-probe": ("the default, every scale run (no probe)", "default-no-probe"),
     "default-quarter-octaves": ("the default on 15 scales 1-11.3 (quarter octaves)",
-                                {"quarter_octaves": True}),
+                                "default-quarter-octaves"),
     "default-no-rotation-check": ("the default without the rotation-consistency filter",
-                                  {"rotation_check": False}),
+                                  "default-no-rotation-check"),
 }
 #: The default run: the two modes and the peers, in the order they are reported.
 METHOD_NAMES = ("scalematch", "scalematch-paper") + BASELINES
@@ -103,38 +103,15 @@ PathLike = Union[str, Path]
 # Methods
 # --------------------------------------------------------------------------------------------
 
-def _variant_config(seed: int, model: str, paper: bool = False, default_scales: bool = False,
-                    paper_scales: bool = False, probe: bool = True, rotation_check: bool = True,
-                    quarter_octaves: bool = False):
-    """The Config of one entry of VARIANTS."""
-    from dataclasses import replace
-
-    from ..config import Config, ProbeParams, geometric_scales
-    from ..stages.constraints import OrientationParams
-    from ..stages.detector import PAPER_SCALES
-
-    config = Config.paper(seed=seed, model=model) if paper else Config(seed=seed, model=model)
-    if default_scales:
-        config = replace(config, scales=Config().scales)
-    if paper_scales:
-        config = replace(config, scales=PAPER_SCALES)
-    if quarter_octaves:
-        config = replace(config, scales=geometric_scales(1.0, 12.0, 4))
-    if not probe:
-        config = replace(config, probe=ProbeParams(enabled=False))
-    if not rotation_check:  # one group holding every candidate
-        config = replace(config, orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1))
-    return config
-
-
 def scalematch_method(low: np.ndarray, high: np.ndarray, mode: str = "default", seed: int = 0,
                       model: str = "similarity") -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
     """scalematch's ``pipeline.match`` with the configuration named ``mode`` (VARIANTS;
     "default" and "paper" stand for "scalematch" and "scalematch-paper")."""
+    from ..config import Config
     from ..pipeline import match
 
     name = {"default": "scalematch", "paper": "scalematch-paper"}.get(mode, mode)
-    config = _variant_config(seed, model, **VARIANTS[name][1])
+    config = Config.preset(VARIANTS[name][1], seed=seed, model=model)
     r = match(low, high, config)
     return (r.transform if r.matched else None), {"inliers": r.n_inliers, "reason": r.reason}
 

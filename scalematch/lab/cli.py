@@ -14,6 +14,7 @@ import click
 #: Lab commands: name -> (module, attribute), imported on first use.
 LAB_COMMANDS = {
     "bench": ("scalematch.lab.bench", "bench_command"),
+    "real-pairs": ("scalematch.lab.realpairs", "real_pairs_command"),
     "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
     "descriptor-study": ("scalematch.lab.descriptor_study", "descriptor_study_command"),
     "covariance": ("scalematch.lab.covariance", "covariance_command"),

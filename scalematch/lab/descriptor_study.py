@@ -43,7 +43,7 @@ import numpy as np
 from ..geometry import apply, similarity_matrix
 from ..stages.descriptors import GradientParams, JetParams, describe_gradients, describe_jets
 from ..stages.detector import HarrisParams, detect_one
-from ..stages.mahalanobis import DEFAULT_COVARIANCE, load_covariance, whiten
+from ..stages.mahalanobis import load_covariance, whiten
 from ..stages.scalespace import Level
 from .datasets import find_shared, list_photos, load_photo
 from .repeatability import choose_crop
@@ -285,11 +285,11 @@ run from the repository root with `../shared` present ({len(results)} photos, se
   gradient magnitude (grey-level gain) and multiplied by the matching power of the jet's std
   (dimensionless). The exact definition is the module docstring of `scalematch/stages/descriptors.py`.
   They are compared by the Mahalanobis distance with the covariance Lambda of
-  `data/jet_covariance.json` (whitening by Lambda^-1/2, `scalematch/stages/mahalanobis.py`).
+  `scalematch/data/jet_covariance.json` (whitening by Lambda^-1/2, `scalematch/stages/mahalanobis.py`).
 * **Oriented gradient histograms** (the default): a dominant orientation and 4x4x8 histograms
   in the turned window, RootSIFT-normalised (unit vectors), Euclidean distance.
 
-**How Lambda was made** (the `provenance` block of `data/jet_covariance.json`): method
+**How Lambda was made** (the `provenance` block of `scalematch/data/jet_covariance.json`): method
 "{prov.get("method", "?")}", seed {prov.get("seed", "?")}, {len(prov.get("photos", []))} photos
 of `../shared/data/photos`. From each, {recipe.get("crops_per_photo", "?")} random crops of
 {recipe.get("crop", "?")} px; each crop is rotated by a random angle, scaled by up to
@@ -298,8 +298,8 @@ of `../shared/data/photos`. From each, {recipe.get("crops_per_photo", "?")} rand
 re-detected within {recipe.get("match_px", "?")} px give descriptor differences, and Lambda is
 their covariance after dropping the largest {prov.get("trimmed_fraction", "?")} (in a first
 covariance's metric): {load_covariance().samples} differences.
-`scalematch covariance photos/*.jpg -o my_covariance.json` re-estimates it
-(`mahalanobis.estimate_covariance`).
+`scalematch lab covariance photos/*.jpg -o my_covariance.json` re-estimates it
+(`lab/covariance.estimate_covariance`); `--set covariance_path=my_covariance.json` uses it.
 
 ## Protocol
 
@@ -377,8 +377,6 @@ def descriptor_study_command(images, n_photos, seed, out, silent):
                                    "folder with data/photos")
     if n_photos is not None:
         paths = paths[:n_photos]
-    if not DEFAULT_COVARIANCE.is_file():
-        raise click.ClickException(f"{DEFAULT_COVARIANCE} is missing: run `scalematch covariance`")
     total = len(paths)
     counter = iter(range(1, total + 1))
     progress = None if silent else (

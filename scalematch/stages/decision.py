@@ -36,7 +36,7 @@ from typing import Dict, Optional, Sequence, Tuple
 import numpy as np
 
 from ..geometry import apply, footprint, grid
-from .estimator import MIN_SAMPLE
+from .estimator import model_of
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def _inside_fraction(t, high_shape, low_shape) -> float:
     return float(ok.mean())
 
 
-def _folded(t: np.ndarray) -> bool:
+def folded(t: np.ndarray) -> bool:
     """True when the transform's linear part flips orientation (negative determinant)."""
     t = np.asarray(t, np.float64)
     a = t[:2, :2] / t[2, 2] if t.shape == (3, 3) else t[:2, :2]
@@ -120,10 +120,7 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
                        orientation_tol_deg: float) -> float:
     """p: chance that a candidate with a uniform random low position fits within threshold."""
     h, w = low_shape
-    if model == "fundamental":
-        p = 2.0 * threshold_px * math.hypot(h, w) / (h * w)  # a band around the epipolar line
-    else:
-        p = math.pi * threshold_px ** 2 / (h * w)
+    p = model_of(model).chance_area(threshold_px, (h, w)) / (h * w)
     if oriented:
         p *= 2.0 * orientation_tol_deg / 360.0
     return min(p, 1.0)
@@ -137,6 +134,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     """
     params: DecisionParams = config.decision
     model = config.model
+    spec = model_of(model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
     evidence: Dict[str, float] = {}
@@ -149,7 +147,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
         return abs(math.log(r / o.row.s)) if r > 0 and math.isfinite(r) else math.inf
 
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
-    plausible = [o for o in with_t if model == "fundamental"
+    plausible = [o for o in with_t if not spec.has_ratio
                  or closeness(o) <= math.log(params.scale_agreement)]
     if not plausible:
         best = max(with_t, key=lambda o: o.row.inliers)
@@ -161,7 +159,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     t = est.transform
     k = best.row.inliers
     n = max(best.candidates, k)
-    m = MIN_SAMPLE[model]
+    m = spec.min_sample
     oriented = config.mode == "default"
     p = chance_probability(config.ransac.threshold_px, low_shape, model, oriented,
                            config.orientation.tolerance_deg)
@@ -182,14 +180,14 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     if lnfa > params.max_log_nfa:
         return no(f"the best transform ({k} inliers of {n} candidates at scale {best.row.s:g}) "
                   f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})")
-    if model == "fundamental":
+    if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, evidence)
     evidence["implied_ratio"] = best.row.ratio
     poly = footprint(t, high_shape, edges=False)  # corner pixel centres, as measured
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
     inside = _inside_fraction(t, high_shape, low_shape)
     evidence.update({"footprint_area_px": area, "footprint_inside": inside})
-    if _folded(t):
+    if folded(t):
         return no("the transform folds the high image over (a mirror image): not a view of it")
     if area < params.min_area_px:
         return no(f"the high image would cover only {area:.0f} px^2 of the low image")
@@ -197,7 +195,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
         return no(f"only {inside:.0%} of the high image's footprint lies inside the low image")
     agreeing = 0
     for o in with_t:
-        if o is best or o.row.inliers < MIN_SAMPLE[model] + 1:
+        if o is best or o.row.inliers < spec.min_sample + 1:
             continue
         if mean_transfer_gap(o.estimate.transform, t, high_shape) <= params.agreement_px:
             agreeing += 1

@@ -27,6 +27,12 @@ from .filters import gaussian_derivative
 from .scalespace import Level, gaussian_blur, scale_space
 
 
+#: Smallest image side the matcher accepts, px (the one minimum: reading an image and matching
+#: arrays both check it): below it the 16 px descriptor window and the Harris filters
+#: (4 sigma~ = 8 px) see mostly border.
+MIN_SIDE_PX = 24
+
+
 @dataclass(frozen=True)
 class HarrisParams:
     """Parameters of the scale-adapted Harris detector; lengths in pixels at s = 1."""
@@ -158,6 +164,14 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     -------
     list of Keypoints
         One per scale, in the order given; an image with no corners gives empty (0, 2) arrays.
+
+    >>> square = np.zeros((64, 64), np.float32)
+    >>> square[16:48, 16:48] = 255.0
+    >>> at_1, at_2 = detect(square, scales=(1, 2))
+    >>> len(at_1), sorted(at_1.xy.round().tolist())      # its four corners, (x, y) px
+    (4, [[17.0, 17.0], [17.0, 46.0], [46.0, 17.0], [46.0, 46.0]])
+    >>> len(detect(np.zeros((64, 64), np.float32))[0])   # flat: no point, not an error
+    0
     """
     levels = scale_space(image, scales, sigma=params.sigma,
                          min_level_sigma=params.min_level_sigma, decimate=params.decimate)

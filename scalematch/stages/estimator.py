@@ -10,15 +10,12 @@ OpenCV objects never leave this module: arrays in, arrays out.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Callable, Dict, Optional, Tuple
 
 import cv2
 import numpy as np
-
-#: minimal sample size of each model (points that determine it)
-MIN_SAMPLE = {"similarity": 2, "affine": 3, "homography": 4, "fundamental": 8}
-
 
 @dataclass(frozen=True)
 class RansacParams:
@@ -46,18 +43,8 @@ class Estimate:
         return int(self.inliers.sum())
 
 
-def residuals(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Transfer error |T(src) - dst| in low px (Sampson distance for the fundamental matrix)."""
-    src = np.asarray(src, np.float64)
-    dst = np.asarray(dst, np.float64)
-    if model == "fundamental":
-        x1 = np.hstack([src, np.ones((len(src), 1))])
-        x2 = np.hstack([dst, np.ones((len(dst), 1))])
-        fx1 = x1 @ t.T
-        ftx2 = x2 @ t
-        num = np.einsum("ij,ij->i", x2, fx1) ** 2
-        den = fx1[:, 0] ** 2 + fx1[:, 1] ** 2 + ftx2[:, 0] ** 2 + ftx2[:, 1] ** 2
-        return np.sqrt(num / np.maximum(den, 1e-18))
+def _transfer_error(t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """|T(src) - dst| in low px for a 2x3 or 3x3 point-to-point map."""
     if t.shape == (2, 3):
         mapped = src @ t[:, :2].T + t[:, 2]
     else:
@@ -66,37 +53,103 @@ def residuals(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np
     return np.linalg.norm(mapped - dst, axis=1)
 
 
-def _fit(model: str, src, dst, thr: float, params: RansacParams, ransac: bool):
-    method = cv2.RANSAC if ransac else 0
-    if model == "similarity":
-        if ransac:
-            t, _ = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC,
-                                               ransacReprojThreshold=thr, maxIters=params.max_iters,
-                                               confidence=params.confidence,
-                                               refineIters=params.refine_iters)
-        else:
-            t, _ = cv2.estimateAffinePartial2D(src, dst, method=cv2.LMEDS,
-                                               refineIters=params.refine_iters)
-        return t
-    if model == "affine":
-        if ransac:
-            t, _ = cv2.estimateAffine2D(src, dst, method=cv2.RANSAC, ransacReprojThreshold=thr,
-                                        maxIters=params.max_iters, confidence=params.confidence,
-                                        refineIters=params.refine_iters)
-        else:
-            t, _ = cv2.estimateAffine2D(src, dst, method=cv2.LMEDS, refineIters=params.refine_iters)
-        return t
-    if model == "homography":
-        t, _ = cv2.findHomography(src, dst, method, thr, maxIters=params.max_iters,
-                                  confidence=params.confidence)
-        return t
-    if model == "fundamental":
-        if len(src) < 8:
-            return None
-        t, _ = cv2.findFundamentalMat(src, dst, cv2.FM_RANSAC if ransac else cv2.FM_8POINT,
-                                      thr, params.confidence, params.max_iters)
-        return None if t is None or t.shape != (3, 3) else t
-    raise ValueError(f"unknown model {model!r}")
+def _sampson_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Sampson distance, px, of each pair to the epipolar geometry ``x_low^T F x_high = 0``."""
+    x1 = np.hstack([src, np.ones((len(src), 1))])
+    x2 = np.hstack([dst, np.ones((len(dst), 1))])
+    fx1 = x1 @ f.T
+    ftx2 = x2 @ f
+    num = np.einsum("ij,ij->i", x2, fx1) ** 2
+    den = fx1[:, 0] ** 2 + fx1[:, 1] ** 2 + ftx2[:, 0] ** 2 + ftx2[:, 1] ** 2
+    return np.sqrt(num / np.maximum(den, 1e-18))
+
+
+def _disc_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
+    """A point predicted by the model: a disc of radius ``threshold_px``."""
+    return math.pi * threshold_px ** 2
+
+
+def _band_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
+    """A point on a predicted line: a band of width 2 thresholds along the image's diagonal."""
+    return 2.0 * threshold_px * math.hypot(*low_shape)
+
+
+def _fit_similarity(src, dst, thr: float, params: "RansacParams", ransac: bool):
+    if ransac:
+        return cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC, ransacReprojThreshold=thr,
+                                           maxIters=params.max_iters, confidence=params.confidence,
+                                           refineIters=params.refine_iters)[0]
+    return cv2.estimateAffinePartial2D(src, dst, method=cv2.LMEDS,
+                                       refineIters=params.refine_iters)[0]
+
+
+def _fit_affine(src, dst, thr: float, params: "RansacParams", ransac: bool):
+    if ransac:
+        return cv2.estimateAffine2D(src, dst, method=cv2.RANSAC, ransacReprojThreshold=thr,
+                                    maxIters=params.max_iters, confidence=params.confidence,
+                                    refineIters=params.refine_iters)[0]
+    return cv2.estimateAffine2D(src, dst, method=cv2.LMEDS, refineIters=params.refine_iters)[0]
+
+
+def _fit_homography(src, dst, thr: float, params: "RansacParams", ransac: bool):
+    return cv2.findHomography(src, dst, cv2.RANSAC if ransac else 0, thr,
+                              maxIters=params.max_iters, confidence=params.confidence)[0]
+
+
+def _fit_fundamental(src, dst, thr: float, params: "RansacParams", ransac: bool):
+    if len(src) < 8:
+        return None
+    t, _ = cv2.findFundamentalMat(src, dst, cv2.FM_RANSAC if ransac else cv2.FM_8POINT,
+                                  thr, params.confidence, params.max_iters)
+    return None if t is None or t.shape != (3, 3) else t
+
+
+@dataclass(frozen=True)
+class Model:
+    """A transform the robust estimator can fit, and what the rest of the pipeline needs of it.
+
+    ``fit(src, dst, thr, params, ransac)`` takes (K, 1, 2) float32 high and low px and returns
+    the 2x3 or 3x3 transform (None when it fails): RANSAC with threshold ``thr`` low px, or a
+    fit to all pairs given. ``residuals(t, src, dst)`` is each pair's error in low px.
+    ``chance_area(threshold_px, low_shape)`` is the area, px^2, of the low image where a random
+    point fits a prediction of the model (the a-contrario test's p is it over the image area).
+    """
+
+    name: str
+    min_sample: int  #: points that determine the model
+    fit: Callable = field(repr=False)
+    residuals: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] = field(repr=False)
+    chance_area: Callable[[float, Tuple[int, int]], float] = field(repr=False)
+    #: True: a point maps to a point, so the transform has a resolution ratio, a rotation, a
+    #: footprint and an overlay; False (the fundamental matrix): a point maps to a line
+    has_ratio: bool = True
+
+
+#: The models of the paper (section 5 and "Further examples"), by name.
+MODELS: Dict[str, Model] = {m.name: m for m in (
+    Model("similarity", 2, _fit_similarity, _transfer_error, _disc_area),
+    Model("affine", 3, _fit_affine, _transfer_error, _disc_area),
+    Model("homography", 4, _fit_homography, _transfer_error, _disc_area),
+    Model("fundamental", 8, _fit_fundamental, _sampson_distance, _band_area, has_ratio=False),
+)}
+#: minimal sample of each model by name (kept for callers of the mapping; see MODELS)
+MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}
+
+
+def model_of(name: str) -> Model:
+    """The :class:`Model` called ``name``; ``ValueError`` naming the known ones otherwise.
+
+    >>> model_of("homography").min_sample, model_of("fundamental").has_ratio
+    (4, False)
+    """
+    if name not in MODELS:
+        raise ValueError(f"unknown model {name!r}; one of {', '.join(MODELS)}")
+    return MODELS[name]
+
+
+def residuals(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Transfer error |T(src) - dst| in low px (Sampson distance for the fundamental matrix)."""
+    return model_of(model).residuals(t, np.asarray(src, np.float64), np.asarray(dst, np.float64))
 
 
 def estimate(model: str, src: np.ndarray, dst: np.ndarray, params: RansacParams = RansacParams(),
@@ -106,24 +159,25 @@ def estimate(model: str, src: np.ndarray, dst: np.ndarray, params: RansacParams 
     ``threshold`` (low px) overrides ``params.threshold_px``. Fewer correspondences than the
     model's minimal sample give an empty estimate (transform None, no inliers), not an error.
     """
+    spec = model_of(model)
     k = len(src)
     thr = float(params.threshold_px if threshold is None else threshold)
     none = Estimate(model, None, np.zeros(k, bool), np.full(k, np.inf))
-    if k < MIN_SAMPLE[model] + 1:
+    if k < spec.min_sample + 1:
         return none
     src32 = np.ascontiguousarray(src, np.float32).reshape(-1, 1, 2)
     dst32 = np.ascontiguousarray(dst, np.float32).reshape(-1, 1, 2)
     cv2.setRNGSeed(int(seed))
-    t = _fit(model, src32, dst32, thr, params, ransac=True)
+    t = spec.fit(src32, dst32, thr, params, ransac=True)
     if t is None or not np.all(np.isfinite(t)):
         return none
     res = residuals(model, t, src, dst)
     inl = res <= thr
     # refine on all inliers, then recount (twice: the inlier set can grow once refined)
     for _ in range(2):
-        if inl.sum() <= MIN_SAMPLE[model]:
+        if inl.sum() <= spec.min_sample:
             break
-        t2 = _fit(model, src32[inl], dst32[inl], thr, params, ransac=False)
+        t2 = spec.fit(src32[inl], dst32[inl], thr, params, ransac=False)
         if t2 is None or not np.all(np.isfinite(t2)):
             break
         res2 = residuals(model, t2, src, dst)

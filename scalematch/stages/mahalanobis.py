@@ -8,23 +8,28 @@ Lambda is the covariance of the difference between the descriptors of the *same 
 seen in two images. Schmid & Mohr estimated it by tracking points through image sequences; here
 it is estimated by tracking points through known synthetic changes of real photos (rotation, a
 small scale error, noise, gain and offset): :func:`scalematch.lab.covariance.estimate_covariance`.
-The shipped estimate is ``data/jet_covariance.json`` (how it was made is recorded inside it);
-``scalematch lab covariance`` re-estimates it from a user's own photos.
+The shipped estimate is the package data file ``scalematch/data/jet_covariance.json`` (how it
+was made is recorded inside it); ``scalematch lab covariance`` re-estimates it from a user's own
+photos, and ``Config(covariance_path=...)`` uses that instead. A loaded Lambda and its whitening
+are cached per file (keyed by path, modification time and size), so repeated matches read it once.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
+from importlib import resources
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
 from .descriptors import JET_DIM
 
-#: The shipped estimate, at the top of the source tree.
-DEFAULT_COVARIANCE = Path(__file__).resolve().parents[2] / "data" / "jet_covariance.json"
+#: The shipped estimate: package data, read with importlib.resources (works from a wheel).
+PACKAGED_COVARIANCE = "jet_covariance.json"
 
 
 @dataclass(frozen=True)
@@ -33,12 +38,25 @@ class Covariance:
     mean: np.ndarray = field(repr=False)  #: (D,) mean difference (should be ~0)
     samples: int = 0
     provenance: dict = field(default_factory=dict, repr=False)
+    #: which Lambda this is: "packaged" or the resolved path, then the first 12 hex digits of
+    #: the file's SHA-256 (recorded in the result's ``config.covariance_used``)
+    source: str = ""
 
     def whitening(self) -> np.ndarray:
-        """W = Lambda^-1/2 (symmetric), so that |W (V - V')| is the Mahalanobis distance."""
+        """W = Lambda^-1/2 (symmetric, (D, D), read-only), so that |W (V - V')| is the
+        Mahalanobis distance. Computed once per Covariance."""
+        return self._whitening
+
+    @cached_property
+    def _whitening(self) -> np.ndarray:
         w, v = np.linalg.eigh(self.matrix)
         w = np.maximum(w, 1e-12 * max(w.max(), 1e-12))
-        return (v / np.sqrt(w)) @ v.T
+        return _read_only((v / np.sqrt(w)) @ v.T)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 def whiten(desc: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -58,16 +76,42 @@ def save_covariance(cov: Covariance, path: Path) -> None:
     Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
 
-def load_covariance(path: Optional[Path] = None) -> Covariance:
-    """Read a covariance written by :func:`save_covariance` (default: the shipped one)."""
-    p = Path(path) if path is not None else DEFAULT_COVARIANCE
+def load_covariance(path: Union[str, Path, None] = None) -> Covariance:
+    """Read a covariance written by :func:`save_covariance` (default: the packaged one).
+
+    Cached: the same file (same resolved path, modification time and size) is parsed once per
+    process; the arrays of the returned Covariance are read-only, since it is shared.
+
+    >>> cov = load_covariance()
+    >>> cov.matrix.shape, cov.source.startswith("packaged sha256:")
+    ((7, 7), True)
+    """
+    if path is None:
+        return _load(None, (0, 0))
+    p = Path(path).resolve()
     if not p.is_file():
         raise FileNotFoundError(
-            f"{p}: jet covariance not found; re-estimate it with `scalematch covariance` "
+            f"{p}: jet covariance not found; re-estimate it with `scalematch lab covariance` "
             "or pass its path")
-    data = json.loads(p.read_text())
+    st = p.stat()
+    return _load(str(p), (st.st_mtime_ns, st.st_size))
+
+
+@lru_cache(maxsize=8)
+def _load(path: Optional[str], stamp: tuple) -> Covariance:
+    """Parse one covariance file (None: the packaged one); ``stamp`` (modification time, size)
+    only keys the cache, so a file rewritten in place is read again."""
+    if path is None:
+        raw = resources.files("scalematch").joinpath("data").joinpath(PACKAGED_COVARIANCE).read_bytes()
+        name = "packaged"
+    else:
+        raw = Path(path).read_bytes()
+        name = path
+    data = json.loads(raw)
     m = np.asarray(data["matrix"], np.float64)
     if m.shape != (JET_DIM, JET_DIM):
-        raise ValueError(f"{p}: covariance is {m.shape}, expected {JET_DIM}x{JET_DIM}")
-    return Covariance(matrix=m, mean=np.asarray(data.get("mean", np.zeros(JET_DIM))),
-                      samples=int(data.get("samples", 0)), provenance=data.get("provenance", {}))
+        raise ValueError(f"{name}: covariance is {m.shape}, expected {JET_DIM}x{JET_DIM}")
+    return Covariance(matrix=_read_only(m),
+                      mean=_read_only(np.asarray(data.get("mean", np.zeros(JET_DIM)), np.float64)),
+                      samples=int(data.get("samples", 0)), provenance=data.get("provenance", {}),
+                      source=f"{name} sha256:{hashlib.sha256(raw).hexdigest()[:12]}")

@@ -1,4 +1,5 @@
-"""The lab's OpenCV line charts: shape and dtype, the file is written and decodes, NaN/empty data."""
+"""The lab's line charts (matplotlib): shape and dtype, the file is written and decodes, NaN/empty
+data. Skipped when matplotlib (the extra ``scalematch[lab]``) is not installed."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from scalematch.chart import format_tick
-from scalematch.lab.plot import PALETTE, finite_runs, line_chart
+pytest.importorskip("matplotlib")
+from scalematch.lab.plot import PALETTE, line_chart  # noqa: E402
 
 X = [1, 1.5, 2, 2.5, 3, 4, 5, 6]
 
@@ -61,9 +62,11 @@ def test_line_chart_bad_input_says_what():
         line_chart({"a": ([1, 2], [1, 2])}, None, ylim=(1, 0))
 
 
-def test_format_tick_and_runs():
-    assert format_tick(0.25, 0.25) == "0.25"
-    assert format_tick(2.0, 0.5) == "2.0"
-    assert format_tick(100.0, 25.0) == "100"
-    runs = finite_runs(np.arange(6.0), np.array([1, np.nan, 2, 3, np.inf, 4.0]))
-    assert [r.tolist() for r in runs] == [[0], [2, 3], [5]]
+def test_a_missing_value_breaks_the_line():
+    """Two runs either side of a NaN: no line is drawn across the gap."""
+    img = line_chart({"a": ([0, 1, 2, 3, 4], [0.5, 0.5, np.nan, 0.5, 0.5])}, None, ylim=(0, 1),
+                     size=(500, 300))
+    blue = np.abs(img.astype(int) - np.array(PALETTE[0])).max(axis=2) <= 12
+    row = blue[np.argmax(blue.sum(axis=1))]  # the row the line runs along
+    xs = np.nonzero(row)[0]
+    assert np.diff(xs).max() > 40  # the gap at x = 2

@@ -40,7 +40,7 @@ def test_mean_transfer_gap_of_a_shift_is_the_shift():
 
 
 def test_a_mirror_transform_is_folded_and_a_turn_is_not():
-    from scalematch.stages.decision import _folded
+    from scalematch.stages.decision import folded as _folded
 
     assert _folded(np.array([[-0.5, 0.0, 10.0], [0.0, 0.5, 3.0]]))  # x mirrored
     assert not _folded(np.array([[0.0, -0.5, 10.0], [0.5, 0.0, 3.0]]))  # turned by 90 deg

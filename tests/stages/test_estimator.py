@@ -61,3 +61,32 @@ def test_same_seed_same_answer():
     a = estimate("similarity", src, dst, RansacParams(), seed=7)
     b = estimate("similarity", src, dst, RansacParams(), seed=7)
     assert np.array_equal(a.transform, b.transform) and np.array_equal(a.inliers, b.inliers)
+
+
+def test_the_model_records():
+    """One record per model: what the pipeline, the decision and the pictures ask of it."""
+    from scalematch.config import MODELS as NAMES
+    from scalematch.stages.estimator import MODELS, model_of
+
+    assert NAMES == tuple(MODELS) == ("similarity", "affine", "homography", "fundamental")
+    assert [m.min_sample for m in MODELS.values()] == [2, 3, 4, 8]
+    assert [m.name for m in MODELS.values() if not m.has_ratio] == ["fundamental"]
+    # the chance area: a disc of radius 3 px around a predicted point, a 6 px band along a line
+    assert model_of("affine").chance_area(3.0, (30, 40)) == pytest.approx(np.pi * 9)
+    assert model_of("fundamental").chance_area(3.0, (30, 40)) == pytest.approx(6.0 * 50)
+    with pytest.raises(ValueError, match="unknown model 'shear'; one of similarity"):
+        model_of("shear")
+
+
+def test_no_product_module_special_cases_a_model_by_name():
+    """Model differences are attributes of the record (stages/estimator.py), not string tests."""
+    from pathlib import Path
+
+    import scalematch
+
+    root = Path(scalematch.__file__).parent
+    for path in root.rglob("*.py"):
+        if "lab" in path.relative_to(root).parts or path.name == "estimator.py":
+            continue
+        assert '== "fundamental"' not in path.read_text(), path
+        assert '!= "fundamental"' not in path.read_text(), path

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from scalematch.stages.descriptors import JET_DIM
-from scalematch.stages.mahalanobis import (DEFAULT_COVARIANCE, Covariance, load_covariance,
+from importlib import resources
+
+from scalematch.stages.mahalanobis import (PACKAGED_COVARIANCE, Covariance, load_covariance,
                                            mahalanobis, save_covariance, whiten)
 
 
@@ -40,7 +42,9 @@ def test_mahalanobis_of_a_diagonal_covariance_by_hand():
 
 def test_shipped_covariance_is_symmetric_positive_definite_of_the_jet_dimension():
     cov = load_covariance()
-    assert DEFAULT_COVARIANCE.is_file()
+    # package data (importlib.resources), so a plain `pip install .` ships it
+    assert resources.files("scalematch").joinpath("data").joinpath(PACKAGED_COVARIANCE).is_file()
+    assert cov.source.startswith("packaged sha256:") and len(cov.source.split(":")[1]) == 12
     assert cov.matrix.shape == (JET_DIM, JET_DIM) == (7, 7)
     np.testing.assert_allclose(cov.matrix, cov.matrix.T, atol=1e-12)
     eig = np.linalg.eigvalsh(cov.matrix)
@@ -66,7 +70,7 @@ def test_save_then_load_gives_the_same_covariance(tmp_path):
 
 def test_a_missing_file_raises_a_clear_error(tmp_path):
     path = tmp_path / "nowhere.json"
-    with pytest.raises(FileNotFoundError, match="scalematch covariance") as err:
+    with pytest.raises(FileNotFoundError, match="scalematch lab covariance") as err:
         load_covariance(path)
     assert "nowhere.json" in str(err.value)
 
@@ -76,3 +80,21 @@ def test_a_matrix_of_the_wrong_size_is_a_value_error(tmp_path):
     path.write_text(json.dumps({"matrix": np.eye(3).tolist()}))
     with pytest.raises(ValueError, match="expected 7x7"):
         load_covariance(path)
+
+
+def test_a_loaded_covariance_is_cached_read_only_and_reread_when_the_file_changes(tmp_path):
+    assert load_covariance() is load_covariance()
+    shipped = load_covariance()
+    assert shipped.whitening() is shipped.whitening()  # decomposed once
+    for a in (shipped.matrix, shipped.mean, shipped.whitening()):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 0.0
+    path = tmp_path / "c.json"
+    save_covariance(Covariance(matrix=np.eye(JET_DIM), mean=np.zeros(JET_DIM)), path)
+    first = load_covariance(path)
+    assert load_covariance(str(path)) is first
+    assert first.source.startswith(str(path.resolve()) + " sha256:")
+    save_covariance(Covariance(matrix=2 * np.eye(JET_DIM), mean=np.zeros(JET_DIM), samples=5),
+                    path)
+    again = load_covariance(path)
+    assert again.samples == 5 and again.source != first.source

@@ -1,0 +1,388 @@
+"""The real-pair benchmark (issue 9): what users bring beyond clean synthetic zooms.
+
+Sets, made once per run and given to every method (docs/EVALUATION-TILT.md):
+
+* ``oxford``: the Oxford sequences boat (zoom + rotation), graf and wall (viewpoint), img1
+  against img2..img6 with the published homographies, in both directions;
+* ``tilted``: synthetic *tilted* zoom pairs from ``shared/data/photos`` (zoom x rotation x tilt
+  along a random direction, exact affine truth, ``synthetic.make_tilted_pair``);
+* ``zoom``: plain synthetic zoom pairs (EVALUATION.md), the reference of the sets above;
+* ``*-swapped``: every pair of ``zoom`` and ``tilted`` given in the other order (finer first);
+* ``unrelated``: the low image of one photo against the high image of another scene.
+
+Every transform is judged in one canonical direction, from the pair's finer image to its
+coarser image (for oxford: img1 -> imgN), by EVALUATION.md's grid error: a method that answers
+in the other direction is inverted first. Methods: scalematch (default configuration), OpenCV
+SIFT (ratio test 0.8 + RANSAC 3 px, the homography model on oxford and tilted pairs, a
+similarity on zoom pairs) and ASIFT (``cv2.AffineFeature`` around SIFT, same matching) on a
+subset small enough to finish, each pair in a child process with a time limit.
+
+A benchmark, not a test: nothing here asserts a time. ``scalematch lab real-pairs --help``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import click
+import cv2
+import numpy as np
+
+from ..geometry import similarity_parts
+from .baselines import RANSAC_PX, RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
+from .datasets import find_shared, list_photos, scene_of
+from .evaluation import is_success, reprojection_error
+from .synthetic import TILTS, make_tilted_pair, pair_rng, pairs_from_photos, unrelated_from_pairs
+
+#: Oxford sequences of the set: boat (zoom + rotation), graf and wall (viewpoint)
+OXFORD = ("boat", "graf", "wall")
+#: zoom ratios of the tilted pairs (directional ratios r and r * t: 2 to 16)
+TILTED_RATIOS = (2.0, 4.0)
+#: zoom ratios of the plain pairs swapped
+ZOOM_RATIOS = (2.0, 4.0, 8.0)
+#: every ``PHOTO_STEP``-th photo of ../shared (sorted by name) is cut into pairs
+PHOTO_STEP = 3
+#: unrelated pairs (false-match test)
+UNRELATED = 50
+#: ASIFT runs on at most this many pairs of each set it is tried on (it takes 5 s to minutes)
+ASIFT_PAIRS = 6
+#: seconds ASIFT may take on one pair before it counts as a failure ("timed out")
+ASIFT_TIMEOUT_S = 180.0
+METHODS = ("scalematch", "sift", "asift")
+
+
+@dataclass(frozen=True)
+class Pair:
+    """A pair as given to the methods, with its truth in the canonical direction."""
+
+    set: str
+    name: str
+    low: np.ndarray = field(repr=False)  #: the image given first
+    high: np.ndarray = field(repr=False)  #: the image given second
+    #: finer -> coarser truth (3x3); None for unrelated pairs
+    truth: Optional[np.ndarray] = field(repr=False)
+    swapped: bool  #: True when ``low`` is the finer image (the truth maps low px -> high px)
+    model: str  #: the model the peers fit (scalematch's own choice is its default)
+    ratio: float = math.nan
+    tilt: float = 1.0
+
+
+def _h3(t: np.ndarray) -> np.ndarray:
+    t = np.asarray(t, np.float64)
+    return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t / t[2, 2]
+
+
+def canonical(pair: Pair, t: Optional[np.ndarray], maps_high_to_low: bool) -> Optional[np.ndarray]:
+    """The method's transform turned to the pair's finer -> coarser direction."""
+    if t is None:
+        return None
+    t = _h3(t)
+    # the truth maps high -> low when the pair is not swapped, low -> high when it is
+    same = maps_high_to_low != pair.swapped
+    return t if same else np.linalg.inv(t)
+
+
+def pair_error(pair: Pair, t: Optional[np.ndarray]) -> float:
+    if pair.truth is None:
+        return math.nan
+    src, dst = (pair.low, pair.high) if pair.swapped else (pair.high, pair.low)
+    return reprojection_error(t, pair.truth, src.shape, dst.shape)
+
+
+# --------------------------------------------------------------------------------------------
+# Sets
+# --------------------------------------------------------------------------------------------
+
+def oxford_pairs(shared: Path) -> List[Pair]:
+    out = []
+    for seq in OXFORD:
+        folder = shared / "data" / "oxford" / seq
+        if not (folder / "img1.png").is_file():
+            continue
+        from ..imageio import read_grey
+
+        img1 = read_grey(folder / "img1.png")
+        for n in range(2, 7):
+            h = np.loadtxt(folder / f"H1to{n}p").reshape(3, 3)
+            imgn = read_grey(folder / f"img{n}.png")
+            ratio = similarity_parts(h)[0]
+            out.append(Pair("oxford", f"{seq} 1->{n}", imgn, img1, h / h[2, 2], False,
+                            "homography", ratio))
+            out.append(Pair("oxford", f"{seq} {n}->1", img1, imgn, h / h[2, 2], True,
+                            "homography", ratio))
+    return out
+
+
+def synthetic_sets(paths: Sequence[Path], seed: int,
+                   log=lambda s: None) -> Dict[str, List[Pair]]:
+    from ..imageio import read_grey
+
+    zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, _h3(p.truth), False,
+                 "similarity", p.ratio)
+            for p in pairs_from_photos(paths, ZOOM_RATIOS, seed)]
+    log(f"made {len(zoom)} zoom pairs")
+    tilted = []
+    for path in paths:
+        photo = read_grey(path)
+        for r in TILTED_RATIOS:
+            for t in TILTS:
+                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
+                                     source=path.name)
+                tilted.append(Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
+                                   _h3(p.truth), False, "homography", r, t))
+    log(f"made {len(tilted)} tilted pairs")
+    swap = lambda ps, name: [Pair(name, p.name, p.high, p.low, p.truth, True, p.model, p.ratio,
+                                  p.tilt) for p in ps]
+    zp = list(pairs_from_photos(paths, (2.0, 4.0), seed))
+    unrelated = [Pair("unrelated", f"{u.source} / {u.high_source}", u.low, u.high, None, False,
+                      "similarity", u.ratio)
+                 for u in unrelated_from_pairs(zp, UNRELATED,
+                                               np.random.default_rng([seed, 1]), scene_of)]
+    return {"zoom": zoom, "zoom-swapped": swap(zoom, "zoom-swapped"), "tilted": tilted,
+            "tilted-swapped": swap(tilted, "tilted-swapped"), "unrelated": unrelated}
+
+
+# --------------------------------------------------------------------------------------------
+# Methods: (pair) -> (transform or None, maps_high_to_low, info)
+# --------------------------------------------------------------------------------------------
+
+def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, Any]]:
+    from ..pipeline import match
+
+    from ..config import Config
+
+    # the model the peers fit on oxford (EVALUATION.md: boat's truth is a homography); the
+    # default configuration elsewhere, as a user would run it
+    r = match(pair.low, pair.high, Config(model="homography") if pair.set == "oxford" else Config())
+    info = {"inliers": r.n_inliers, "order": r.order, "model": r.model, "reason": r.reason,
+            "view_tilt": r.evidence.get("view_tilt", 1.0)}
+    return (r.transform if r.matched else None), r.order == "given", info
+
+
+def _peer(pair: Pair, detector) -> Tuple[Optional[np.ndarray], bool, Dict[str, Any]]:
+    xy_l, d_l = detect_and_describe(detector, to_uint8(pair.low))
+    xy_h, d_h = detect_and_describe(detector, to_uint8(pair.high))
+    m = ratio_matches(d_h, d_l, cv2.NORM_L2, RATIO_TEST)
+    t, n = estimate(xy_h[m[:, 0]], xy_l[m[:, 1]], pair.model)
+    return t, True, {"inliers": n, "matches": int(len(m))}
+
+
+def run_sift(pair: Pair):
+    return _peer(pair, cv2.SIFT_create())
+
+
+def run_asift(pair: Pair):
+    return _peer(pair, cv2.AffineFeature_create(cv2.SIFT_create()))
+
+
+RUNNERS = {"scalematch": run_scalematch, "sift": run_sift, "asift": run_asift}
+
+
+def _child(name: str, pair: Pair, queue) -> None:
+    cv2.setNumThreads(1)
+    t0 = time.perf_counter()
+    t, fwd, info = RUNNERS[name](pair)
+    queue.put((t, fwd, info, time.perf_counter() - t0))
+
+
+def run_limited(name: str, pair: Pair, timeout: float):
+    """Run a method in a child process; (t, maps_high_to_low, info, seconds) or a time-out."""
+    ctx = mp.get_context("fork")
+    q = ctx.Queue()
+    proc = ctx.Process(target=_child, args=(name, pair, q))
+    proc.start()
+    try:
+        return q.get(timeout=timeout)
+    except Exception:  # noqa: BLE001 - queue.Empty: the limit passed
+        return None, True, {"reason": f"timed out after {timeout:g} s"}, timeout
+    finally:
+        proc.kill()
+        proc.join()
+
+
+def judge(method: str, pair: Pair, out) -> Dict[str, Any]:
+    t, fwd, info, seconds = out
+    est = canonical(pair, t, fwd)
+    err = pair_error(pair, est)
+    return {"set": pair.set, "pair": pair.name, "method": method, "ratio": pair.ratio,
+            "tilt": pair.tilt, "claimed": t is not None, "error_px": err,
+            "success": bool(pair.truth is not None and is_success(err)),
+            "false_claim": bool(pair.truth is None and t is not None), "seconds": seconds,
+            **{k: v for k, v in info.items() if k in ("inliers", "order", "model", "reason",
+                                                     "view_tilt")}}
+
+
+def asift_subset(pairs: Sequence[Pair], n: int) -> List[Pair]:
+    """``n`` pairs spread evenly over ``pairs`` (the order they were made in)."""
+    if len(pairs) <= n:
+        return list(pairs)
+    idx = np.linspace(0, len(pairs) - 1, n).round().astype(int)
+    return [pairs[i] for i in idx]
+
+
+# --------------------------------------------------------------------------------------------
+# Summary
+# --------------------------------------------------------------------------------------------
+
+def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
+    """Per (set, method): pairs, solved, rate, median error of successes, false claims, time."""
+    out = []
+    keys = sorted({(r["set"], r["method"]) for r in rows},
+                  key=lambda k: (SET_ORDER.index(k[0]) if k[0] in SET_ORDER else 99,
+                                 METHODS.index(k[1])))
+    for s, m in keys:
+        rs = [r for r in rows if r["set"] == s and r["method"] == m]
+        ok = [r for r in rs if r["success"]]
+        out.append({"set": s, "method": m, "pairs": len(rs), "solved": len(ok),
+                    "rate": len(ok) / len(rs) if rs else math.nan,
+                    "median_error_px": float(np.median([r["error_px"] for r in ok]))
+                    if ok else math.nan,
+                    "false_claims": sum(r["claimed"] and not r["success"] for r in rs),
+                    "median_s": float(np.median([r["seconds"] for r in rs]))})
+    return out
+
+
+SET_ORDER = ("oxford", "zoom", "zoom-swapped", "tilted", "tilted-swapped", "unrelated")
+
+
+def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, int]]:
+    """(set, method, tilt, solved, pairs) for the tilted sets."""
+    out = []
+    for s in ("tilted", "tilted-swapped"):
+        for m in METHODS:
+            for t in TILTS:
+                rs = [r for r in rows if r["set"] == s and r["method"] == m and r["tilt"] == t]
+                if rs:
+                    out.append((s, m, t, sum(r["success"] for r in rs), len(rs)))
+    return out
+
+
+def markdown(summary, tilt_rows, command: str, meta: Dict[str, Any]) -> str:
+    lines = ["## Real pairs, either order, tilt (issue 9)", "",
+             f"Command: `{command}`  ", f"Run: {meta['date']}, {meta['machine']}, load average "
+             f"at start {meta['load']}, seed {meta['seed']}, photos: every {PHOTO_STEP}rd of "
+             f"../shared/data/photos ({meta['photos']}).", "",
+             "Success: grid error < 3 px in the coarser image, judged from the finer image to the "
+             "coarser one whichever order the method answers in. \"wrong\" counts transforms "
+             "claimed that are not a success (on unrelated pairs: any claim). ASIFT ran on a "
+             "subset (column pairs).", "",
+             "| set | method | pairs | solved | rate | median error px | wrong claims | "
+             "median s |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for r in summary:
+        err = "-" if math.isnan(r["median_error_px"]) else f"{r['median_error_px']:.2f}"
+        rate = "-" if r["set"] == "unrelated" else f"{100 * r['rate']:.0f} %"
+        solved = "-" if r["set"] == "unrelated" else str(r["solved"])
+        lines.append(f"| {r['set']} | {r['method']} | {r['pairs']} | {solved} | {rate} | {err} | "
+                     f"{r['false_claims']} | {r['median_s']:.2f} |")
+    lines += ["", "Tilted pairs by tilt (solved / pairs):", "",
+              "| set | method | " + " | ".join(f"t = {t:g}" for t in TILTS) + " |",
+              "|---|---|" + "---:|" * len(TILTS)]
+    for s in ("tilted", "tilted-swapped"):
+        for m in METHODS:
+            cells = {t: f"{k}/{n}" for ss, mm, t, k, n in tilt_rows if ss == s and mm == m}
+            if cells:
+                lines.append(f"| {s} | {m} | " + " | ".join(cells.get(t, "-") for t in TILTS)
+                             + " |")
+    return "\n".join(lines) + "\n"
+
+
+MARK_BEGIN = "<!-- real-pairs: begin (written by scalematch lab real-pairs) -->"
+MARK_END = "<!-- real-pairs: end -->"
+
+
+def write_section(doc: Path, text: str) -> None:
+    """Put ``text`` between the markers of ``doc`` (appended when they are absent)."""
+    old = doc.read_text() if doc.is_file() else ""
+    block = f"{MARK_BEGIN}\n{text}{MARK_END}\n"
+    if MARK_BEGIN in old and MARK_END in old:
+        head, rest = old.split(MARK_BEGIN, 1)
+        new = head + block + rest.split(MARK_END, 1)[1].lstrip("\n")
+    else:
+        new = old.rstrip("\n") + "\n\n" + block
+    doc.write_text(new)
+
+
+@click.command("real-pairs", context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--shared", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
+@click.option("--sets", default=",".join(SET_ORDER), show_default=True,
+              help="Comma-separated sets to run.")
+@click.option("--methods", default=",".join(METHODS), show_default=True)
+@click.option("--photo-step", type=click.IntRange(min=1), default=PHOTO_STEP, show_default=True,
+              help="Use every N-th photo.")
+@click.option("--asift-pairs", type=click.IntRange(min=0), default=ASIFT_PAIRS, show_default=True,
+              help="ASIFT pairs per set (it is slow).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out-dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("bench-out/real"), show_default=True)
+@click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the tables into this Markdown file (its real-pairs section).")
+def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out_dir, write_doc):
+    """Real pairs: the Oxford sequences both ways, tilted zoom pairs, every pair swapped, and
+    unrelated pairs, for scalematch, SIFT and ASIFT (on a subset) in one run.
+
+    \b
+    Example:
+      scalematch lab real-pairs --write-doc docs/BENCHMARKS.md
+      scalematch lab real-pairs --sets oxford --methods scalematch,sift
+    """
+    import datetime as _dt
+    import sys
+
+    shared = shared or find_shared()
+    if shared is None:
+        raise click.ClickException("../shared is absent: this benchmark needs its photos")
+    wanted = [s.strip() for s in sets.split(",") if s.strip()]
+    names = [m.strip() for m in methods.split(",") if m.strip()]
+    for m in names:
+        if m not in METHODS:
+            raise click.BadParameter(f"unknown method {m!r}", param_hint="--methods")
+    log = lambda s: click.echo(s, err=True)
+    paths = list_photos(shared)[::photo_step]
+    pool: Dict[str, List[Pair]] = {}
+    if any(s != "oxford" for s in wanted):
+        pool.update(synthetic_sets(paths, seed, log))
+    if "oxford" in wanted:
+        pool["oxford"] = oxford_pairs(shared)
+    meta = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "seed": seed,
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            "load": " ".join(f"{v:.1f}" for v in os.getloadavg()), "photos": len(paths)}
+    rows = []
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for s in wanted:
+        for m in names:
+            pairs = pool.get(s, [])
+            if m == "asift":
+                if s in ("unrelated", "zoom"):
+                    continue
+                pairs = asift_subset(pairs, asift_pairs)
+            t0 = time.perf_counter()
+            for p in pairs:
+                out = (run_limited(m, p, ASIFT_TIMEOUT_S) if m == "asift"
+                       else _timed(RUNNERS[m], p))
+                rows.append(judge(m, p, out))
+            done = [r for r in rows if r["set"] == s and r["method"] == m]
+            log(f"{s:15s} {m:10s} {sum(r['success'] for r in done)}/{len(done)} solved, "
+                f"{sum(r['false_claim'] for r in done)} false, {time.perf_counter() - t0:.0f} s")
+    (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
+    command = "scalematch lab real-pairs " + " ".join(sys.argv[3:] if len(sys.argv) > 3 else [])
+    text = markdown(summarise(rows), by_tilt(rows), command.strip(), meta)
+    (out_dir / "real-pairs.md").write_text(text)
+    click.echo(text)
+    if write_doc is not None:
+        write_section(write_doc, text)
+        log(f"wrote {write_doc}")
+
+
+def _timed(fn, pair: Pair):
+    t0 = time.perf_counter()
+    t, fwd, info = fn(pair)
+    return t, fwd, info, time.perf_counter() - t0
