@@ -18,8 +18,13 @@ pixels to the coarser one's):
 >>> r = match(low, scene)
 >>> r.matched, round(r.resolution_ratio, 1), round(r.rotation_deg), r.transform.shape
 (True, 3.0, 20, (2, 3))
->>> match(np.full((60, 80), 128.0), np.full((120, 160), 90.0)).matched  # nothing to match
+>>> rng = np.random.default_rng(1)
+>>> match(rng.normal(128, 3, (60, 80)), rng.normal(90, 3, (120, 160))).matched  # nothing to match
 False
+>>> match(np.full((60, 80), 128.0), scene)  # a constant image: not even a try
+Traceback (most recent call last):
+    ...
+scalematch.imageio.ImageError: the low image is constant (every pixel 128): there is nothing to match in it
 """
 
 import os as _os

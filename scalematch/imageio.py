@@ -84,7 +84,7 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     Scaled as ``to_grey`` scales: floats in [0, 1] (scikit-image's convention) by 255, 16-bit by
     255/65535; other values are taken as grey levels. Raises ``ImageError`` (a ``ValueError``)
     for what would otherwise give "no match" without saying why: a bool array, a NaN or infinite
-    value, a constant image.
+    value, a constant image; a side under ``MIN_SIDE_PX``.
     """
     img = np.asarray(image)
     if img.dtype == np.bool_:
@@ -96,8 +96,9 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     if img.ndim != 2:
         raise ImageError(f"the {name} image has shape {img.shape}; give a 2-D grey image "
                          f"(scalematch.read_grey reads and converts any image file)")
-    if img.size == 0:
-        raise ImageError(f"the {name} image is empty (shape {img.shape})")
+    if min(img.shape) < MIN_SIDE_PX:
+        raise ImageError(f"the {name} image is {img.shape[1]}x{img.shape[0]} px; at least "
+                         f"{MIN_SIDE_PX} px on each side is needed")
     lo, hi = float(img.min()), float(img.max())  # nan when any value is nan
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ImageError(f"the {name} image holds NaN or infinite values; replace them "
