@@ -272,7 +272,9 @@ def markdown(summary, tilt_rows, command: str, meta: Dict[str, Any]) -> str:
     lines = ["## Real pairs, either order, tilt (issue 9)", "",
              f"Command: `{command}`  ", f"Run: {meta['date']}, {meta['machine']}, load average "
              f"at start {meta['load']}, seed {meta['seed']}, photos: every {PHOTO_STEP}rd of "
-             f"../shared/data/photos ({meta['photos']}).", "",
+             f"../shared/data/photos ({meta['photos']})."
+             + (f" Rows of methods not run here come from `{meta['merged']}` (same pairs, "
+                f"same seed)." if meta.get("merged") else ""), "",
              "Success: grid error < 3 px in the coarser image, judged from the finer image to the "
              "coarser one whichever order the method answers in. \"wrong\" counts transforms "
              "claimed that are not a success (on unrelated pairs: any claim). ASIFT ran on a "
@@ -326,9 +328,13 @@ def write_section(doc: Path, text: str) -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out-dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("bench-out/real"), show_default=True)
+@click.option("--merge-rows", type=click.Path(dir_okay=False, exists=True, path_type=Path),
+              default=None, help="rows.json of an earlier run (e.g. ASIFT alone, which is slow "
+                                 "and does not change with scalematch) to report with this one.")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the tables into this Markdown file (its real-pairs section).")
-def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out_dir, write_doc):
+def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out_dir, merge_rows,
+                       write_doc):
     """Real pairs: the Oxford sequences both ways, tilted zoom pairs, every pair swapped, and
     unrelated pairs, for scalematch, SIFT and ASIFT (on a subset) in one run.
 
@@ -376,6 +382,10 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
             log(f"{s:15s} {m:10s} {sum(r['success'] for r in done)}/{len(done)} solved, "
                 f"{sum(r['false_claim'] for r in done)} false, {time.perf_counter() - t0:.0f} s")
     (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
+    if merge_rows is not None:
+        rows = rows + [r for r in json.loads(merge_rows.read_text())
+                       if (r["set"], r["method"]) not in {(q["set"], q["method"]) for q in rows}]
+        meta["merged"] = str(merge_rows)
     command = "scalematch lab real-pairs " + " ".join(sys.argv[3:] if len(sys.argv) > 3 else [])
     text = markdown(summarise(rows), by_tilt(rows), command.strip(), meta)
     (out_dir / "real-pairs.md").write_text(text)

@@ -171,10 +171,25 @@ def estimate(model: str, src: np.ndarray, dst: np.ndarray, params: RansacParams 
     t = spec.fit(src32, dst32, thr, params, ransac=True)
     if t is None or not np.all(np.isfinite(t)):
         return none
+    return refine(model, t, src, dst, params, threshold=thr)
+
+
+def refine(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray,
+           params: RansacParams = RansacParams(), threshold: Optional[float] = None,
+           rounds: int = 2) -> Estimate:
+    """Refit ``t`` on the pairs it explains, then recount, ``rounds`` times (no sampling).
+
+    The pairs within ``threshold`` low px of ``t`` are its inliers; the model is fitted to all of
+    them and kept when it explains at least as many. RANSAC's winner is refined this way, and so
+    is a transform given more pairs than it was found on (``pipeline``: every scale's candidates).
+    """
+    spec = model_of(model)
+    thr = float(params.threshold_px if threshold is None else threshold)
+    src32 = np.ascontiguousarray(src, np.float32).reshape(-1, 1, 2)
+    dst32 = np.ascontiguousarray(dst, np.float32).reshape(-1, 1, 2)
     res = residuals(model, t, src, dst)
     inl = res <= thr
-    # refine on all inliers, then recount (twice: the inlier set can grow once refined)
-    for _ in range(2):
+    for _ in range(rounds):
         if inl.sum() <= spec.min_sample:
             break
         t2 = spec.fit(src32[inl], dst32[inl], thr, params, ransac=False)
