@@ -329,8 +329,9 @@ def write_section(doc: Path, text: str) -> None:
 @click.option("--out-dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("bench-out/real"), show_default=True)
 @click.option("--merge-rows", type=click.Path(dir_okay=False, exists=True, path_type=Path),
-              default=None, help="rows.json of an earlier run (e.g. ASIFT alone, which is slow "
-                                 "and does not change with scalematch) to report with this one.")
+              multiple=True, help="rows.json of an earlier run (e.g. ASIFT alone, which is slow "
+                                  "and does not change with scalematch) to report with this one; "
+                                  "with --methods '' only these are reported (no run).")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the tables into this Markdown file (its real-pairs section).")
 def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out_dir, merge_rows,
@@ -357,9 +358,11 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
     log = lambda s: click.echo(s, err=True)
     paths = list_photos(shared)[::photo_step]
     pool: Dict[str, List[Pair]] = {}
-    if any(s != "oxford" for s in wanted):
+    if not names:  # report the rows of earlier runs only
+        wanted = []
+    elif any(s != "oxford" for s in wanted):
         pool.update(synthetic_sets(paths, seed, log))
-    if "oxford" in wanted:
+    if names and "oxford" in wanted:
         pool["oxford"] = oxford_pairs(shared)
     meta = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "seed": seed,
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
@@ -381,11 +384,15 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
             done = [r for r in rows if r["set"] == s and r["method"] == m]
             log(f"{s:15s} {m:10s} {sum(r['success'] for r in done)}/{len(done)} solved, "
                 f"{sum(r['false_claim'] for r in done)} false, {time.perf_counter() - t0:.0f} s")
-    (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
-    if merge_rows is not None:
-        rows = rows + [r for r in json.loads(merge_rows.read_text())
-                       if (r["set"], r["method"]) not in {(q["set"], q["method"]) for q in rows}]
-        meta["merged"] = str(merge_rows)
+    if names:
+        (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
+        (out_dir / "meta.json").write_text(json.dumps(meta))
+    elif merge_rows and (merge_rows[0].parent / "meta.json").is_file():  # the run's own figures
+        meta.update(json.loads((merge_rows[0].parent / "meta.json").read_text()))
+    for extra in merge_rows:
+        seen = {(q["set"], q["method"]) for q in rows}
+        rows = rows + [r for r in json.loads(extra.read_text()) if (r["set"], r["method"]) not in seen]
+        meta["merged"] = ", ".join(str(m) for m in merge_rows)
     command = "scalematch lab real-pairs " + " ".join(sys.argv[3:] if len(sys.argv) > 3 else [])
     text = markdown(summarise(rows), by_tilt(rows), command.strip(), meta)
     (out_dir / "real-pairs.md").write_text(text)
