@@ -8,15 +8,13 @@ present. Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage.
 
 from __future__ import annotations
 
-import concurrent.futures
-import csv
 import dataclasses
 import importlib
+import importlib.machinery
+import importlib.util
 import json
-import multiprocessing
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
@@ -32,14 +30,17 @@ from .result import MatchResult, to_jsonable
 #: Exit codes (documented in --help and README.md).
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT = 0, 1, 2
 
-#: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
-#: left out (not listed, "No such command") when the module is absent or cannot be imported.
+#: Subcommands that live in other modules: name -> (module, attribute, line of the group's help).
+#: Loaded on first use and left out (not listed, "No such command") when the module is absent
+#: or cannot be imported; the group's help lists them without importing them.
 #: ``lab`` is the lab's group; the other three are short aliases of its commands.
 LAZY_COMMANDS = {
-    "lab": ("scalematch.lab.cli", "lab"),
-    "bench": ("scalematch.lab.bench", "bench_command"),
-    "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
-    "covariance": ("scalematch.lab.covariance", "covariance_command"),
+    "lab": ("scalematch.lab.cli", "lab", "Research commands: benchmark, studies, covariance."),
+    "bench": ("scalematch.lab.bench", "bench_command", "Benchmark against OpenCV SIFT, ORB..."),
+    "repeatability": ("scalematch.lab.repeatability", "repeatability_command",
+                      "Repeatability of standard vs scale-adapted Harris..."),
+    "covariance": ("scalematch.lab.covariance", "covariance_command",
+                   "Re-estimate the jet covariance Lambda from your own..."),
 }
 
 #: Named threshold options: (option, Config path, type, help). An option is offered only when
@@ -251,6 +252,8 @@ def _show_progress(quiet: bool) -> bool:
 
 def check_out_dir(path: Path) -> None:
     """Create ``path`` and make sure a file can be written in it, before the work starts."""
+    import tempfile  # imported where used: the command line starts faster
+
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".scalematch-check-"):
@@ -305,16 +308,36 @@ class ScalematchGroup(click.Group):
         cmd = super().get_command(ctx, name)
         if cmd is not None or name not in LAZY_COMMANDS:
             return cmd
-        module, attr = LAZY_COMMANDS[name]
+        module, attr, _ = LAZY_COMMANDS[name]
         try:
             return getattr(importlib.import_module(module), attr)
         except (ImportError, AttributeError):
             return None
 
     def list_commands(self, ctx: click.Context) -> List[str]:
-        names = list(self.commands)
-        names += [n for n in LAZY_COMMANDS if self.get_command(ctx, n) is not None]
-        return names
+        return list(self.commands) + [n for n, (module, _, _) in LAZY_COMMANDS.items()
+                                      if _module_exists(module)]
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        # the lazy commands are found, not imported: the help does not load the lab
+        limit = formatter.width - 6 - max(len(n) for n in self._known())
+        rows = [(n, LAZY_COMMANDS[n][2] if n in LAZY_COMMANDS
+                 else self.commands[n].get_short_help_str(limit))
+                for n in self.list_commands(ctx)
+                if n in LAZY_COMMANDS or not self.commands[n].hidden]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+def _module_exists(name: str) -> bool:
+    """Whether module ``name`` ("scalematch.lab.cli") can be found, without running its package."""
+    package, _, _ = name.rpartition(".")
+    try:
+        spec = importlib.util.find_spec(package)  # imports only the packages above ``package``
+    except ImportError:
+        return False
+    places = spec.submodule_search_locations if spec is not None else None
+    return bool(places) and importlib.machinery.PathFinder.find_spec(name, places) is not None
 
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -496,6 +519,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
 def read_pairs(path: Path) -> List[Tuple[str, str]]:
     """(low, high) rows of a CSV; a first row "low...,high..." (any case) is a header, skipped."""
+    import csv  # imported where used: the command line starts faster
+
     try:
         with open(path, newline="") as fh:
             rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
@@ -633,6 +658,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, quiet: boo
                 if bar is not None:
                     bar.update(1)
         else:
+            import concurrent.futures  # imported where used: the command line starts faster
+            import multiprocessing
+
             ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
             pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx,
                                                           initializer=_init_worker)
