@@ -31,6 +31,11 @@ from .stages.views import View, keep_inside, to_high, view_plan, views_of
 #: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
 #: Harris filters (4 sigma~ = 8 px) see mostly border.
 MIN_SIDE_PX = 24
+#: Largest high image, px, whose scale-space levels are kept from detection to the full pass
+#: (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a larger
+#: image's levels are computed again, so peak memory stays bounded for camera-size images.
+#: The result is the same either way.
+KEEP_LEVELS_MAX_PX = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -105,9 +110,9 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     return ScaleOutcome(row, best, best_src, best_dst, initial)
 
 
-def _head(kp: Keypoints, n: int) -> Keypoints:
-    """The ``n`` strongest keypoints (they are sorted strongest first)."""
-    return Keypoints(s=kp.s, xy=kp.xy[:n], response=kp.response[:n])
+def _part(kp: Keypoints, rows: slice) -> Keypoints:
+    """Some of the keypoints: ``slice(n)`` the ``n`` strongest (they are sorted strongest first)."""
+    return Keypoints(s=kp.s, xy=kp.xy[rows], response=kp.response[rows])
 
 
 def probe_score(high: Described, low: Described, config: Config) -> float:
@@ -179,6 +184,14 @@ def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
     return Keypoints(s=kp.s, xy=kp.xy[ok], response=kp.response[ok])
 
 
+def _joined(head: Described, rest: Described, offset: int) -> Described:
+    """The descriptors of keypoints [0, offset) and [offset, N) as one ``Described``."""
+    return Described(s=head.s, xy=np.vstack([head.xy, rest.xy]),
+                     index=np.concatenate([head.index, rest.index + offset]),
+                     angle=np.concatenate([head.angle, rest.angle]),
+                     desc=np.vstack([head.desc, rest.desc]))
+
+
 def search_scales(view: View, low: LowFeatures, config: Config, whitening,
                   step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Steps 1-6 at every scale of one view of the high image (the paper's one-to-many search).
@@ -186,33 +199,46 @@ def search_scales(view: View, low: LowFeatures, config: Config, whitening,
     With the probe on, every scale is detected and scored from its strongest points, and only
     the best scales and their neighbours are matched in full. ``step()`` is called once per
     scale detected and once per scale matched (or skipped).
+
+    The levels of a high image of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full
+    pass (with the probe's descriptors: only the other points are described then); a larger
+    image's levels are computed again, by the same cascade, so the two paths give the same
+    result and memory holds two levels at a time.
     """
     high = view.image
     scales = sorted(config.scales)
     space = dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
                  decimate=config.harris.decimate)
     probing = config.probe.enabled and len(scales) > config.probe.keep
-    detected = []  # (keypoints, descriptors of the probe points or all) per scale
+    keep = high.size <= KEEP_LEVELS_MAX_PX
+    detected = []  # (keypoints, descriptors of the probe points or all, level if kept) per scale
     for level in scale_space(high, scales, **space):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
-            detected.append((Keypoints.empty(level.s), None))
+            detected.append((Keypoints.empty(level.s), None, None))
         else:
             kp = _inside(view, detect_on_level(level, config.harris), config.views.edge_margin_px)
-            part = _head(kp, config.probe.points) if probing else kp
-            detected.append((kp, _describe(level, part, config, whitening)))
+            part = _part(kp, slice(config.probe.points)) if probing else kp
+            detected.append((kp, _describe(level, part, config, whitening),
+                             level if keep else None))
         step()
-    usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
+    usable = [i for i, (kp, d, _) in enumerate(detected) if d is not None and len(d)]
     if probing:
         scores = [probe_score(detected[i][1], low.described, config) for i in usable]
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
     else:
         run = usable
+    if keep or not run:
+        levels = ((i, detected[i][2]) for i in run)
+    else:  # the detection's cascade again, up to the largest scale run
+        levels = ((i, level) for i, level in enumerate(scale_space(
+            high, scales[:run[-1] + 1], **space)) if i in run)
     full = {}
-    # the selected scales are described in full (their levels computed again: holding every
-    # level of a large high image in memory would cost several full-resolution copies)
-    for i, level in zip(run, scale_space(high, [scales[i] for i in run], **space)):
-        kp = detected[i][0]
-        desc = _describe(level, kp, config, whitening) if probing else detected[i][1]
+    for i, level in levels:
+        kp, desc, _ = detected[i]
+        if probing and len(kp) > config.probe.points:  # the probe described the strongest
+            rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
+                             whitening)
+            desc = _joined(desc, rest, config.probe.points)
         full[i] = _full_scale(level, kp, desc, low.described, low.image, config)
     outcomes: List[ScaleOutcome] = []
     for n, s in enumerate(scales):
