@@ -27,6 +27,7 @@ from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
+from .working import in_original_low, shrink, working_factor, working_scales
 
 #: Smallest image side the matcher accepts, px: below it the 16 px descriptor window and the
 #: Harris filters (4 sigma~ = 8 px) see mostly border.
@@ -332,6 +333,11 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         ``order`` says whether the images were found in the order given; ``transform`` always
         maps the finer image's pixels to the coarser image's.
     """
+    f = working_factor(np.shape(low), config.low_max_side)
+    if f > 1.0:  # a very large low image: matched at its working size, answered in its pixels
+        small = replace(config, low_max_side=None, scales=working_scales(config.scales, f))
+        return in_original_low(match(shrink(as_float_image(low), f), high, small, progress),
+                               f, config)
     t0 = time.perf_counter()
     low = as_float_image(low)
     high = as_float_image(high)
