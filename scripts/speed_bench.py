@@ -40,7 +40,7 @@ from scalematch.lab.evaluation import is_success, reprojection_error
 from scalematch.lab.synthetic import pairs_from_photos, zoom_pair_from_crop
 
 ROOT = Path(__file__).resolve().parents[1]
-SIFT_SCRIPT = ROOT / "scripts" / "sift_reference.py"
+SIFT_CMD = [sys.executable, str(ROOT / "scripts" / "sift_reference.py")]
 #: The large pair: a 6000x4000 high image cut from the photo enlarged to 9000x6000, seen in a
 #: low image of at most 1800x1200 px (2.2 MP) zoomed out by 5 (footprint about 1200x800 px).
 LARGE_HIGH = (6000, 4000)
@@ -54,14 +54,23 @@ def write_png(path: Path, image: np.ndarray) -> str:
     return str(path)
 
 
+#: Runs one command and reports (wall seconds, peak resident KB, exit code) of it alone: the
+#: child is started from this small process, because Linux counts in a child's peak the
+#: memory of the process it was forked from (this benchmark holds every pair in memory).
+_TIMER = """
+import os, subprocess, sys, time
+t0 = time.perf_counter()
+proc = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+_, status, usage = os.wait4(proc.pid, 0)
+print(time.perf_counter() - t0, usage.ru_maxrss, os.waitstatus_to_exitcode(status))
+"""
+
+
 def run_child(cmd: Sequence[str]) -> Tuple[float, float, int]:
     """(wall seconds, peak resident MB, exit code) of one child process."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(proc.pid, 0)
-    seconds = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return seconds, usage.ru_maxrss / 1024.0, proc.returncode
+    out = subprocess.run([sys.executable, "-c", _TIMER, *cmd], capture_output=True, text=True,
+                         check=True).stdout.split()
+    return float(out[0]), int(out[1]) / 1024.0, int(out[2])
 
 
 def load() -> str:
@@ -85,6 +94,62 @@ def large_pair(photo: Path, seed: int):
     raise RuntimeError("no angle fits the large pair's window")
 
 
+def time_processes(files, scalematch_cmd: str) -> str:
+    """Whole processes, alternately: one table row."""
+    sm_t, sift_t = [], []
+    for k, (lo, hi) in enumerate(files):
+        got = {}
+        for which in ("sm", "sift") if k % 2 == 0 else ("sift", "sm"):
+            cmd = [scalematch_cmd, lo, hi] if which == "sm" else SIFT_CMD + [lo, hi]
+            got[which] = run_child(cmd)[0]
+        sm_t.append(got["sm"])
+        sift_t.append(got["sift"])
+    return _row("whole process", sm_t, sift_t)
+
+
+def time_in_process(pairs) -> Tuple[str, str]:
+    """``scalematch.match`` and the SIFT baseline in this process, alternately: (row, success)."""
+    methods = {"sm": lambda p: (lambda r: r.transform if r.matched else None)(
+                   scalematch.match(p.low, p.high)),
+               "sift": lambda p: match_baseline(p.low, p.high, "sift").transform}
+    times = {m: [] for m in methods}
+    ok = {m: 0 for m in methods}
+    for fn in methods.values():  # warm-up: one-off library set-up
+        fn(pairs[0])
+    for k, p in enumerate(pairs):
+        for m in ("sm", "sift") if k % 2 == 0 else ("sift", "sm"):
+            t0 = time.perf_counter()
+            t = methods[m](p)
+            times[m].append(time.perf_counter() - t0)
+            ok[m] += is_success(reprojection_error(t, p.truth, p.high.shape, p.low.shape))
+    n = len(pairs)
+    return (_row("in process", times["sm"], times["sift"]),
+            f"success (error < 3 px): scalematch {ok['sm']}/{n}, SIFT {ok['sift']}/{n}")
+
+
+def time_large(photo: Path, seed: int, folder: Path, scalematch_cmd: str) -> str:
+    """The 6000x4000 / ~2 MP pair, whole processes, two rounds: a Markdown table."""
+    pair = large_pair(photo, seed)
+    lo = write_png(folder / "large_low.png", pair.low)
+    hi = write_png(folder / "large_high.png", pair.high)
+    h, w = pair.low.shape
+    del pair
+    lines = [f"6000x4000 high ({photo.name} enlarged), low {w}x{h}, ratio {LARGE_RATIO:g}, "
+             "whole process (two rounds):\n",
+             "| method | seconds | peak MB | exit | load 1/5/15 min |", "|---|---|---|---|---|"]
+    for _ in range(2):
+        for name, cmd in (("scalematch", [scalematch_cmd, lo, hi]), ("SIFT", SIFT_CMD + [lo, hi])):
+            seconds, mb, code = run_child(cmd)
+            lines.append(f"| {name} | {seconds:.2f} | {mb:.0f} | {code} | {load()} |")
+    return "\n".join(lines)
+
+
+def _row(name: str, sm_t: Sequence[float], sift_t: Sequence[float]) -> str:
+    ratio = statistics.median(a / b for a, b in zip(sm_t, sift_t))
+    return (f"| {name} | {statistics.median(sm_t):.3f} | {statistics.median(sift_t):.3f} | "
+            f"{ratio:.2f} | {load()} |")
+
+
 def main(argv: Sequence[str] = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
@@ -92,89 +157,38 @@ def main(argv: Sequence[str] = None) -> None:
                     help="N photos spread evenly over the sorted list; 0 = all")
     ap.add_argument("--ratios", default="2,3,4,6,8,10")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--no-large", action="store_true")
-    ap.add_argument("--no-process", action="store_true", help="skip the whole-process timing")
+    ap.add_argument("--parts", default="process,inprocess,large",
+                    help="what to measure: process (whole processes), inprocess, large")
     ap.add_argument("--scalematch", default=str(Path(sys.executable).with_name("scalematch")),
                     help="the scalematch command (default: next to this Python)")
     args = ap.parse_args(argv)
-    photos = sorted(p for p in (args.shared / "data" / "photos").iterdir()
-                    if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
-    if 0 < args.photos < len(photos):
-        photos = [photos[int(i)] for i in np.linspace(0, len(photos) - 1, args.photos)]
-    ratios = [float(r) for r in args.ratios.split(",")]
+    parts = set(args.parts.split(","))
+    every = sorted(p for p in (args.shared / "data" / "photos").iterdir()
+                   if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+    photos = every
+    if 0 < args.photos < len(every):
+        photos = [every[int(i)] for i in np.linspace(0, len(every) - 1, args.photos)]
     tmp = Path(tempfile.mkdtemp(prefix="speed-bench-"))
-    pairs = list(pairs_from_photos(photos, ratios, args.seed))
-    files = [(write_png(tmp / f"{k}_low.png", p.low), write_png(tmp / f"{k}_high.png", p.high))
-             for k, p in enumerate(pairs)]
-    sift_cmd = [sys.executable, str(SIFT_SCRIPT)]
-    print(f"{len(pairs)} pairs from {len(photos)} photos, ratios {args.ratios}, seed {args.seed}"
-          f"; load average before {load()}", file=sys.stderr)
-
-    rows: List[str] = []
-    if not args.no_process:
-        sm_t, sift_t = [], []
-        for k, (lo, hi) in enumerate(files):
-            order = [0, 1] if k % 2 == 0 else [1, 0]
-            got = {}
-            for which in order:
-                cmd = ([args.scalematch, lo, hi] if which == 0 else sift_cmd + [lo, hi])
-                got[which] = run_child(cmd)[0]
-            sm_t.append(got[0])
-            sift_t.append(got[1])
-        ratio = statistics.median(a / b for a, b in zip(sm_t, sift_t))
-        rows.append(f"| whole process | {statistics.median(sm_t):.3f} | "
-                    f"{statistics.median(sift_t):.3f} | {ratio:.2f} | {load()} |")
-
-    sm_t, sift_t, sm_ok, sift_ok = [], [], 0, 0
-    cfg = scalematch.Config()
-    scalematch.match(pairs[0].low, pairs[0].high, cfg)  # warm-up: one-off library set-up
-    match_baseline(pairs[0].low, pairs[0].high, "sift")
-    for k, p in enumerate(pairs):
-        order = [0, 1] if k % 2 == 0 else [1, 0]
-        for which in order:
-            t0 = time.perf_counter()
-            if which == 0:
-                r = scalematch.match(p.low, p.high, cfg)
-                t = r.transform if r.matched else None
-            else:
-                t = match_baseline(p.low, p.high, "sift").transform
-            dt = time.perf_counter() - t0
-            ok = is_success(reprojection_error(t, p.truth, p.high.shape, p.low.shape))
-            if which == 0:
-                sm_t.append(dt)
-                sm_ok += ok
-            else:
-                sift_t.append(dt)
-                sift_ok += ok
-    ratio = statistics.median(a / b for a, b in zip(sm_t, sift_t))
-    rows.append(f"| in process | {statistics.median(sm_t):.3f} | {statistics.median(sift_t):.3f}"
-                f" | {ratio:.2f} | {load()} |")
-    n = len(pairs)
-    print(f"success: scalematch {sm_ok}/{n}, SIFT {sift_ok}/{n}", file=sys.stderr)
-
-    large = []
-    if not args.no_large:
-        biggest = max(photos, key=lambda p: p.stat().st_size)
-        pair = large_pair(biggest, args.seed)
-        lo = write_png(tmp / "large_low.png", pair.low)
-        hi = write_png(tmp / "large_high.png", pair.high)
-        del pair
-        for _ in range(2):
-            for name, cmd in (("scalematch", [args.scalematch, lo, hi]),
-                              ("SIFT", sift_cmd + [lo, hi])):
-                s, mb, code = run_child(cmd)
-                large.append(f"| {name} | {s:.2f} | {mb:.0f} | {code} | {load()} |")
-        low_shape = cv2.imread(lo, cv2.IMREAD_GRAYSCALE).shape
-        large.insert(0, f"6000x4000 high ({biggest.name} enlarged), low {low_shape[1]}x"
-                        f"{low_shape[0]}, ratio {LARGE_RATIO:g}, whole process (two rounds):\n\n"
-                        "| method | seconds | peak MB | exit | load 1/5/15 min |\n|---|---|---|---|---|")
-
-    print(f"| timing ({n} pairs) | scalematch median s | SIFT median s | median ratio | "
-          "load 1/5/15 min after |\n|---|---|---|---|---|")
-    print("\n".join(rows))
-    print(f"\nsuccess (error < 3 px): scalematch {sm_ok}/{n}, SIFT {sift_ok}/{n}")
-    if large:
-        print("\n" + "\n".join(large))
+    print(f"load average before {load()}", file=sys.stderr)
+    out = []
+    if parts & {"process", "inprocess"}:
+        pairs = list(pairs_from_photos(photos, [float(r) for r in args.ratios.split(",")],
+                                       args.seed))
+        out.append(f"{len(pairs)} pairs from {len(photos)} photos, ratios {args.ratios}, seed "
+                   f"{args.seed}\n\n| timing | scalematch median s | SIFT median s | "
+                   "median ratio | load 1/5/15 min after |\n|---|---|---|---|---|")
+        if "process" in parts:
+            files = [(write_png(tmp / f"{k}_low.png", p.low),
+                      write_png(tmp / f"{k}_high.png", p.high)) for k, p in enumerate(pairs)]
+            out.append(time_processes(files, args.scalematch))
+        if "inprocess" in parts:
+            row, success = time_in_process(pairs)
+            out += [row, "\n" + success]
+        del pairs
+    if "large" in parts:  # the largest photo file of the folder, whatever --photos says
+        out.append("\n" + time_large(max(every, key=lambda p: p.stat().st_size), args.seed, tmp,
+                                      args.scalematch))
+    print("\n".join(out))
 
 
 if __name__ == "__main__":
