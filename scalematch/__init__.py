@@ -36,13 +36,36 @@ import os as _os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
-from .config import Config  # noqa: E402
-from .stages.detector import HarrisParams, Keypoints, PAPER_SCALES, detect  # noqa: E402
-from .imageio import ImageError, read_grey  # noqa: E402
-from .pipeline import match  # noqa: E402
-from .result import MatchResult, ScaleRow  # noqa: E402
-
 __version__ = "0.1.0"
 
-__all__ = ["match", "Config", "HarrisParams", "Keypoints", "PAPER_SCALES", "detect", "ImageError",
-           "read_grey", "MatchResult", "ScaleRow", "__version__"]
+#: The public names, each loaded from its module on first use (PEP 562), so that
+#: ``import scalematch`` and the command line's start-up load only what a command needs
+#: (``scalematch --help`` never loads the pipeline).
+_EXPORTS = {
+    "match": ".pipeline",
+    "Config": ".config",
+    "HarrisParams": ".stages.detector",
+    "Keypoints": ".stages.detector",
+    "PAPER_SCALES": ".stages.detector",
+    "detect": ".stages.detector",
+    "ImageError": ".imageio",
+    "read_grey": ".imageio",
+    "MatchResult": ".result",
+    "ScaleRow": ".result",
+}
+
+__all__ = list(_EXPORTS) + ["__version__"]
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'scalematch' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_EXPORTS[name], __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

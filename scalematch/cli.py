@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import importlib.machinery
+import importlib.util
 import json
 import math
+import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -31,14 +35,17 @@ from .stages.estimator import model_of
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130
 
-#: Subcommands that live in other modules: name -> (module, attribute). Loaded on first use and
-#: left out (not listed, "No such command") when the module is absent or cannot be imported.
+#: Subcommands that live in other modules: name -> (module, attribute, line of the group's help).
+#: Loaded on first use and left out (not listed, "No such command") when the module is absent
+#: or cannot be imported; the group's help lists them without importing them.
 #: ``lab`` is the lab's group; the other three are short aliases of its commands.
 LAZY_COMMANDS = {
-    "lab": ("scalematch.lab.cli", "lab"),
-    "bench": ("scalematch.lab.bench", "bench_command"),
-    "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
-    "covariance": ("scalematch.lab.covariance", "covariance_command"),
+    "lab": ("scalematch.lab.cli", "lab", "Research commands: benchmark, studies, covariance."),
+    "bench": ("scalematch.lab.bench", "bench_command", "Benchmark against OpenCV SIFT, ORB..."),
+    "repeatability": ("scalematch.lab.repeatability", "repeatability_command",
+                      "Repeatability of standard vs scale-adapted Harris..."),
+    "covariance": ("scalematch.lab.covariance", "covariance_command",
+                   "Re-estimate the jet covariance Lambda from your own..."),
 }
 
 class FiniteFloatRange(click.FloatRange):
@@ -245,6 +252,8 @@ def _show_progress(quiet: bool) -> bool:
 
 def check_out_dir(path: Path) -> None:
     """Create ``path`` and make sure a file can be written in it, before the work starts."""
+    import tempfile  # imported where used: the command line starts faster
+
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".scalematch-check-"):
@@ -320,16 +329,36 @@ class ScalematchGroup(click.Group):
         cmd = super().get_command(ctx, name)
         if cmd is not None or name not in LAZY_COMMANDS:
             return cmd
-        module, attr = LAZY_COMMANDS[name]
+        module, attr, _ = LAZY_COMMANDS[name]
         try:
             return getattr(importlib.import_module(module), attr)
         except (ImportError, AttributeError):
             return None
 
     def list_commands(self, ctx: click.Context) -> List[str]:
-        names = list(self.commands)
-        names += [n for n in LAZY_COMMANDS if self.get_command(ctx, n) is not None]
-        return names
+        return list(self.commands) + [n for n, (module, _, _) in LAZY_COMMANDS.items()
+                                      if _module_exists(module)]
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        # the lazy commands are found, not imported: the help does not load the lab
+        limit = formatter.width - 6 - max(len(n) for n in self._known())
+        rows = [(n, LAZY_COMMANDS[n][2] if n in LAZY_COMMANDS
+                 else self.commands[n].get_short_help_str(limit))
+                for n in self.list_commands(ctx)
+                if n in LAZY_COMMANDS or not self.commands[n].hidden]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+def _module_exists(name: str) -> bool:
+    """Whether module ``name`` ("scalematch.lab.cli") can be found, without running its package."""
+    package, _, _ = name.rpartition(".")
+    try:
+        spec = importlib.util.find_spec(package)  # imports only the packages above ``package``
+    except ImportError:
+        return False
+    places = spec.submodule_search_locations if spec is not None else None
+    return bool(places) and importlib.machinery.PathFinder.find_spec(name, places) is not None
 
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -372,6 +401,9 @@ def matching_options(f: Callable) -> Callable:
         click.option("--views/--no-views", "views", default=True, show_default=True,
                      help="When nothing matches, simulate tilted views of the finer image "
                           "(oblique shots; slower on pairs that do not match)."),
+        click.option("--working-size", type=click.IntRange(min=0), default=None, metavar="PX",
+                     help="Match a low image whose longer side exceeds PX at that size and give "
+                          "the answer in its own pixels (0: always full size). [default: 2048]"),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
@@ -414,8 +446,12 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
     try:
         config = build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
                               kwargs.pop("seed"), thresholds,
-                              tuple(kwargs.pop("settings")) + (f"order={kwargs.pop('order')}",
-                                                               f"views.enabled={kwargs.pop('views')}"))
+                              tuple(kwargs.pop("settings"))
+                              + (f"order={kwargs.pop('order')}",
+                                 f"views.enabled={kwargs.pop('views')}"))
+        working = kwargs.pop("working_size")
+        if working is not None:  # 0: always full size
+            config = dataclasses.replace(config, low_max_side=working or None)
     except ValueError as exc:
         raise InputError(str(exc))
     for _, paths, typ, _ in THRESHOLD_OPTIONS:  # a --set value for a named threshold

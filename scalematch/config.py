@@ -124,6 +124,12 @@ class Config:
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)
     model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
+    #: longest side, px, at which the low image is matched (None: its full size). A larger low
+    #: image is shrunk to it (INTER_AREA) and the answer given in its own pixels
+    #: (``scalematch.working``). The low detector keeps at most 12,000 points anyway; at 2048 px
+    #: a 24 MP (6000x4000) low image becomes 2.8 MP: time and memory are bounded, and images up
+    #: to 2048 px (the benchmark's 1024x768) are matched exactly as before.
+    low_max_side: Optional[int] = 2048
 
     def __post_init__(self) -> None:
         if self.order not in ORDERS:
@@ -132,6 +138,8 @@ class Config:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
         if self.model not in MODELS:
             raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        if self.low_max_side is not None and self.low_max_side < 64:
+            raise ValueError(f"low_max_side must be None or at least 64 px, got {self.low_max_side}")
         if not self.scales or min(self.scales) < 1.0:
             raise ValueError("scales must be a non-empty list of values >= 1")
 

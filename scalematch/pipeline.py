@@ -28,7 +28,13 @@ from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import Candidates, match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
+from .working import in_original_low, shrink, working_factor, working_scales
 
+#: Largest view of the high image, px, whose scale-space levels are kept from detection to the
+#: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
+#: larger image's levels are computed again, so peak memory stays bounded for camera-size
+#: images. The result is the same either way.
+KEEP_LEVELS_MAX_PX = 4_000_000
 
 @dataclass(frozen=True)
 class ScaleOutcome:
@@ -102,9 +108,9 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     return ScaleOutcome(row, best, best_src, best_dst, initial)
 
 
-def _head(kp: Keypoints, n: int) -> Keypoints:
-    """The ``n`` strongest keypoints (they are sorted strongest first)."""
-    return Keypoints(s=kp.s, xy=kp.xy[:n], response=kp.response[:n])
+def _part(kp: Keypoints, rows: slice) -> Keypoints:
+    """Some of the keypoints: ``slice(n)`` the ``n`` strongest (they are sorted strongest first)."""
+    return Keypoints(s=kp.s, xy=kp.xy[rows], response=kp.response[rows])
 
 
 def probe_score(high: Described, low: Described, config: Config) -> float:
@@ -199,7 +205,8 @@ class Probed:
     """A view of the high image detected at every scale and scored by the probe."""
 
     view: View = field(repr=False)
-    #: per scale: (keypoints, descriptors of the probe points, or of all points without probe)
+    #: per scale: (keypoints, descriptors of the probe points -- of all points without the
+    #: probe --, the level when kept for the full pass or None)
     detected: Tuple = field(repr=False)
     usable: Tuple[int, ...]  #: scales with described points
     run: Tuple[int, ...]  #: scales to match in full
@@ -212,24 +219,35 @@ def _space(config: Config) -> dict:
                 decimate=config.harris.decimate)
 
 
+def _joined(head: Described, rest: Described, offset: int) -> Described:
+    """The descriptors of keypoints [0, offset) and [offset, N) as one ``Described``."""
+    return Described(s=head.s, xy=np.vstack([head.xy, rest.xy]),
+                     index=np.concatenate([head.index, rest.index + offset]),
+                     angle=np.concatenate([head.angle, rest.angle]),
+                     desc=np.vstack([head.desc, rest.desc]))
+
+
 def probe_view(view: View, low: LowFeatures, config: Config, whitening,
                step: Callable[[], None] = lambda: None) -> Probed:
     """Detect every scale of one view; score each from its strongest points (paper 5).
 
-    ``step()`` is called once per scale detected.
+    ``step()`` is called once per scale detected. The levels of a view of at most
+    ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass.
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
+    keep = view.image.size <= KEEP_LEVELS_MAX_PX
     detected = []
     for level in scale_space(view.image, scales, **_space(config)):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
-            detected.append((Keypoints.empty(level.s), None))
+            detected.append((Keypoints.empty(level.s), None, None))
         else:
             kp = _inside(view, detect_on_level(level, config.harris), config.views.edge_margin_px)
-            part = _head(kp, config.probe.points) if probing else kp
-            detected.append((kp, _describe(level, part, config, whitening)))
+            part = _part(kp, slice(config.probe.points)) if probing else kp
+            detected.append((kp, _describe(level, part, config, whitening),
+                             level if keep else None))
         step()
-    usable = [i for i, (kp, d) in enumerate(detected) if d is not None and len(d)]
+    usable = [i for i, (kp, d, _) in enumerate(detected) if d is not None and len(d)]
     if probing:
         scores = probe_scores([detected[i][1] for i in usable], low.described, config)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
@@ -243,26 +261,32 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
                 step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
-    ``step()`` is called once per scale matched or skipped.
+    The probe's descriptors are kept: only the other points are described. ``step()`` is
+    called once per scale matched or skipped.
     """
     scales = sorted(config.scales)
-    detected = probed.detected
+    detected, run = probed.detected, probed.run
+    if not run or all(detected[i][2] is not None for i in run):
+        levels = ((i, detected[i][2]) for i in run)
+    else:  # the detection's cascade again, up to the largest scale run (bounded memory)
+        levels = ((i, level) for i, level in enumerate(scale_space(
+            probed.view.image, scales[:run[-1] + 1], **_space(config))) if i in run)
     full = {}
-    # the selected scales are described in full (their levels computed again: holding every
-    # level of a large high image in memory would cost several full-resolution copies)
-    levels = scale_space(probed.view.image, [scales[i] for i in probed.run], **_space(config))
-    for i, level in zip(probed.run, levels):
-        kp = detected[i][0]
-        desc = _describe(level, kp, config, whitening) if probed.probing else detected[i][1]
+    for i, level in levels:
+        kp, desc, _ = detected[i]
+        if probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
+            rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
+                             whitening)
+            desc = _joined(desc, rest, config.probe.points)
         full[i] = _full_scale(level, kp, desc, low.described, low.image, config)
     outcomes: List[ScaleOutcome] = []
-    for n, s in enumerate(scales):
+    for n, s_ in enumerate(scales):
         if n in full:
             outcomes.append(full[n])
         else:
             # skipped: the probe judged it hopeless (not: too small, or no points at all)
-            row = ScaleRow(s=s, ratio=float("nan"), points=len(detected[n][0]), initial=0, kept=0,
-                           inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
+            row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n][0]), initial=0,
+                           kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         step()
     return outcomes
@@ -408,6 +432,11 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         ``order`` says whether the images were found in the order given; ``transform`` always
         maps the finer image's pixels to the coarser image's.
     """
+    f = working_factor(np.shape(low), config.low_max_side)
+    if f > 1.0:  # a very large low image: matched at its working size, answered in its pixels
+        small = replace(config, low_max_side=None, scales=working_scales(config.scales, f))
+        return in_original_low(match(shrink(as_float_image(low), f), high, small, progress),
+                               f, config)
     t0 = time.perf_counter()
     low = as_float_image(grey_levels(low, "low"))  # ValueError: bool, NaN, constant
     high = as_float_image(grey_levels(high, "high"))

@@ -236,3 +236,22 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     low = cv2.imread(str(DEMO_LOW))
     assert cv2.imread(str(out / "overlay.png")).shape == low.shape
     assert (out / "matches.png").is_file() and (out / "scales.png").is_file()
+
+
+@needs_pipeline
+def test_working_size_and_order_options_reach_the_config(tmp_path):
+    # demo_low is 419 px wide: a working size of 400 px shrinks it, 0 keeps the full size
+    shrunk = run(DEMO_LOW, DEMO_HIGH, "--working-size", "400", "--json", "-", "-q")
+    assert shrunk.exit_code == 0, shrunk.output
+    d = json.loads(shrunk.stdout)
+    assert d["config"]["low_max_side"] == 400 and d["evidence"]["low_working_factor"] > 1
+    full = json.loads(run(DEMO_LOW, DEMO_HIGH, "--working-size", "0", "--json", "-", "-q").stdout)
+    assert full["config"]["low_max_side"] is None
+    # the answer is in the original low pixels either way (within a pixel)
+    a, b = np.array(d["transform"]), np.array(full["transform"])
+    assert np.abs(a[:, 2] - b[:, 2]).max() < 1.0 and abs(d["resolution_ratio"] /
+                                                          full["resolution_ratio"] - 1) < 0.01
+    swapped = json.loads(run(DEMO_HIGH, DEMO_LOW, "--json", "-", "-q").stdout)
+    assert swapped["order"] == "swapped" and swapped["low"]["path"].endswith("demo_low.png")
+    given = run(DEMO_HIGH, DEMO_LOW, "--order", "given", "--no-views", "--json", "-", "-q")
+    assert given.exit_code == 1 and json.loads(given.stdout)["config"]["order"] == "given"

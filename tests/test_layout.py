@@ -28,3 +28,27 @@ def test_import_and_match_do_not_load_the_lab():
                          timeout=120)
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == "[] []"
+
+
+HELP_PROBE = """
+import sys
+import scalematch
+after_import = sorted(m for m in sys.modules if m.startswith("scalematch."))
+from scalematch.cli import main
+try:
+    main(["--help"])
+except SystemExit:
+    pass
+names = ("scalematch.pipeline", "scalematch.render", "scalematch.lab")
+print(after_import, sorted(m for m in sys.modules if m.startswith(names)))
+"""
+
+
+def test_import_and_help_load_neither_the_pipeline_nor_the_lab():
+    """``import scalematch`` loads its names on first use; the group's help lists the lab's
+    commands without importing them."""
+    run = subprocess.run([sys.executable, "-c", HELP_PROBE], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().endswith("[] []"), run.stdout[-300:]
+    assert "lab" in run.stdout and "bench" in run.stdout  # listed all the same

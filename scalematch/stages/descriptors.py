@@ -267,10 +267,10 @@ def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
     b1 = (b0 + 1) % nb
     # per-sample orientation histograms (M, ns, ns, nb), linear in angle
     per = np.zeros((m, ns, ns, nb), np.float32)
-    np.put_along_axis(per, b0[..., None], (mag * (1 - f))[..., None], axis=3)
-    per_b1 = np.zeros_like(per)
-    np.put_along_axis(per_b1, b1[..., None], (mag * f)[..., None], axis=3)
-    per += per_b1
+    flat = per.reshape(-1, nb)  # a view: one row per sample; b0 != b1, so no sum collides
+    samples = np.arange(flat.shape[0])
+    flat[samples, b0.ravel()] = (mag * (1 - f)).ravel()
+    flat[samples, b1.ravel()] = (mag * f).ravel()
     # spatial pooling into g x g cells, bilinear between cell centres (Lowe's trilinear weights)
     pos = (np.arange(ns) + 0.5) / spc - 0.5  # sample position in cell units
     cell = np.arange(g)

@@ -1,0 +1,81 @@
+"""The working size of a large low image: the same answer, in the original low pixels."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from scalematch import Config, match
+from scalematch.lab.evaluation import reprojection_error
+from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.stages.decision import mean_transfer_gap
+from scalematch.working import shrink, working_factor, working_scales
+
+#: a match at the working size against the truth, original low px (a working pixel is f of them)
+ERROR_TOL_PX = 2.0
+#: full size against working size, original low px, mean over a grid spanning the high image
+GAP_TOL_PX = 1.0
+
+
+def _pair(photo, ratio, seed):
+    return make_zoom_pair(photo, ratio, np.random.default_rng(seed), high_size=(320, 240))
+
+
+def test_shrink_follows_the_pixel_centre_convention():
+    """Working pixel x_w holds the original pixels around f * x_w + (f - 1) / 2 (x and y),
+    within 0.06 original px (INTER_AREA's rounded area weights; measured 0.05 at f = 2.34)."""
+    h, w, f = 400, 600, 600 / 256
+    ramp_x = np.tile(np.arange(w, dtype=np.float32), (h, 1))
+    ramp_y = np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))
+    small_x, small_y = shrink(ramp_x, f), shrink(ramp_y, f)
+    assert small_x.shape == (round(h / f), 256)
+    xs = np.arange(2, small_x.shape[1] - 2)
+    ys = np.arange(2, small_y.shape[0] - 2)
+    assert np.abs(small_x[3, xs] - (f * xs + (f - 1) / 2)).max() < 0.06
+    assert np.abs(small_y[ys, 3] - (f * ys + (f - 1) / 2)).max() < 0.06
+
+
+def test_factor_and_scales():
+    assert working_factor((768, 1024), 2048) == 1.0
+    assert working_factor((4000, 6000), 2048) == pytest.approx(6000 / 2048)
+    assert working_factor((4000, 6000), None) == 1.0
+    scales = working_scales((1.0, 2.0, 4.0), 3.0)
+    # the configured ones, and upward to f times the largest (ratio 4 in original px)
+    assert scales == (1.0, 2.0, 4.0, 6.0, 12.0)
+
+
+@pytest.mark.parametrize("ratio,seed", [(2.0, 0), (3.0, 1)])
+def test_working_size_gives_the_full_size_answer(raccoon, ratio, seed):
+    pair = _pair(raccoon, ratio, seed)
+    side = max(pair.low.shape) // 2  # f = 2: the low image matched at half its size
+    full = match(pair.low, pair.high, Config(low_max_side=None))
+    small = match(pair.low, pair.high, Config(low_max_side=side))
+    assert full.matched and small.matched, small.reason
+    assert small.evidence["low_working_factor"] == pytest.approx(max(pair.low.shape) / side)
+    assert small.config.low_max_side == side
+    err = reprojection_error(small.transform, pair.truth, pair.high.shape, pair.low.shape)
+    assert err < ERROR_TOL_PX
+    assert mean_transfer_gap(small.transform, full.transform, pair.high.shape) < GAP_TOL_PX
+    assert small.resolution_ratio == pytest.approx(full.resolution_ratio, rel=0.02)
+    # inliers in original low px: each fits the transform within the RANSAC threshold (in
+    # working px, so f times it here)
+    f = small.evidence["low_working_factor"]
+    fit = cv2.transform(small.inliers[None, :, :2], small.transform)[0]
+    assert np.linalg.norm(fit - small.inliers[:, 2:], axis=1).max() <= f * 3.0 + 1e-6
+    assert abs(small.best_scale / ratio - 1) < 0.3  # reported in the original pixels
+
+
+def test_working_size_in_the_swapped_order(raccoon):
+    """The first image given is the finer one: it is the one shrunk, the answer still maps
+    the finer image's original pixels to the coarser one's."""
+    pair = _pair(raccoon, 3.0, 2)
+    result = match(pair.high, pair.low, Config(low_max_side=200))  # 320 px -> f = 1.6
+    assert result.matched and result.order == "swapped", result.reason
+    err = reprojection_error(result.transform, pair.truth, pair.high.shape, pair.low.shape)
+    assert err < ERROR_TOL_PX
+
+
+def test_low_max_side_is_checked():
+    with pytest.raises(ValueError, match="low_max_side"):
+        Config(low_max_side=10)
