@@ -79,3 +79,28 @@ def boat_pairs(shared: PathLike) -> List[Tuple[np.ndarray, np.ndarray, np.ndarra
         h = np.loadtxt(hfile, dtype=np.float64).reshape(3, 3)
         out.append((read_grey(img), high, h / h[2, 2], f"boat 1->{n}"))
     return out
+
+
+def study_photos(images, n_photos: Optional[int], silent: bool):
+    """(paths, progress) of a study command: the images given, else the shared photos, the
+    first ``n_photos`` of them; ``progress(name)`` prints "[k/N] name" (None when silent).
+
+    Raises ``click.ClickException`` when there is no photo.
+    """
+    import click
+
+    if images:
+        paths = [Path(p) for p in images]
+    else:
+        shared = find_shared()
+        paths = list_photos(shared) if shared is not None else []
+    if not paths:
+        raise click.ClickException("no photos: give image paths, or set SCALEMATCH_SHARED to a "
+                                   "folder with data/photos")
+    if n_photos is not None:
+        paths = paths[:n_photos]
+    total = len(paths)
+    counter = iter(range(1, total + 1))
+    progress = None if silent else (
+        lambda name: click.echo(f"[{next(counter)}/{total}] {name}", err=True))
+    return paths, progress

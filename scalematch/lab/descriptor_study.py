@@ -45,7 +45,7 @@ from ..stages.descriptors import GradientParams, JetParams, describe_gradients, 
 from ..stages.detector import HarrisParams, detect_one
 from ..stages.mahalanobis import load_covariance, whiten
 from ..stages.scalespace import Level
-from .datasets import find_shared, list_photos, load_photo
+from .datasets import load_photo, study_photos
 from .repeatability import choose_crop
 
 PathLike = Union[str, Path]
@@ -367,20 +367,7 @@ def descriptor_study_command(images, n_photos, seed, out, silent):
 
     Example: python -m scalematch.lab.descriptor_study --photos 38 --out docs/DESCRIPTORS.md
     """
-    if images:
-        paths = [Path(p) for p in images]
-    else:
-        shared = find_shared()
-        paths = list_photos(shared) if shared is not None else []
-    if not paths:
-        raise click.ClickException("no photos: give image paths, or set SCALEMATCH_SHARED to a "
-                                   "folder with data/photos")
-    if n_photos is not None:
-        paths = paths[:n_photos]
-    total = len(paths)
-    counter = iter(range(1, total + 1))
-    progress = None if silent else (
-        lambda name: click.echo(f"[{next(counter)}/{total}] {name}", err=True))
+    paths, progress = study_photos(images, n_photos, silent)
     params = StudyParams()
     t0 = time.perf_counter()
     results, skipped = run_study(paths, seed, params, progress)

@@ -62,7 +62,7 @@ import numpy as np
 
 from ..geometry import apply, compose
 from ..stages.detector import HarrisParams, detect, detect_one
-from .datasets import find_shared, list_photos, load_photo
+from .datasets import load_photo, study_photos
 from .synthetic import most_textured_crop, zoom_warp
 
 PathLike = Union[str, Path]
@@ -591,12 +591,6 @@ def write_outputs(table: StudyTable, out_dir: PathLike) -> List[Path]:
 # Command line
 # --------------------------------------------------------------------------------------------
 
-def default_photos() -> List[Path]:
-    """The sorted photos of the shared folder ($SCALEMATCH_SHARED or <repo>/../shared)."""
-    shared = find_shared()
-    return list_photos(shared) if shared is not None else []
-
-
 def _parse_factors(text: str) -> Tuple[float, ...]:
     try:
         vals = tuple(float(t) for t in text.replace(" ", "").split(",") if t)
@@ -642,16 +636,7 @@ def repeatability_command(images, n_photos, factors, seed, angle, crop, out_dir,
         params = StudyParams(crop_w=cw, crop_h=ch, angle_deg=angle)
     except ValueError as err:
         raise click.BadParameter(str(err), param_hint="--crop")
-    paths = [Path(p) for p in images] if images else default_photos()
-    if not paths:
-        raise click.ClickException("no photos: give image paths, or set SCALEMATCH_SHARED to a "
-                                   "folder with data/photos")
-    if n_photos is not None:
-        paths = paths[:n_photos]
-    total = len(paths)
-    counter = iter(range(1, total + 1))
-    progress = None if silent else (
-        lambda name: click.echo(f"[{next(counter)}/{total}] {name}", err=True))
+    paths, progress = study_photos(images, n_photos, silent)
     table = run_study(paths, fac, seed, params, progress)
     for name, reason in table.skipped:
         click.echo(f"skipped {name}: {reason}", err=True)
