@@ -460,7 +460,12 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     attempts: List[Attempt] = []
     searches = 0  # every view probed counts: the best ones are chosen among them all
     winner: Optional[Attempt] = None
-    for views in passes:
+    matches: List[Attempt] = []  # every reliable match found so far
+
+    def strength(a: Attempt) -> float:
+        return a.verdict.evidence["log10_nfa"]
+
+    for k, views in enumerate(passes):
         found: List[Attempt] = []
         for swapped in directions:
             lo_img, hi_img = images[swapped]
@@ -487,9 +492,17 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                         break  # overwhelming: no other view of this pass can do better
             if found:
                 break
-        if found:
-            winner = max(found, key=lambda a: a.verdict.evidence["inliers"])
-            break
+        matches += found
+        if matches:
+            best = min(matches, key=strength)
+            # a plain match on a handful of inliers can be a repeated structure seen through a
+            # viewpoint change: the first pass of views gets to show a stronger answer
+            weak = best.verdict.evidence["inliers"] < config.views.confirm_below_inliers
+            if not (weak and k == 0 and len(passes) > 1):
+                winner = best
+                break
+    if winner is None and matches:
+        winner = min(matches, key=strength)
     timings = {"total": time.perf_counter() - t0}
     if winner is None:
         first = attempts[0]

@@ -44,6 +44,11 @@ class ViewParams:
     #: probe score went above 4 in either order, while the views that solved tilted zoom pairs
     #: scored 5 to 80 (a chance similarity fit of the probe's 100 points finds 2-4 inliers)
     min_probe_score: float = 5.0
+    #: a match of the plain search with fewer distinct inliers than this is compared with the
+    #: first pass of views, and the stronger (lower log10 NFA) answer is taken: a tilted view
+    #: of a repeated facade gave a plain similarity of 6 wrong inliers at log10 NFA -12.6 on a
+    #: tilted zoom pair (t = 2.83) where the views find the truth (docs/BENCHMARKS.md)
+    confirm_below_inliers: int = 12
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0
