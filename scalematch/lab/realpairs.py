@@ -274,15 +274,19 @@ def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, 
     return out
 
 
-def markdown(summary, tilt_rows, command: str, meta: Dict[str, Any]) -> str:
+def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]]) -> str:
+    """The Markdown section: the runs whose rows it reports, the table per set, the tilt table."""
     lines = ["## Real pairs, either order, tilt (issue 9)", "",
-             f"Command: `{command}`  ", f"Run: {meta['date']}, {meta['machine']}, load average "
-             f"at start {meta['load']}, seed {meta['seed']}, photos: every {PHOTO_STEP}rd of "
-             f"../shared/data/photos ({meta['photos']})."
-             + (f" Rows of methods not run here come from `{meta['merged']}` (same pairs, "
-                f"same seed)." if meta.get("merged") else ""), "",
+             "Protocol: [EVALUATION-TILT.md](EVALUATION-TILT.md). Runs reported (the same pairs: "
+             "same seed and photos):", ""]
+    for m in runs:
+        lines.append(f"- `{m.get('command', '?')}`: {m.get('date', '?')}, {m.get('machine', '?')}, "
+                     f"load average at start {m.get('load', '?')}, seed {m.get('seed', '?')}, "
+                     f"{m.get('photos', '?')} photos (every {PHOTO_STEP}rd of "
+                     f"../shared/data/photos)")
+    lines += ["",
              "Success: grid error < 3 px in the coarser image, judged from the finer image to the "
-             "coarser one whichever order the method answers in. \"wrong\" counts transforms "
+             "coarser one whichever order the method answers in. \"wrong claims\" counts transforms "
              "claimed that are not a success (on unrelated pairs: any claim). ASIFT ran on a "
              "subset (column pairs).", "",
              "| set | method | pairs | solved | rate | median error px | wrong claims | "
@@ -390,17 +394,18 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
             done = [r for r in rows if r["set"] == s and r["method"] == m]
             log(f"{s:15s} {m:10s} {sum(r['success'] for r in done)}/{len(done)} solved, "
                 f"{sum(r['false_claim'] for r in done)} false, {time.perf_counter() - t0:.0f} s")
+    meta["command"] = ("scalematch lab real-pairs " + " ".join(sys.argv[3:])).strip()
+    runs = []
     if names:
         (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
         (out_dir / "meta.json").write_text(json.dumps(meta))
-    elif merge_rows and (merge_rows[0].parent / "meta.json").is_file():  # the run's own figures
-        meta.update(json.loads((merge_rows[0].parent / "meta.json").read_text()))
+        runs.append(meta)
     for extra in merge_rows:
         seen = {(q["set"], q["method"]) for q in rows}
         rows = rows + [r for r in json.loads(extra.read_text()) if (r["set"], r["method"]) not in seen]
-        meta["merged"] = ", ".join(str(m) for m in merge_rows)
-    command = "scalematch lab real-pairs " + " ".join(sys.argv[3:] if len(sys.argv) > 3 else [])
-    text = markdown(summarise(rows), by_tilt(rows), command.strip(), meta)
+        info = extra.parent / "meta.json"
+        runs.append(json.loads(info.read_text()) if info.is_file() else {"command": str(extra)})
+    text = markdown(summarise(rows), by_tilt(rows), runs)
     (out_dir / "real-pairs.md").write_text(text)
     click.echo(text)
     if write_doc is not None:
