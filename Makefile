@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_OUT := out/demo
 
-.PHONY: setup demo test test-fast bench repeatability covariance clean
+.PHONY: setup demo test test-fast bench bench-real repeatability covariance clean
 
 setup: $(STAMP)
 
@@ -27,6 +27,10 @@ test: $(STAMP)
 ## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
 bench: $(STAMP)
 	$(BIN)/scalematch lab bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
+
+## the real-pair benchmark of issue 9 (needs ../shared): Oxford both ways, tilted and swapped pairs
+bench-real: $(STAMP)
+	$(BIN)/scalematch lab real-pairs --write-doc docs/BENCHMARKS.md
 
 ## the repeatability study of issue 2 (needs ../shared)
 repeatability: $(STAMP)
