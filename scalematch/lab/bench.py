@@ -815,7 +815,12 @@ def _csv_methods(ctx, param, value):
 
 def _command_line(ctx: click.Context) -> str:
     args = sys.argv[1:]
-    if ctx.parent is not None and args and args[0] == ctx.info_name:
+    # drop the group and command names the user typed (``lab bench`` or ``bench``): the command
+    # path names them already
+    names = ctx.command_path.split()[1:]
+    while args and names and args[0] == names[0]:
+        args, names = args[1:], names[1:]
+    while args and args[0] == ctx.info_name:
         args = args[1:]
     return " ".join([ctx.command_path, shlex.join(args)]).strip()
 
