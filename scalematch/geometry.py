@@ -70,25 +70,48 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
     return ratio, angle, (float(tr[0]), float(tr[1]))
 
 
+def as_matrix3(t: np.ndarray) -> np.ndarray:
+    """The 3x3 matrix of a 2x3 affine map (last row 0 0 1) or of a 3x3 homography (as given).
+
+    >>> as_matrix3([[2.0, 0.0, 1.0], [0.0, 2.0, 0.0]]).tolist()
+    [[2.0, 0.0, 1.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    t = np.asarray(t, dtype=np.float64)
+    return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
+
+
+def _like(m3: np.ndarray, affine: bool) -> np.ndarray:
+    """A 3x3 product back in the shape of its inputs: 2x3 for affine maps, else w = 1."""
+    return m3[:2] if affine else m3 / m3[2, 2]
+
+
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """2x3 of ``a o b`` (apply b first, then a).
+    """``a o b`` (apply b first, then a): 2x3 when both are 2x3, else a 3x3 with w = 1.
 
     Parameters
     ----------
-    a, b : (2, 3) arrays
+    a, b : (2, 3) or (3, 3) arrays
 
     Returns
     -------
-    (2, 3) float64 array
+    (2, 3) or (3, 3) float64 array
 
     >>> shift = similarity_matrix(1.0, 0.0, 10.0, 0.0)
     >>> half = similarity_matrix(0.5, 0.0)
     >>> compose(half, shift).tolist()    # shift, then halve
     [[0.5, 0.0, 5.0], [0.0, 0.5, 0.0]]
     """
-    a3 = np.vstack([a, [0, 0, 1]])
-    b3 = np.vstack([b, [0, 0, 1]])
-    return (a3 @ b3)[:2]
+    affine = np.shape(a) == (2, 3) and np.shape(b) == (2, 3)
+    return _like(as_matrix3(a) @ as_matrix3(b), affine)
+
+
+def invert(t: np.ndarray) -> np.ndarray:
+    """The inverse map, in the shape given (2x3 affine, or 3x3 with w = 1).
+
+    >>> invert(similarity_matrix(0.5, 0.0, 1.0, 2.0)).tolist()
+    [[2.0, 0.0, -2.0], [0.0, 2.0, -4.0]]
+    """
+    return _like(np.linalg.inv(as_matrix3(t)), np.shape(t) == (2, 3))
 
 
 def apply(t: np.ndarray, xy: np.ndarray) -> np.ndarray:

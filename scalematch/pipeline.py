@@ -16,7 +16,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .config import Config
-from .geometry import compose, similarity_parts
+from .geometry import compose, invert, similarity_parts
 from .imageio import grey_levels
 from .result import MatchResult, ScaleRow
 from .stages.constraints import orientation_groups, semi_local_filter
@@ -113,22 +113,18 @@ def _part(kp: Keypoints, rows: slice) -> Keypoints:
     return Keypoints(s=kp.s, xy=kp.xy[rows], response=kp.response[rows])
 
 
-def probe_score(high: Described, low: Described, config: Config) -> float:
-    """How promising a scale looks from the initial matches of its strongest points alone.
+def probe_scores(highs: Sequence[Described], low: Described, config: Config) -> List[float]:
+    """How promising each scale looks from the initial matches of its strongest points alone.
 
     The paper (section 5) notes that the initial matches already point at the best scale.
-    ``high`` holds the ``ProbeParams.points`` strongest points of the scale. In the paper mode
-    the score is their number of candidate matches. In the default mode it is the number of
-    inliers of a quick similarity fit to the candidates in the dominant rotation peak, counted
-    only when the fit's ratio agrees with the scale: rotation alone cannot rank scales where
-    the scene's edges share a few directions (facades), geometry can.
+    Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
+    paper mode a scale's score is their number of candidate matches. In the default mode it is
+    the number of inliers of a quick similarity fit to the candidates in the dominant rotation
+    peak, counted only when the fit's ratio agrees with the scale: rotation alone cannot rank
+    scales where the scene's edges share a few directions (facades), geometry can. One
+    nearest-neighbour search serves every scale (each candidate depends on its own row only;
+    one large product is faster than many small ones).
     """
-    return _score(high, low, match_descriptors(high.desc, low.desc, config.matcher), config)
-
-
-def probe_scores(highs: Sequence[Described], low: Described, config: Config) -> List[float]:
-    """``probe_score`` of several scales with one nearest-neighbour search (the same result:
-    each candidate depends on its own row only; one large product is faster than many small)."""
     if not highs:
         return []
     cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
@@ -169,13 +165,6 @@ def select_scales(scores: List[float], keep: int) -> List[int]:
         chosen.update(j for j in (i - 1, i, i + 1) if 0 <= j < len(scores))
     return sorted(chosen)
 
-
-
-def _check_images(low: np.ndarray, high: np.ndarray) -> None:
-    for name, img in (("low", low), ("high", high)):
-        if min(img.shape) < MIN_SIDE_PX:
-            raise ValueError(f"the {name}-resolution image is {img.shape[1]}x{img.shape[0]} px; "
-                             f"at least {MIN_SIDE_PX} px on each side is needed")
 
 
 @dataclass(frozen=True)
@@ -292,17 +281,6 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
     return outcomes
 
 
-def search_scales(view: View, low: LowFeatures, config: Config, whitening,
-                  step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
-    """Steps 1-6 at every scale of one view of the high image (the paper's one-to-many search).
-
-    With the probe on, every scale is detected and scored from its strongest points, and only
-    the best scales and their neighbours are matched in full.
-    """
-    return finish_view(probe_view(view, low, config, whitening, step), low, config, whitening,
-                       step)
-
-
 @dataclass(frozen=True)
 class Attempt:
     """One search: a direction (which image is taken as the finer one) and a view of it."""
@@ -311,6 +289,11 @@ class Attempt:
     view: View = field(repr=False)
     outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
     verdict: Decision = field(repr=False)
+
+
+def _winning_outcome(attempt: Attempt) -> ScaleOutcome:
+    """The outcome of the scale the decision chose."""
+    return next(o for o in attempt.outcomes if o.row.s == attempt.verdict.best_scale)
 
 
 def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.ndarray, str]:
@@ -328,16 +311,14 @@ def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.nda
     model = "homography" if config.model == "homography" else "affine"
     # every candidate of the winning scale, not only the view's similarity inliers: the sampled
     # tilt differs from the true one, so the similarity holds on part of the image only
-    best = next(o for o in attempt.outcomes if o.row.s == v.best_scale)
-    est = estimate(model, to_high(attempt.view, best.src), best.dst, config.ransac,
-                   seed=config.seed)
+    best = _winning_outcome(attempt)
+    cand_src = to_high(attempt.view, best.src)
+    est = estimate(model, cand_src, best.dst, config.ransac, seed=config.seed)
     if est.transform is not None and est.n_inliers >= len(src):
-        return est.transform, np.hstack([to_high(attempt.view, best.src)[est.inliers],
-                                         best.dst[est.inliers]]), model
+        return est.transform, np.hstack([cand_src[est.inliers], best.dst[est.inliers]]), model
     est = estimate(model, src, dst, config.ransac, seed=config.seed)
     if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
-        composed = compose(v.transform, attempt.view.to_view) if v.transform.shape == (2, 3) \
-            else v.transform @ np.vstack([attempt.view.to_view, [0.0, 0.0, 1.0]])
+        composed = compose(v.transform, attempt.view.to_view)
         return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
     inl = est.inliers
     return est.transform, np.hstack([src[inl], dst[inl]]), model
@@ -354,7 +335,7 @@ def _richer_model(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attem
     check = config.model_check
     if not check.enabled or model != "similarity" or not attempt.view.is_identity:
         return t, inliers, model
-    best = next(o for o in attempt.outcomes if o.row.s == attempt.verdict.best_scale)
+    best = _winning_outcome(attempt)
     k = len(inliers)
     for richer in check.models:
         est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
@@ -397,10 +378,7 @@ def _as_finer_to_coarser(t: np.ndarray, inliers: np.ndarray, swapped: bool, mode
     ratio = similarity_parts(t)[0]
     if not model_of(model).has_ratio or not (math.isfinite(ratio) and ratio < 1.0):
         return t, inliers, swapped
-    t3 = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-    inv = np.linalg.inv(t3)
-    inv = inv[:2] if t.shape == (2, 3) else inv / inv[2, 2]
-    return inv, inliers[:, [2, 3, 0, 1]], not swapped
+    return invert(t), inliers[:, [2, 3, 0, 1]], not swapped
 
 
 def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
@@ -438,9 +416,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         return in_original_low(match(shrink(as_float_image(low), f), high, small, progress),
                                f, config)
     t0 = time.perf_counter()
-    low = as_float_image(grey_levels(low, "low"))  # ValueError: bool, NaN, constant
+    # ValueError: bool, NaN, constant, or a side under MIN_SIDE_PX
+    low = as_float_image(grey_levels(low, "low"))
     high = as_float_image(grey_levels(high, "high"))
-    _check_images(low, high)
     cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
     config = replace(config, covariance_used=cov.source) if cov is not None else config
     whitening = cov.whitening() if cov is not None else None
@@ -476,7 +454,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                       for v in views_of(hi_img, views, config.views)]
             searches += len(probed)
             chosen = sorted(probed, key=lambda p: -p.score)
-            if len(views) > 1 or not views[0] == (1.0, 0.0):  # a pass of simulated views
+            if k > 0:  # a pass of simulated views (pass 0 is the image itself)
                 chosen = [p for p in chosen[:config.views.full_searches]
                           if p.score >= config.views.min_probe_score]
             count["total"] += len(chosen) * per_search // 2

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from .chart import bar_chart
-from .geometry import footprint, similarity_parts
+from .geometry import as_matrix3, footprint, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult
 from .stages.estimator import model_of
@@ -45,11 +45,6 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX
 
 # --------------------------------------------------------------------------- helpers
 
-def _as3(t: np.ndarray) -> np.ndarray:
-    t = np.asarray(t, dtype=np.float64)
-    return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-
-
 def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
                size: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray]:
     """high warped onto a ``size`` (w, h) canvas by ``transform``; (image, mask 0/255).
@@ -58,7 +53,7 @@ def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
     not alias (a plain bilinear warp at 10x shrink keeps 1 pixel in 100).
     """
     ratio, _, _ = similarity_parts(transform)
-    t3 = _as3(transform)
+    t3 = as_matrix3(transform)
     img = high_bgr
     f = 1.0 / ratio if np.isfinite(ratio) and ratio > 1.0 else 1.0
     if f < 0.9:

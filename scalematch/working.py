@@ -25,7 +25,7 @@ from typing import Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .geometry import compose, similarity_parts
+from .geometry import as_matrix3, compose, invert, similarity_parts
 from .result import MatchResult
 from .stages.estimator import model_of
 
@@ -50,20 +50,17 @@ def working_scales(scales: Sequence[float], f: float) -> Tuple[float, ...]:
 
 
 def _to_original(f: float) -> np.ndarray:
-    """S (3x3): working low px -> original low px."""
+    """S (2x3): working low px -> original low px."""
     c = (f - 1.0) / 2.0
-    return np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
+    return np.array([[f, 0.0, c], [0.0, f, c]])
 
 
 def _transform_in_original(t: np.ndarray, model: str, f: float, low_is_coarser: bool):
     s = _to_original(f)
-    s_inv = np.linalg.inv(s)
     if not model_of(model).has_ratio:  # the fundamental matrix: x_coarse^T F x_fine = 0
+        s_inv = as_matrix3(invert(s))
         return s_inv.T @ t if low_is_coarser else t @ s_inv
-    if t.shape == (2, 3):
-        return compose(s[:2], t) if low_is_coarser else compose(t, s_inv[:2])
-    out = s @ t if low_is_coarser else t @ s_inv
-    return out / out[2, 2]
+    return compose(s, t) if low_is_coarser else compose(t, invert(s))
 
 
 def in_original_low(result: MatchResult, f: float, config) -> MatchResult:

@@ -36,7 +36,7 @@ import click
 import cv2
 import numpy as np
 
-from ..geometry import similarity_parts
+from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RANSAC_PX, RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
 from .datasets import find_shared, list_photos, scene_of
 from .evaluation import is_success, reprojection_error
@@ -81,19 +81,14 @@ class Pair:
     tilt: float = 1.0
 
 
-def _h3(t: np.ndarray) -> np.ndarray:
-    t = np.asarray(t, np.float64)
-    return np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t / t[2, 2]
-
-
 def canonical(pair: Pair, t: Optional[np.ndarray], maps_high_to_low: bool) -> Optional[np.ndarray]:
     """The method's transform turned to the pair's finer -> coarser direction."""
     if t is None:
         return None
-    t = _h3(t)
+    t = as_matrix3(t)
     # the truth maps high -> low when the pair is not swapped, low -> high when it is
     same = maps_high_to_low != pair.swapped
-    return t if same else np.linalg.inv(t)
+    return t if same else invert(t)
 
 
 def pair_error(pair: Pair, t: Optional[np.ndarray]) -> float:
@@ -131,7 +126,7 @@ def synthetic_sets(paths: Sequence[Path], seed: int,
                    log=lambda s: None) -> Dict[str, List[Pair]]:
     from ..imageio import read_grey
 
-    zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, _h3(p.truth), False,
+    zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, as_matrix3(p.truth), False,
                  "similarity", p.ratio)
             for p in pairs_from_photos(paths, ZOOM_RATIOS, seed)]
     log(f"made {len(zoom)} zoom pairs")
@@ -143,7 +138,7 @@ def synthetic_sets(paths: Sequence[Path], seed: int,
                 p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
                                      source=path.name)
                 tilted.append(Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
-                                   _h3(p.truth), False, "homography", r, t))
+                                   as_matrix3(p.truth), False, "homography", r, t))
     log(f"made {len(tilted)} tilted pairs")
     swap = lambda ps, name: [Pair(name, p.name, p.high, p.low, p.truth, True, p.model, p.ratio,
                                   p.tilt) for p in ps]

@@ -22,6 +22,8 @@ from typing import List, Sequence, Tuple
 import cv2
 import numpy as np
 
+from ..geometry import apply, compose, invert
+
 
 @dataclass(frozen=True)
 class ViewParams:
@@ -118,8 +120,8 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     img = cv2.resize(img, (nw, ch), interpolation=cv2.INTER_LINEAR)
     inside = cv2.resize(inside, (nw, ch), interpolation=cv2.INTER_NEAREST)
     sx = nw / cw
-    shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    to_view = (shrink @ np.vstack([turn, [0.0, 0.0, 1.0]]))[:2]
+    shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, 1.0, 0.0]])
+    to_view = compose(shrink, turn)
     dist = cv2.distanceTransform(inside, cv2.DIST_L2, 3)
     return View(float(tilt), float(longitude_deg), img, to_view, dist)
 
@@ -137,8 +139,7 @@ def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:
 
 def to_high(view: View, xy: np.ndarray) -> np.ndarray:
     """View px (N, 2) -> high-image px (N, 2)."""
-    inv = cv2.invertAffineTransform(view.to_view)
-    return np.asarray(xy, np.float64).reshape(-1, 2) @ inv[:, :2].T + inv[:, 2]
+    return apply(invert(view.to_view), xy)
 
 
 def views_of(high: np.ndarray, pairs: Sequence[Tuple[float, float]],
