@@ -13,12 +13,8 @@ import dataclasses
 import importlib
 import importlib.machinery
 import importlib.util
-import json
 import math
-import os
 import sys
-import tempfile
-import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 

@@ -50,7 +50,7 @@ from .datasets import boat_pairs, find_shared, list_photos, scene_of
 from .evaluation import SUCCESS_PX, is_success, reprojection_error, similarity_floor
 from ..geometry import similarity_parts
 from ..imageio import read_grey
-from .synthetic import ZoomPair, pair_rng, pairs_from_photos, unrelated_indices, zoom_pair_from_crop
+from .synthetic import ZoomPair, pairs_from_photos, unrelated_indices, zoom_pair_from_crop
 
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
 RATIOS = (2, 3, 4, 6, 8, 10)

@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from ..geometry import as_matrix3, invert, similarity_parts
-from .baselines import RANSAC_PX, RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
+from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
 from .datasets import find_shared, list_photos, scene_of
 from .evaluation import is_success, reprojection_error
 from .synthetic import TILTS, make_tilted_pair, pair_rng, pairs_from_photos, unrelated_from_pairs
