@@ -398,8 +398,9 @@ def matching_options(f: Callable) -> Callable:
                      help="When nothing matches, simulate tilted views of the finer image "
                           "(oblique shots; slower on pairs that do not match)."),
         click.option("--working-size", type=click.IntRange(min=0), default=None, metavar="PX",
-                     help="Match a low image whose longer side exceeds PX at that size and give "
-                          "the answer in its own pixels (0: always full size). [default: 2048]"),
+                     help="Match an image whose longer side exceeds PX at that size and give "
+                          "the answer in its own pixels (0: always full size; the high image "
+                          "only with --order auto). [default: 2048]"),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
@@ -447,7 +448,8 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                                  f"views.enabled={kwargs.pop('views')}"))
         working = kwargs.pop("working_size")
         if working is not None:  # 0: always full size
-            config = dataclasses.replace(config, low_max_side=working or None)
+            config = dataclasses.replace(config, low_max_side=working or None,
+                                         high_max_side=working or None)
     except ValueError as exc:
         raise InputError(str(exc))
     for _, paths, typ, _ in THRESHOLD_OPTIONS:  # a --set value for a named threshold
@@ -533,11 +535,12 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     except OSError as exc:  # a file the configuration names is missing (e.g. --set ..._path=)
         raise InputError(str(exc))
 
-    text = result.to_json(low, high, low_grey.shape, high_grey.shape)
-    if json_path == "-":
-        click.echo(text, nl=False)
-    elif json_path:
-        write_text(Path(json_path), text, "--json")
+    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
+        text = result.to_json(low, high, low_grey.shape, high_grey.shape)
+        if json_path == "-":
+            click.echo(text, nl=False)
+        else:
+            write_text(Path(json_path), text, "--json")
     written: Dict[str, Path] = {}
     if out_dir is not None:
         from .render import write_outputs

@@ -57,7 +57,10 @@ def to_grey(image: np.ndarray) -> np.ndarray:
         img = img[:, :, 0]
     if img.ndim != 2:
         raise ImageError(f"unsupported image layout {img.shape}")
-    return np.ascontiguousarray(img, dtype=np.float32) * np.float32(scale)
+    out = np.array(img, dtype=np.float32, order="C")  # always a copy: the caller's stays intact
+    if scale != 1.0:  # in place: one pass and one image less (a 24 MP one: 40 ms)
+        out *= np.float32(scale)
+    return out
 
 
 def to_bgr8(image: np.ndarray) -> np.ndarray:
@@ -119,8 +122,39 @@ class Header(NamedTuple):
     scan: int  #: JPEG: offset of the first scan (its pixel data), else -1
 
 
+#: Pillow's default decompression-bomb guard, ``PIL.Image.MAX_IMAGE_PIXELS``: larger PNG files
+#: are left to Pillow, whose own limits then apply as for every other format
+_PILLOW_MAX_IMAGE_PIXELS = 89_478_485
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_header(data: bytes) -> Optional[Header]:
+    """What Pillow would read from a PNG file's header, without importing Pillow (40 ms of a
+    whole process, measured with ``python -X importtime``); None when it should judge.
+
+    The size is in the IHDR chunk, which comes first; an orientation can only come from an
+    eXIf chunk before the image data (IDAT), so a PNG without one shows as stored.
+    """
+    if not data.startswith(_PNG_SIGNATURE) or len(data) < 33 or data[12:16] != b"IHDR":
+        return None
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if not 0 < width * height <= _PILLOW_MAX_IMAGE_PIXELS:
+        return None
+    pos = len(_PNG_SIGNATURE)
+    while pos + 8 <= len(data):
+        kind = data[pos + 4:pos + 8]
+        if kind == b"IDAT":
+            return Header((width, height), 1, -1)
+        if kind == b"eXIf":
+            return None
+        pos += 12 + int.from_bytes(data[pos:pos + 4], "big")  # length, type, data, CRC
+    return None  # no image data: not a PNG to trust
+
+
 def header(data: bytes) -> Header:
     """The header of an image file, read by Pillow (``Image.open`` is lazy: no pixel is decoded).
+
+    A PNG file without an orientation is read directly (:func:`_png_header`): the same answer.
 
     A file Pillow does not recognise gives ``size=None``: OpenCV may still decode it, and its
     size is then checked after decoding. Pillow's own decompression-bomb limit
@@ -131,7 +165,10 @@ def header(data: bytes) -> Header:
     >>> header(png)
     Header(size=(40, 30), orientation=1, scan=-1)
     """
-    from PIL import Image  # imported when a file is read (46 ms), not with scalematch
+    png = _png_header(data)
+    if png is not None:
+        return png
+    from PIL import Image  # imported when a file is read (40-46 ms), not with scalematch
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # Pillow warns about corrupt EXIF and large images

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -27,8 +27,9 @@ from .stages.estimator import MIN_SAMPLE, Estimate, estimate, model_of, refine, 
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import Candidates, match_descriptors
 from .stages.scalespace import Level, as_float_image, scale_space
+from .stages.threads import thread_map
 from .stages.views import View, keep_inside, to_high, view_plan, views_of
-from .working import in_original_low, shrink, working_factor, working_scales
+from .working import direction_scales, in_original, shrink, working_factor
 
 #: Largest view of the high image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
@@ -255,19 +256,26 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
     """
     scales = sorted(config.scales)
     detected, run = probed.detected, probed.run
-    if not run or all(detected[i][2] is not None for i in run):
+    kept = all(detected[i][2] is not None for i in run)
+    if kept:
         levels = ((i, detected[i][2]) for i in run)
     else:  # the detection's cascade again, up to the largest scale run (bounded memory)
         levels = ((i, level) for i, level in enumerate(scale_space(
             probed.view.image, scales[:run[-1] + 1], **_space(config))) if i in run)
-    full = {}
-    for i, level in levels:
+
+    def one(item) -> ScaleOutcome:
+        i, level = item
         kp, desc, _ = detected[i]
         if probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
             rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
                              whitening)
             desc = _joined(desc, rest, config.probe.points)
-        full[i] = _full_scale(level, kp, desc, low.described, low.image, config)
+        return _full_scale(level, kp, desc, low.described, low.image, config)
+
+    if kept:  # every level in memory: the scales are matched side by side on threads
+        full = dict(zip(run, thread_map(one, list(levels))))
+    else:  # levels made one after the other by the cascade (bounded memory): in turn
+        full = {i: one((i, level)) for i, level in levels}
     outcomes: List[ScaleOutcome] = []
     for n, s_ in enumerate(scales):
         if n in full:
@@ -410,11 +418,24 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         ``order`` says whether the images were found in the order given; ``transform`` always
         maps the finer image's pixels to the coarser image's.
     """
-    f = working_factor(np.shape(low), config.low_max_side)
-    if f > 1.0:  # a very large low image: matched at its working size, answered in its pixels
-        small = replace(config, low_max_side=None, scales=working_scales(config.scales, f))
-        return in_original_low(match(shrink(as_float_image(low), f), high, small, progress),
-                               f, config)
+    f_low = working_factor(np.shape(low), config.low_max_side)
+    # a shrunk high image can become the coarser one: only the automatic order finds it then
+    f_high = working_factor(np.shape(high), config.high_max_side) \
+        if config.order == "auto" else 1.0
+    if f_low > 1.0 or f_high > 1.0:  # very large images: matched at their working size
+        low_w = shrink(as_float_image(low), f_low) if f_low > 1.0 else low
+        high_w = shrink(as_float_image(high), f_high) if f_high > 1.0 else high
+        inner = replace(config, low_max_side=None, high_max_side=None)
+        found = _search(low_w, high_w, inner, direction_scales(config.scales, f_low, f_high),
+                        progress)
+        return in_original(found, f_low, f_high, config)
+    return _search(low, high, config, {False: config.scales, True: config.scales}, progress)
+
+
+def _search(low: np.ndarray, high: np.ndarray, config: Config,
+            scales: Dict[bool, Tuple[float, ...]],
+            progress: Optional[Callable[[int, int], None]]) -> MatchResult:
+    """:func:`match` on images of their working size; ``scales[swapped]``: each direction's."""
     t0 = time.perf_counter()
     # ValueError: bool, NaN, constant, or a side under MIN_SIDE_PX
     low = as_float_image(grey_levels(low, "low"))
@@ -426,7 +447,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     directions = (False, True) if config.order == "auto" else (False,)
     plain = [[(1.0, 0.0)]]
     passes = plain + (view_plan(config.views) if model_of(config.model).has_ratio else [])
-    per_search = 2 * len(config.scales)  # progress steps: detect + match each scale
+    configs = {d: replace(config, scales=tuple(scales[d])) for d in directions}
     feats = {}
     count = {"done": 0, "total": 0}
 
@@ -447,10 +468,12 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         found: List[Attempt] = []
         for swapped in directions:
             lo_img, hi_img = images[swapped]
+            cfg = configs[swapped]
+            per_search = 2 * len(cfg.scales)  # progress steps: detect + match each scale
             if swapped not in feats:
                 feats[swapped] = describe_low(lo_img, config, whitening)
             count["total"] += len(views) * per_search // 2
-            probed = [probe_view(v, feats[swapped], config, whitening, step)
+            probed = [probe_view(v, feats[swapped], cfg, whitening, step)
                       for v in views_of(hi_img, views, config.views)]
             searches += len(probed)
             chosen = sorted(probed, key=lambda p: -p.score)
@@ -459,8 +482,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                           if p.score >= config.views.min_probe_score]
             count["total"] += len(chosen) * per_search // 2
             for p in chosen:
-                outcomes = tuple(finish_view(p, feats[swapped], config, whitening, step))
-                verdict = decide(outcomes, lo_img.shape, p.view.image.shape, config,
+                outcomes = tuple(finish_view(p, feats[swapped], cfg, whitening, step))
+                verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg,
                                  searches=searches)
                 attempt = Attempt(swapped, p.view, outcomes, verdict)
                 attempts.append(attempt)
@@ -498,6 +521,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     t, inliers = _pooled_refit(t, inliers, model, winner, config)
     t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
     evidence = dict(winner.verdict.evidence, searches=searches,
+                    search_order="swapped" if winner.swapped else "given",
                     view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)
     if not model_of(model).has_ratio:
         ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))

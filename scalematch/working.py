@@ -1,26 +1,30 @@
-"""The working size of a very large low-resolution image (issue 12).
+"""The working size of very large images (issue 12).
 
-A low image whose longer side exceeds ``Config.low_max_side`` is matched as a copy shrunk by
-the factor ``f = side / low_max_side`` (``cv2.INTER_AREA``, the same ``f`` on both axes), and
-the answer is given back in the original low image's pixels. With OpenCV's pixel-centre
+An image whose longer side exceeds its ``Config`` limit (``low_max_side``, ``high_max_side``)
+is matched as a copy shrunk by ``f = side / limit`` (``cv2.INTER_AREA``, the same ``f`` on both
+axes), and the answer is given back in the original pixels. With OpenCV's pixel-centre
 convention the working pixel ``x_w`` covers original pixels ``[x_w f, (x_w + 1) f)`` (edges), so
 
     x_original = f * x_working + (f - 1) / 2        (same for y)
 
-which is the similarity ``S`` below. A transform ``T`` (high px -> working low px) becomes
-``S o T``; in the other order (the low image found to be the finer one) ``T o S^-1``.
+which is the similarity ``S`` below. A transform ``T`` (finer image's working px -> coarser
+image's working px) becomes ``S_coarser o T o S_finer^-1``.
 
-Shrinking the low image by ``f`` multiplies the resolution ratio by ``f``, so the search runs on
-the configured scales extended upward to ``f`` times the largest: the ratios the configuration
-covers in the original pixels are all still searched. The per-scale table and ``best_scale``
-are reported in the original pixels (the working scale divided by ``f``; times ``f`` when the
-low image was found to be the finer one).
+Shrinking the low image by ``f_low`` and the high one by ``f_high`` multiplies the resolution
+ratio by ``f_low / f_high``. The search runs on the configured scales extended upward to
+``max(f_low / f_high, f_high / f_low)`` times the largest, in both orders, so every ratio the
+configuration covers in the original pixels (either way round) is still searched. A ratio that
+the shrinking brings below 1 is found in the other order: that is why the high image is shrunk
+only when the order is searched automatically. The per-scale table and ``best_scale`` are
+reported in the original pixels, in the direction of the search they come from
+(``evidence["search_order"]``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
-from typing import Optional, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -43,46 +47,79 @@ def shrink(image: np.ndarray, f: float) -> np.ndarray:
 
 
 def working_scales(scales: Sequence[float], f: float) -> Tuple[float, ...]:
-    """The scales to search on the shrunk low image: the configured ones, and each times ``f``
-    where that exceeds the largest (the configured ratio range, in original pixels)."""
+    """The scales to search on the shrunk images: the configured ones, and each times ``f``
+    where that exceeds the largest (``f = max(f_low / f_high, f_high / f_low)``: the
+    configured ratio range, in original pixels)."""
     top = max(scales)
     return tuple(sorted(set(scales) | {round(s * f, 3) for s in scales if s * f > top}))
 
 
+def direction_scales(scales: Sequence[float], f_low: float,
+                     f_high: float) -> Dict[bool, Tuple[float, ...]]:
+    """The working scales of each search direction (key: the order swapped?).
+
+    Shrinking multiplies a working ratio by ``h = f_low / f_high`` in the given direction (by
+    ``1 / h`` in the other). A direction with ``h >= 1`` searches the configured scales extended
+    upward to ``h`` times the largest (:func:`working_scales`); one with ``h < 1`` keeps only
+    the configured scales up to ``h`` times the largest: its smaller ratios are ratios below 1,
+    which the other direction searches.
+
+    >>> direction_scales((1.0, 2.0, 4.0, 8.0), 1.0, 4.0)
+    {False: (1.0, 2.0), True: (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)}
+    """
+    out = {}
+    for swapped, h in ((False, f_low / f_high), (True, f_high / f_low)):
+        if h >= 1.0:
+            out[swapped] = working_scales(scales, h)
+        else:
+            top = max(scales) * h * (1 + 1e-9)
+            out[swapped] = tuple(sorted(s for s in scales if s <= top)) or (min(scales),)
+    return out
+
+
 def _to_original(f: float) -> np.ndarray:
-    """S (2x3): working low px -> original low px."""
+    """S (2x3): working px -> original px of an image shrunk by ``f``."""
     c = (f - 1.0) / 2.0
     return np.array([[f, 0.0, c], [0.0, f, c]])
 
 
-def _transform_in_original(t: np.ndarray, model: str, f: float, low_is_coarser: bool):
-    s = _to_original(f)
+def _transform_in_original(t: np.ndarray, model: str, f_finer: float, f_coarser: float):
+    """``t`` (finer working px -> coarser working px) in the original pixels of both images."""
+    s_fine, s_coarse = _to_original(f_finer), _to_original(f_coarser)
     if not model_of(model).has_ratio:  # the fundamental matrix: x_coarse^T F x_fine = 0
-        s_inv = as_matrix3(invert(s))
-        return s_inv.T @ t if low_is_coarser else t @ s_inv
-    return compose(s, t) if low_is_coarser else compose(t, invert(s))
+        return as_matrix3(invert(s_coarse)).T @ t @ as_matrix3(invert(s_fine))
+    return compose(s_coarse, compose(t, invert(s_fine)))
 
 
-def in_original_low(result: MatchResult, f: float, config) -> MatchResult:
-    """``result`` of a match on the low image shrunk by ``f``, in the original low pixels.
+def in_original(result: MatchResult, f_low: float, f_high: float, config) -> MatchResult:
+    """``result`` of a match on the images shrunk by ``f_low`` and ``f_high``, in their
+    original pixels.
 
-    ``config`` is the configuration the caller asked for (recorded in the result).
+    ``config`` is the configuration the caller asked for (recorded in the result). A match
+    whose ratio in the original pixels is below 1 is turned round, as the pipeline does.
     """
-    low_is_coarser = result.order == "given"
-    # a scale is high px per low px: the low image's pixels grow by f (or, swapped, the finer's)
-    g = 1.0 / f if low_is_coarser else f
+    # a row's scale is finer px per coarser px of its search: original = working * f_fine / f_coarse
+    search_given = result.evidence.get("search_order", result.order) == "given"
+    g = f_high / f_low if search_given else f_low / f_high
     rows = tuple(replace(r, s=r.s * g, ratio=r.ratio * g) for r in result.scales)
-    evidence = dict(result.evidence, low_working_factor=f)
+    evidence = dict(result.evidence, low_working_factor=f_low, high_working_factor=f_high)
     out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config,
                   evidence=evidence)
     if not result.matched:
         return out
-    t = _transform_in_original(result.transform, result.model, f, low_is_coarser)
+    low_is_coarser = result.order == "given"
+    f_fine, f_coarse = (f_high, f_low) if low_is_coarser else (f_low, f_high)
+    t = _transform_in_original(result.transform, result.model, f_fine, f_coarse)
     inliers = np.array(result.inliers, dtype=np.float64)
-    cols = slice(2, 4) if low_is_coarser else slice(0, 2)
-    inliers[:, cols] = inliers[:, cols] * f + (f - 1.0) / 2.0
+    inliers[:, 0:2] = inliers[:, 0:2] * f_fine + (f_fine - 1.0) / 2.0
+    inliers[:, 2:4] = inliers[:, 2:4] * f_coarse + (f_coarse - 1.0) / 2.0
     if not model_of(result.model).has_ratio:
         return replace(out, transform=t, inliers=inliers)
+    ratio = similarity_parts(t)[0]
+    order = result.order
+    if math.isfinite(ratio) and ratio < 1.0:  # the shrinking swapped which image is finer
+        t, inliers = invert(t), inliers[:, [2, 3, 0, 1]]
+        order = "swapped" if low_is_coarser else "given"
     ratio, angle, tr = similarity_parts(t)
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
-                   rotation_deg=angle, translation=tr)
+                   rotation_deg=angle, translation=tr, order=order)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 from pathlib import Path
@@ -236,3 +237,31 @@ def test_random_and_truncated_files_give_one_line_errors(tmp_path, bgr):
         lines = run.stderr.strip().splitlines()
         assert run.exit_code == 2 and "Traceback" not in run.output, (name, run.output)
         assert len(lines) == 1 and lines[0].startswith(f"Error: {path}: "), (name, run.stderr)
+
+
+def test_the_png_header_is_read_as_pillow_reads_it(tmp_path, bgr):
+    """PNG files are read without Pillow unless an eXIf chunk comes before the pixels: the
+    header must be Pillow's, whatever the layout (grey, colour, alpha, 16-bit, text chunks)."""
+    from PIL import PngImagePlugin
+
+    from scalematch.imageio import _png_header
+
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    images = {"grey": grey, "bgr": bgr, "bgra": cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA),
+              "grey16": grey.astype(np.uint16) * 257}
+    for name, img in images.items():
+        data = cv2.imencode(".png", img)[1].tobytes()
+        assert _png_header(data) is not None, name
+        with Image.open(io.BytesIO(data)) as im:
+            assert header(data) == (im.size, 1, -1), name
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Comment", "a text chunk before the pixels")
+    path = tmp_path / "text.png"
+    Image.fromarray(grey).save(path, pnginfo=info)
+    assert _png_header(path.read_bytes()) == ((160, 120), 1, -1)
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(grey).save(path, exif=exif.tobytes())
+    assert _png_header(path.read_bytes()) is None  # Pillow reads the orientation
+    assert _png_header(png_header_only(12000, 12000)) is None  # past Pillow's guard: Pillow
+    assert _png_header(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40) is None  # no IHDR

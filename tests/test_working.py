@@ -79,3 +79,69 @@ def test_working_size_in_the_swapped_order(raccoon):
 def test_low_max_side_is_checked():
     with pytest.raises(ValueError, match="low_max_side"):
         Config(low_max_side=10)
+
+
+def _pair_large(photo, ratio, seed):
+    return make_zoom_pair(photo, ratio, np.random.default_rng(seed), high_size=(480, 360),
+                          low_max=(480, 360))
+
+
+def _check(result, pair, full=None):
+    assert result.matched, result.reason
+    err = reprojection_error(result.transform, pair.truth, pair.high.shape, pair.low.shape)
+    assert err < ERROR_TOL_PX
+    if full is not None:
+        assert mean_transfer_gap(result.transform, full.transform, pair.high.shape) < GAP_TOL_PX
+    # inliers in original px: (finer x, y, coarser x, y) fit the transform within the RANSAC
+    # threshold in the coarser image's working px (at most f of its original px)
+    f = max(result.evidence["low_working_factor"], result.evidence["high_working_factor"])
+    fit = cv2.transform(result.inliers[None, :, :2], result.transform)[0]
+    assert np.linalg.norm(fit - result.inliers[:, 2:], axis=1).max() <= f * 3.0 + 1e-6
+
+
+def test_a_shrunk_high_image_gives_the_full_size_answer(raccoon):
+    """High 480 px matched at 240 (f = 2): ratio 3 becomes 1.5, still the given order."""
+    pair = _pair_large(raccoon, 3.0, 3)
+    full = match(pair.low, pair.high, Config(high_max_side=None))
+    small = match(pair.low, pair.high, Config(high_max_side=240))
+    assert small.evidence["high_working_factor"] == pytest.approx(2.0)
+    assert small.order == "given" and small.config.high_max_side == 240
+    _check(small, pair, full)
+    assert small.resolution_ratio == pytest.approx(full.resolution_ratio, rel=0.02)
+    assert abs(small.best_scale / 3.0 - 1) < 0.3  # reported in the original pixels
+
+
+def test_a_high_image_shrunk_past_the_low_one_is_found_in_the_other_order(raccoon):
+    """Ratio 2, high 480 px matched at 120 (f = 4): the working high image is the coarser one
+    (working ratio 1/2); the search finds it in the other order, and the answer is given in the
+    order of the original pixels. The scale table stays in its search's direction, in original
+    pixels: low px per high px, 1/2 at the best scale."""
+    pair = _pair_large(raccoon, 2.0, 4)
+    small = match(pair.low, pair.high, Config(high_max_side=120))
+    assert small.evidence["search_order"] == "swapped"
+    assert small.order == "given" and small.resolution_ratio == pytest.approx(2.0, rel=0.03)
+    assert small.best_scale == pytest.approx(0.5, rel=0.3)
+    _check(small, pair)
+
+
+def test_both_images_shrunk_keep_the_ratio(raccoon):
+    pair = _pair_large(raccoon, 2.0, 5)
+    result = match(pair.low, pair.high, Config(low_max_side=160, high_max_side=320))
+    assert result.evidence["low_working_factor"] > 1 and result.evidence["high_working_factor"] > 1
+    assert result.order == "given"
+    _check(result, pair)
+
+
+def test_the_given_order_keeps_the_high_image_at_full_size(raccoon):
+    """With order='given' a shrunk high image could not be found coarser: it is not shrunk."""
+    pair = _pair_large(raccoon, 3.0, 3)
+    result = match(pair.low, pair.high, Config(order="given", high_max_side=160))
+    assert "high_working_factor" not in result.evidence
+    _check_given = reprojection_error(result.transform, pair.truth, pair.high.shape,
+                                      pair.low.shape)
+    assert result.matched and _check_given < ERROR_TOL_PX
+
+
+def test_high_max_side_is_checked():
+    with pytest.raises(ValueError, match="high_max_side"):
+        Config(high_max_side=10)

@@ -125,3 +125,32 @@ def test_empty_inputs_give_empty_candidates(selection, n_high, n_low):
 def test_unknown_selection_is_a_value_error():
     with pytest.raises(ValueError, match="selection must be one of"):
         match_descriptors(HIGH, LOW, MatcherParams(selection="best"))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_large_matches_in_chunks_and_threads_agree_with_brute_force(threads):
+    """A product past _THREADED_MIN is cut into chunks of _CHUNK rows, on as many threads as
+    OpenCV uses: the neighbours are the brute-force ones whatever the threads."""
+    import cv2
+
+    from scalematch.stages import matcher
+
+    rng = np.random.default_rng(1)
+    n_high = matcher._CHUNK * 2 + 37  # three chunks, the last one short
+    n_low = matcher._THREADED_MIN // n_high + 1
+    high = rng.normal(size=(n_high, 8)).astype(np.float32)
+    low = rng.normal(size=(n_low, 8)).astype(np.float32)
+    d = np.linalg.norm(high[:, None].astype(np.float64) - low[None], axis=2)
+    order = np.argsort(d, axis=1)[:, :2]
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        c = match_descriptors(high, low, MatcherParams(selection="knn", k=2))
+    finally:
+        cv2.setNumThreads(before)
+    gap = np.take_along_axis(d, np.argsort(d, axis=1)[:, 1:3], 1)
+    clear = gap[:, 1] - gap[:, 0] > 1e-4  # rows without a near-tie for the second place
+    assert (c.j.reshape(n_high, 2)[:, 0] == order[:, 0]).all()
+    assert (c.j.reshape(n_high, 2)[clear, 1] == order[clear, 1]).all()
+    np.testing.assert_allclose(c.distance.reshape(n_high, 2), np.take_along_axis(d, order, 1),
+                               atol=1e-4)
