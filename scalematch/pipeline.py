@@ -217,9 +217,9 @@ def _joined(head: Described, rest: Described, offset: int) -> Described:
                      desc=np.vstack([head.desc, rest.desc]))
 
 
-def probe_view(view: View, low: LowFeatures, config: Config, whitening,
-               step: Callable[[], None] = lambda: None) -> Probed:
-    """Detect every scale of one view; score each from its strongest points (paper 5).
+def detect_view(view: View, config: Config, whitening,
+                step: Callable[[], None] = lambda: None) -> Tuple[Tuple, bool]:
+    """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``step()`` is called once per scale detected. The levels of a view of at most
     ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass.
@@ -237,6 +237,12 @@ def probe_view(view: View, low: LowFeatures, config: Config, whitening,
             detected.append((kp, _describe(level, part, config, whitening),
                              level if keep else None))
         step()
+    return tuple(detected), probing
+
+
+def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
+               config: Config) -> Probed:
+    """Score each scale of a detected view from its strongest points (paper 5)."""
     usable = [i for i, (kp, d, _) in enumerate(detected) if d is not None and len(d)]
     if probing:
         scores = probe_scores([detected[i][1] for i in usable], low.described, config)
@@ -244,7 +250,13 @@ def probe_view(view: View, low: LowFeatures, config: Config, whitening,
         best = max(scores, default=0.0)
     else:
         run, best = usable, math.inf
-    return Probed(view, tuple(detected), tuple(usable), tuple(run), best, probing)
+    return Probed(view, detected, tuple(usable), tuple(run), best, probing)
+
+
+def probe_view(view: View, low: LowFeatures, config: Config, whitening,
+               step: Callable[[], None] = lambda: None) -> Probed:
+    """Detect every scale of one view; score each from its strongest points (paper 5)."""
+    return score_view(view, *detect_view(view, config, whitening, step), low, config)
 
 
 def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
@@ -470,11 +482,16 @@ def _search(low: np.ndarray, high: np.ndarray, config: Config,
             lo_img, hi_img = images[swapped]
             cfg = configs[swapped]
             per_search = 2 * len(cfg.scales)  # progress steps: detect + match each scale
-            if swapped not in feats:
-                feats[swapped] = describe_low(lo_img, config, whitening)
             count["total"] += len(views) * per_search // 2
-            probed = [probe_view(v, feats[swapped], cfg, whitening, step)
-                      for v in views_of(hi_img, views, config.views)]
+            probed = []
+            for v in views_of(hi_img, views, config.views):
+                if swapped in feats:
+                    found_view = detect_view(v, cfg, whitening, step)
+                else:  # the coarser image is described while the first view is detected
+                    feats[swapped], found_view = thread_map(lambda job: job(), [
+                        lambda: describe_low(lo_img, config, whitening),
+                        lambda: detect_view(v, cfg, whitening, step)])
+                probed.append(score_view(v, *found_view, feats[swapped], cfg))
             searches += len(probed)
             chosen = sorted(probed, key=lambda p: -p.score)
             if k > 0:  # a pass of simulated views (pass 0 is the image itself)

@@ -49,6 +49,7 @@ def main() -> None:
     from scalematch.lab.datasets import find_shared, list_photos
     from scalematch.lab.evaluation import is_success, reprojection_error
     from scalematch.lab.synthetic import pairs_from_photos
+    from scalematch.stages.decision import mean_transfer_gap
 
     shared = find_shared()
     if shared is None:
@@ -62,6 +63,7 @@ def main() -> None:
         proc.start()
         workers[name] = (proc, jobs, results)
     rows = {name: [] for name in workers}
+    found = {name: [] for name in workers}  # the transforms, to compare the answers
     load = os.getloadavg()
     for k, p in enumerate(pairs):
         order = ("old", "new") if k % 2 == 0 else ("new", "old")
@@ -71,6 +73,7 @@ def main() -> None:
             _, secs, t = results.get()
             err = reprojection_error(t, p.truth, p.high.shape, p.low.shape)
             rows[name].append((p.ratio, secs, err, is_success(err)))
+            found[name].append(t)
     for proc, jobs, _ in workers.values():
         jobs.put(None)
         proc.join()
@@ -89,6 +92,13 @@ def main() -> None:
     ratio = np.median([s for _, s, _, _ in rows["new"]]) / np.median(
         [s for _, s, _, _ in rows["old"]])
     print(f"median time new / old: {ratio:.2f}")
+    same = sum((a is None and b is None) or (a is not None and b is not None
+                                             and np.array_equal(a, b))
+               for a, b in zip(found["old"], found["new"]))
+    gaps = [mean_transfer_gap(a, b, p.high.shape) for a, b, p in
+            zip(found["old"], found["new"], pairs) if a is not None and b is not None]
+    print(f"answers: {same}/{len(pairs)} identical; both matched {len(gaps)}, mean transfer gap "
+          f"median {np.median(gaps):.4f} px, max {np.max(gaps):.4f} px")
 
 
 if __name__ == "__main__":
