@@ -253,12 +253,6 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     return Probed(view, detected, tuple(usable), tuple(run), best, probing)
 
 
-def probe_view(view: View, low: LowFeatures, config: Config, whitening,
-               step: Callable[[], None] = lambda: None) -> Probed:
-    """Detect every scale of one view; score each from its strongest points (paper 5)."""
-    return score_view(view, *detect_view(view, config, whitening, step), low, config)
-
-
 def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
                 step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
@@ -410,6 +404,11 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
     the finer image (``config.views``), in both orders. The a-contrario test counts every search
     made, so trying more cannot make a chance transform look reliable.
+
+    An image longer than its working size (``config.low_max_side``, ``config.high_max_side``)
+    is matched shrunk and the answer given in its own pixels (:mod:`scalematch.working`).
+    Independent pieces of work run on as many threads as OpenCV uses
+    (:mod:`scalematch.stages.threads`); the answer does not depend on them.
 
     Parameters
     ----------

@@ -1,0 +1,78 @@
+"""A 24 MP high image matched at full size and at its working size, at several ratios (issue 12).
+
+Usage: python scripts/high_working_size.py [--ratios 1.5,2,3,5,10] [--seed 0]
+
+For each ratio r: the largest photo of ../shared enlarged to 9000x6000, its centre 6000x4000 cut
+as the high image, and the whole scene zoomed out by r in a low window of 1800x1200 px or the
+footprint's size plus a margin (``lab.synthetic.zoom_pair_from_crop``, exact truth, EVALUATION.md).
+Then ``scalematch.match`` in this process with ``high_max_side=None`` (full size, as before)
+and with the default (2048 px), alternately. Prints one Markdown row per ratio and setting:
+seconds, error (low px), the ratio found and the order.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from scalematch import Config, match  # noqa: E402
+from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
+from scalematch.lab.evaluation import reprojection_error  # noqa: E402
+from scalematch.lab.synthetic import zoom_pair_from_crop  # noqa: E402
+
+HIGH = (6000, 4000)  #: the high image, px (24 MP)
+SCENE = (9000, 6000)  #: the enlarged photo it is cut from
+LOW_MIN_WINDOW = (1800, 1200)  #: the low window, px, unless the footprint needs more
+MARGIN = 1.3  #: low window / footprint side when the footprint is larger than LOW_MIN_WINDOW
+
+
+def pair(scene: np.ndarray, ratio: float, seed: int):
+    w, h = HIGH
+    x0, y0 = (SCENE[0] - w) // 2, (SCENE[1] - h) // 2
+    side = int(np.ceil(np.hypot(w, h) / ratio * MARGIN))  # any angle fits
+    window = (max(LOW_MIN_WINDOW[0], side), max(LOW_MIN_WINDOW[1], side))
+    return zoom_pair_from_crop(scene, (x0, y0, w, h), ratio, np.random.default_rng([seed, 7]),
+                               window, source="large")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ratios", default="1.5,2,3,5,10")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args()
+    shared = find_shared()
+    if shared is None:
+        sys.exit("../shared is absent")
+    photo = max(list_photos(shared), key=lambda p: p.stat().st_size)
+    grey = cv2.imread(str(photo), cv2.IMREAD_GRAYSCALE).astype(np.float32)
+    scene = cv2.resize(grey, SCENE, interpolation=cv2.INTER_CUBIC)
+    del grey
+    print(f"{photo.name} enlarged to {SCENE[0]}x{SCENE[1]}, high {HIGH[0]}x{HIGH[1]}, seed "
+          f"{a.seed}, load average {os.getloadavg()[0]:.1f}\n")
+    print("| ratio | low px | high image matched at | seconds | error px | ratio found | order |")
+    print("|---|---|---|---:|---:|---:|---|")
+    settings = (("full size", Config(high_max_side=None)), ("2048 px (default)", Config()))
+    for k, ratio in enumerate(float(r) for r in a.ratios.split(",")):
+        p = pair(scene, ratio, a.seed)
+        for name, config in settings if k % 2 == 0 else settings[::-1]:
+            t0 = time.perf_counter()
+            r = match(p.low, p.high, config)
+            secs = time.perf_counter() - t0
+            err = reprojection_error(r.transform if r.matched else None, p.truth, p.high.shape,
+                                     p.low.shape)
+            print(f"| {ratio:g} | {p.low.shape[1]}x{p.low.shape[0]} | {name} | {secs:.2f} | "
+                  f"{err:.3f} | {r.resolution_ratio:.3f} | {r.order} |", flush=True)
+    print(f"\nload average at the end {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
