@@ -11,11 +11,11 @@ which is the similarity ``S`` below. A transform ``T`` (finer image's working px
 image's working px) becomes ``S_coarser o T o S_finer^-1``.
 
 Shrinking the low image by ``f_low`` and the high one by ``f_high`` multiplies the resolution
-ratio by ``f_low / f_high``. The search runs on the configured scales extended upward to
-``max(f_low / f_high, f_high / f_low)`` times the largest, in both orders, so every ratio the
-configuration covers in the original pixels (either way round) is still searched. A ratio that
-the shrinking brings below 1 is found in the other order: that is why the high image is shrunk
-only when the order is searched automatically. The per-scale table and ``best_scale`` are
+ratio by ``f_low / f_high``. Each search direction runs on its own scales
+(:func:`direction_scales`), so that every ratio the configuration covers in the original pixels
+(either way round) is still searched, and no more. A ratio that the shrinking brings below 1 is
+found in the other order: that is why the high image is shrunk only when the order is searched
+automatically. The per-scale table and ``best_scale`` are
 reported in the original pixels, in the direction of the search they come from
 (``evidence["search_order"]``).
 """
@@ -47,9 +47,9 @@ def shrink(image: np.ndarray, f: float) -> np.ndarray:
 
 
 def working_scales(scales: Sequence[float], f: float) -> Tuple[float, ...]:
-    """The scales to search on the shrunk images: the configured ones, and each times ``f``
-    where that exceeds the largest (``f = max(f_low / f_high, f_high / f_low)``: the
-    configured ratio range, in original pixels)."""
+    """The configured scales, and each times ``f >= 1`` where that exceeds the largest: the
+    configured ratio range, in original pixels, of a search whose working ratios are the
+    original ones times ``f``."""
     top = max(scales)
     return tuple(sorted(set(scales) | {round(s * f, 3) for s in scales if s * f > top}))
 
