@@ -354,9 +354,13 @@ def _worker_run(methods: Dict[str, Method],
 _BATCH_METHOD: Optional[Method] = None
 
 
-def _batch_init(method: Method) -> None:
+def _batch_init(method: Method, opencv_threads: int) -> None:
     global _BATCH_METHOD
     _BATCH_METHOD = method
+    if opencv_threads:
+        import cv2
+
+        cv2.setNumThreads(opencv_threads)
     _warm_up(method)
 
 
@@ -371,9 +375,15 @@ def _batch_one(rec: PairRecord) -> bool:
 
 
 def time_batch(method: Method, records: Sequence[PairRecord], workers: int) -> float:
-    """Wall seconds to match ``records`` with ``workers`` spawned processes (after start-up)."""
+    """Wall seconds to match ``records`` with ``workers`` spawned processes (after start-up).
+
+    As ``scalematch batch`` does, several workers use one OpenCV thread each (the processes are
+    the parallelism; scalematch's own threads follow OpenCV's count), every method alike; a
+    single worker keeps OpenCV's default.
+    """
     ctx = mp.get_context("spawn")
-    with ctx.Pool(workers, initializer=_batch_init, initargs=(method,)) as pool:
+    threads = 1 if workers > 1 else 0
+    with ctx.Pool(workers, initializer=_batch_init, initargs=(method, threads)) as pool:
         pool.map(_batch_ready, range(workers), chunksize=1)
         t0 = time.perf_counter()
         pool.map(_batch_one, list(records), chunksize=1)
@@ -774,8 +784,9 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
              "process; peak memory = the worker's peak resident set size minus its size before "
              "the first pair (after imports and a warm-up call).",
              f"- Load average when the run started: {s['load_average_at_start']} (times are "
-             f"wall-clock; OpenCV uses {s['opencv_threads']} threads per call, so more worker "
-             "processes than cores do not speed a batch up).",
+             f"wall-clock; OpenCV, and scalematch with it, use {s['opencv_threads']} threads "
+             "per call; in the batch of several workers, each uses one, as `scalematch batch` "
+             "does).",
              ("- The 6000x4000 pair: " + s["large_pair"] + " (bicubic upscale of the largest "
               f"photo, centre cut), low image at ratio {LARGE_RATIO:g}.") if s["large_pair"]
              else "- The 6000x4000 pair was not run.",
