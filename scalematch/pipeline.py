@@ -455,7 +455,9 @@ def _search(low: np.ndarray, high: np.ndarray, config: Config,
     config = replace(config, covariance_used=cov.source) if cov is not None else config
     whitening = cov.whitening() if cov is not None else None
     images = {False: (low, high), True: (high, low)}
-    directions = (False, True) if config.order == "auto" else (False,)
+    # a direction may have no scale of its own at working size (direction_scales)
+    directions = tuple(d for d in ((False, True) if config.order == "auto" else (False,))
+                       if scales[d])
     plain = [[(1.0, 0.0)]]
     passes = plain + (view_plan(config.views) if model_of(config.model).has_ratio else [])
     configs = {d: replace(config, scales=tuple(scales[d])) for d in directions}
@@ -530,7 +532,9 @@ def _search(low: np.ndarray, high: np.ndarray, config: Config,
                            rotation_deg=float("nan"), translation=(float("nan"), float("nan")),
                            best_scale=first.verdict.best_scale, inliers=np.zeros((0, 4)),
                            scales=tuple(o.row for o in first.outcomes), timings=timings,
-                           config=config, evidence=dict(first.verdict.evidence, searches=tried),
+                           config=config, evidence=dict(
+                               first.verdict.evidence, searches=tried,
+                               search_order="swapped" if first.swapped else "given"),
                            order="given")
     t, inliers, model = _refit_in_high(winner, config)
     t, inliers, model = _richer_model(t, inliers, model, winner, config)

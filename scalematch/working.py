@@ -46,35 +46,30 @@ def shrink(image: np.ndarray, f: float) -> np.ndarray:
     return cv2.resize(image, (0, 0), fx=1.0 / f, fy=1.0 / f, interpolation=cv2.INTER_AREA)
 
 
-def working_scales(scales: Sequence[float], f: float) -> Tuple[float, ...]:
-    """The configured scales, and each times ``f >= 1`` where that exceeds the largest: the
-    configured ratio range, in original pixels, of a search whose working ratios are the
-    original ones times ``f``."""
-    top = max(scales)
-    return tuple(sorted(set(scales) | {round(s * f, 3) for s in scales if s * f > top}))
-
-
 def direction_scales(scales: Sequence[float], f_low: float,
                      f_high: float) -> Dict[bool, Tuple[float, ...]]:
     """The working scales of each search direction (key: the order swapped?).
 
-    Shrinking multiplies a working ratio by ``h = f_low / f_high`` in the given direction (by
-    ``1 / h`` in the other). A direction with ``h >= 1`` searches the configured scales extended
-    upward to ``h`` times the largest (:func:`working_scales`); one with ``h < 1`` keeps only
-    the configured scales up to ``h`` times the largest: its smaller ratios are ratios below 1,
-    which the other direction searches.
+    A search direction's working ratio is its ratio in the original pixels times ``h``:
+    ``h = f_low / f_high`` in the given direction, ``1 / h`` in the other. Each configured
+    scale ``s`` (an original ratio) is searched at ``s * h`` in its direction when that is at
+    least 1, and otherwise, the working finer image being then the coarser one, at
+    ``1 / (s * h)`` in the other direction. So the configured ratios are searched, either way
+    round, at the same spacing and with the same tolerance around each as at full size.
 
     >>> direction_scales((1.0, 2.0, 4.0, 8.0), 1.0, 4.0)
-    {False: (1.0, 2.0), True: (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)}
+    {False: (1.0, 2.0), True: (2.0, 4.0, 8.0, 16.0, 32.0)}
     """
-    out = {}
-    for swapped, h in ((False, f_low / f_high), (True, f_high / f_low)):
-        if h >= 1.0:
-            out[swapped] = working_scales(scales, h)
-        else:
-            top = max(scales) * h * (1 + 1e-9)
-            out[swapped] = tuple(sorted(s for s in scales if s <= top)) or (min(scales),)
-    return out
+    h = {False: f_low / f_high, True: f_high / f_low}
+    out = {False: set(), True: set()}
+    for d in (False, True):
+        for s in scales:
+            w = s * h[d]
+            if w >= 1.0 - 1e-9:
+                out[d].add(round(max(w, 1.0), 3))
+            else:
+                out[not d].add(round(1.0 / w, 3))
+    return {d: tuple(sorted(v)) for d, v in out.items()}
 
 
 def _to_original(f: float) -> np.ndarray:

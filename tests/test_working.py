@@ -10,7 +10,7 @@ from scalematch import Config, match
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_zoom_pair
 from scalematch.stages.decision import mean_transfer_gap
-from scalematch.working import shrink, working_factor, working_scales
+from scalematch.working import direction_scales, shrink, working_factor
 
 #: a match at the working size against the truth, original low px (a working pixel is f of them)
 ERROR_TOL_PX = 2.0
@@ -40,9 +40,16 @@ def test_factor_and_scales():
     assert working_factor((768, 1024), 2048) == 1.0
     assert working_factor((4000, 6000), 2048) == pytest.approx(6000 / 2048)
     assert working_factor((4000, 6000), None) == 1.0
-    scales = working_scales((1.0, 2.0, 4.0), 3.0)
-    # the configured ones, and upward to f times the largest (ratio 4 in original px)
-    assert scales == (1.0, 2.0, 4.0, 6.0, 12.0)
+    # the low image shrunk 3x: each configured ratio s is searched at 3 s in the given
+    # direction; the other direction's ratios s (low image the finer) at s / 3 when that is
+    # at least 1, else at 3 / s in the given direction
+    scales = direction_scales((1.0, 2.0, 4.0), 3.0, 1.0)
+    assert scales == {False: (1.5, 3.0, 6.0, 12.0), True: (1.333,)}
+    # the paper's unit steps keep their spacing at working size (the high image shrunk 2.93x:
+    # ratio 8 is searched at 8 / 2.93 = 2.73, as the bench's ratio-10 pair needs)
+    paper = direction_scales(tuple(float(s) for s in range(1, 9)), 1.0, 2.93)
+    assert paper[False] == tuple(round(s / 2.93, 3) for s in range(3, 9))
+    assert paper[True][:2] == (1.465, 2.93)
 
 
 @pytest.mark.parametrize("ratio,seed", [(2.0, 0), (3.0, 1)])
