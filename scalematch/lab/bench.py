@@ -801,8 +801,19 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
         shutil.copyfile(report.plot_path, p.parent / png)
         lines += [f"![success rate against ratio]({png})", ""]
     lines += [report.table, "", "Photos: " + ", ".join(f"`{n}`" for n in s["photos"]), ""]
-    p.write_text("\n".join(lines))
+    p.write_text("\n".join(lines) + _real_pairs_section(p))
     return p
+
+
+def _real_pairs_section(page: Path) -> str:
+    """The section ``scalematch lab real-pairs`` wrote into ``page`` (kept: another command's
+    figures), or ""."""
+    from .realpairs import MARK_BEGIN, MARK_END
+
+    old = page.read_text() if page.is_file() else ""
+    if MARK_BEGIN not in old or MARK_END not in old.split(MARK_BEGIN, 1)[1]:
+        return ""
+    return "\n" + MARK_BEGIN + old.split(MARK_BEGIN, 1)[1].split(MARK_END, 1)[0] + MARK_END + "\n"
 
 
 # --------------------------------------------------------------------------------------------

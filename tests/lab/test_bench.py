@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 
 from scalematch.lab.bench import run_benchmark, write_benchmarks_doc
+from scalematch.lab.realpairs import MARK_BEGIN, MARK_END, write_section
 
 
 def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
@@ -24,3 +25,9 @@ def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
     page = write_benchmarks_doc(report, tmp_path / "docs" / "TINY.md")
     assert (page.parent / "tiny.png").is_file()
     assert "![success rate against ratio](tiny.png)" in page.read_text()
+    # the section of `scalematch lab real-pairs` (another command's figures) survives a re-run
+    write_section(page, "## Real pairs\n\n| a table |\n")
+    write_benchmarks_doc(report, page)
+    text = page.read_text()
+    assert text.count("## Real pairs") == 1 and "| a table |" in text
+    assert text.index("Photos: ") < text.index(MARK_BEGIN) < text.index(MARK_END)
