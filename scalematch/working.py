@@ -59,17 +59,19 @@ def direction_scales(scales: Sequence[float], f_low: float,
 
     >>> direction_scales((1.0, 2.0, 4.0, 8.0), 1.0, 4.0)
     {False: (1.0, 2.0), True: (2.0, 4.0, 8.0, 16.0, 32.0)}
+    >>> [round(s, 3) for s in direction_scales((1.0, 1.5, 3.0), 1.0, 1.2)[False]]
+    [1.25, 2.5]
     """
     h = {False: f_low / f_high, True: f_high / f_low}
-    out = {False: set(), True: set()}
+    out: Dict[bool, Dict[float, float]] = {False: {}, True: {}}  # rounded (to merge) -> exact
     for d in (False, True):
         for s in scales:
             w = s * h[d]
-            if w >= 1.0 - 1e-9:
-                out[d].add(round(max(w, 1.0), 3))
+            if w >= 1.0 - 1e-9:  # exact values: reported back, they give the configured scales
+                out[d].setdefault(round(w, 6), max(w, 1.0))
             else:
-                out[not d].add(round(1.0 / w, 3))
-    return {d: tuple(sorted(v)) for d, v in out.items()}
+                out[not d].setdefault(round(1.0 / w, 6), 1.0 / w)
+    return {d: tuple(sorted(v.values())) for d, v in out.items()}
 
 
 def _to_original(f: float) -> np.ndarray:
