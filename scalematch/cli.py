@@ -600,7 +600,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler:
     from the CSV's folder; a repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
-    gets a line with "error" and the batch goes on.
+    gets a line with "error" and the batch goes on. When a worker process is killed by the
+    system (out of memory), the workers are started again and the pairs in flight tried again,
+    one at a time; a pair whose worker died twice gets an error line.
 
     Resuming: with --output, running the same command again after an interruption (Ctrl-C,
     kill, power cut) skips the pairs already in the file (delete a line to redo its pair). The
