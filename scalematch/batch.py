@@ -4,12 +4,13 @@ or a Dask cluster.
 In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``unique_pairs``
 (repeated rows matched once, paths resolved), ``scan_output`` (what an earlier run left in the
 output file: the pairs done and which of them errored; it refuses a file holding anything but
-result lines, or results made with another configuration), ``match_pair`` (one pair -> one JSON
-line, never raises), and the runners ``run_serial``, ``run_pool`` and ``run_dask``: each yields
-the lines in the order pairs finish and keeps at most a few pairs per worker in flight, so the
-main process stays the same size however many pairs there are (docs/BATCH.md). ``run_pool``
-starts a new pool when a worker process is killed (out of memory) and tries the pairs in flight
-again; ``after_worker_death`` says when to give one up.
+result lines, or results made with another configuration), ``drop_error_lines`` (with
+``--retry-errors``: the error lines of pairs to match again removed, the file replaced in one
+step), ``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
+``run_pool`` and ``run_dask``: each yields the lines in the order pairs finish and keeps at most
+a few pairs per worker in flight, so the main process stays the same size however many pairs
+there are (docs/BATCH.md). ``run_pool`` starts a new pool when a worker process is killed (out of
+memory) and tries the pairs in flight again; ``after_worker_death`` says when to give one up.
 
 Errors here are ``BatchError`` (a ``ValueError``) with a one-line message; the command line turns
 them into exit code 2.
@@ -30,7 +31,7 @@ import time
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import (Any, Callable, Dict, FrozenSet, Hashable, Iterable, Iterator,
+from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
                     List, Optional, Sequence, Set, Tuple)
 
 from . import __version__
@@ -218,6 +219,32 @@ def _result_key(line: bytes) -> Optional[Tuple[Tuple[str, str], Dict[str, Any]]]
     return key, obj
 
 
+def _result_lines(fh: Any, path: Path, config: Dict[str, Any]
+                  ) -> Iterator[Tuple[bytes, Optional[Tuple[str, str]], bool]]:
+    """(line, its (low, high) or None when blank, whether it is an error) of every complete line
+    of the open batch output ``fh``; stops before a torn last line. Raises ``BatchError`` at a
+    line that is not a result of configuration ``config`` (see ``scan_output``)."""
+    for n, line in enumerate(fh, 1):
+        if not line.endswith(b"\n") and line.startswith(LINE_START):
+            return  # torn by an interruption: the only line that may end so
+        if not line.strip():
+            yield line, None, False
+            continue
+        found = _result_key(line)
+        if found is None:
+            raise BatchError(
+                f"{path} line {n} is not a scalematch result; the output file must "
+                f"be new or the output of an earlier batch (left unchanged)")
+        key, obj = found
+        if "config" in obj and obj["config"] != config:
+            changes = config_changes(obj["config"], config)
+            raise BatchError(
+                f"{path} holds results made with other options ({'; '.join(changes[:3])}"
+                f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
+                f"options or write to another file")
+        yield line, key, "error" in obj
+
+
 def scan_output(path: Path, config: Dict[str, Any]) -> Done:
     """What the batch output ``path`` already holds, read without changing it.
 
@@ -233,24 +260,10 @@ def scan_output(path: Path, config: Dict[str, Any]) -> Done:
     complete = 0
     try:
         with open(path, "rb") as fh:
-            for n, line in enumerate(fh, 1):
-                if not line.endswith(b"\n") and line.startswith(LINE_START):
-                    break  # torn by an interruption: the only line that may end so
-                if line.strip():
-                    found = _result_key(line)
-                    if found is None:
-                        raise BatchError(
-                            f"{path} line {n} is not a scalematch result; the output file must "
-                            f"be new or the output of an earlier batch (left unchanged)")
-                    key, obj = found
-                    if "config" in obj and obj["config"] != config:
-                        changes = config_changes(obj["config"], config)
-                        raise BatchError(
-                            f"{path} holds results made with other options ({'; '.join(changes[:3])}"
-                            f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
-                            f"options or write to another file")
+            for line, key, error in _result_lines(fh, path, config):
+                if key is not None:
                     pairs.add(key)
-                    if "error" in obj:
+                    if error:
                         errors.add(key)
                 complete += len(line)
     except OSError as exc:
@@ -262,6 +275,71 @@ def cut_torn_line(path: Path, done: Done) -> None:
     """Remove what follows the complete lines of ``path`` (a line torn by an interruption)."""
     if path.is_file() and path.stat().st_size > done.complete_bytes:
         os.truncate(path, done.complete_bytes)
+
+
+def drop_error_lines(path: Path, keys: Collection[Tuple[str, str]],
+                     config: Dict[str, Any]) -> Done:
+    """Remove from the batch output ``path`` the error lines of the pairs ``keys`` (to match them
+    again) and a torn last line; every other line is kept, byte for byte and in order. Returns
+    what the file holds then (``scan_output``).
+
+    The kept lines go to a temporary file in the same folder, which is flushed to disk and then
+    put in the place of ``path`` in one step (``os.replace``): an interruption at any moment
+    leaves the old file or the new one, never a part. The file keeps its permissions. Raises
+    ``BatchError`` as ``scan_output`` does, or when the folder is not writable (``path`` is then
+    unchanged).
+    """
+    import stat
+    import tempfile
+
+    target = Path(os.path.realpath(path))  # a symbolic link stays one
+    pairs, errors = set(), set()
+    complete = 0
+    tmp = None
+    try:
+        with open(target, "rb") as src, tempfile.NamedTemporaryFile(
+                "wb", dir=target.parent, prefix=f".{target.name}.", suffix=".tmp",
+                delete=False) as dst:
+            tmp = dst.name
+            for line, key, error in _result_lines(src, path, config):
+                if error and key in keys:
+                    continue
+                dst.write(line)
+                complete += len(line)
+                if key is not None:
+                    pairs.add(key)
+                    if error:
+                        errors.add(key)
+            dst.flush()
+            os.fsync(dst.fileno())
+            os.chmod(tmp, stat.S_IMODE(os.fstat(src.fileno()).st_mode))
+        os.replace(tmp, target)
+        tmp = None
+        _fsync_folder(target.parent)
+    except OSError as exc:
+        raise BatchError(f"cannot rewrite {path} without its error lines: "
+                         f"{exc.strerror or exc} (left unchanged)")
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return Done(frozenset(pairs), frozenset(errors), complete)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Flush the folder's entries to disk (a renamed file survives a power cut); not on Windows."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 # --------------------------------------------------------------------------- one pair

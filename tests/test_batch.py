@@ -1,5 +1,6 @@
 """Batch: the pairs CSV (columns, header, repeated rows), the output file (refused when it holds
-anything but results, or results of other options; a torn line cut), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
+anything but results, or results of other options; a torn line cut; error lines removed to retry
+their pairs), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
 die with the main process (kill -9), resume after it, a worker killed mid-run (the pool started
 again, its pairs retried, a pair that kills its worker given up), Ctrl-C, and the Dask backend on
 a LocalCluster on loopback."""
@@ -9,7 +10,9 @@ from __future__ import annotations
 import concurrent.futures
 import json
 import os
+import shutil
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -23,8 +26,8 @@ import pytest
 
 from scalematch import batch
 from scalematch.batch import (NOTHING_DONE, BatchError, Pair, after_worker_death, bounded,
-                              config_changes, config_json, cut_torn_line, read_pairs, scan_output,
-                              unique_pairs)
+                              config_changes, config_json, cut_torn_line, drop_error_lines,
+                              read_pairs, scan_output, unique_pairs)
 from scalematch.config import Config
 from scalematch.result import dumps
 from scalematch.lab.synthetic import make_zoom_pair
@@ -167,6 +170,31 @@ def test_config_changes_names_every_difference_by_path():
     assert config_changes(old, new) == ['gone 1 (now "absent")', "ransac.threshold_px 2.0 (now 3.0)"]
 
 
+def test_drop_error_lines_removes_only_those_asked_and_keeps_every_other_byte(tmp_path):
+    good, blank = _line("a", "b"), "\n"
+    kept_error = _line("e", "f", error=True)  # not asked: kept
+    both_error, both_good = _line("g", "h", error=True), _line("g", "h")  # a pair with two lines
+    real = write(tmp_path / "real.jsonl", good + blank + _line("c", "d", error=True) + kept_error
+                 + both_error + both_good + _line("x", "y")[:30])  # ... and a torn last line
+    os.chmod(real, 0o640)
+    out = tmp_path / "r.jsonl"
+    out.symlink_to(real)
+    done = drop_error_lines(out, {("c", "d"), ("g", "h")}, config_json(Config()))
+    assert real.read_text() == good + blank + kept_error + both_good
+    assert done == scan_output(out, config_json(Config()))
+    assert done.pairs == {("a", "b"), ("e", "f"), ("g", "h")} and done.errors == {("e", "f")}
+    assert out.is_symlink() and stat.S_IMODE(real.stat().st_mode) == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.jsonl", "real.jsonl"]  # no temp file
+
+
+def test_drop_error_lines_refuses_a_file_with_other_lines_and_leaves_it(tmp_path):
+    text = _line("c", "d", error=True) + "my notes\n"
+    out = write(tmp_path / "r.jsonl", text)
+    with pytest.raises(BatchError, match="line 2 is not a scalematch result"):
+        drop_error_lines(out, {("c", "d")}, config_json(Config()))
+    assert out.read_text() == text and [p.name for p in tmp_path.iterdir()] == ["r.jsonl"]
+
+
 # --------------------------------------------------------------------------- bounded in-flight
 
 def test_bounded_keeps_at_most_limit_in_flight_and_yields_each_pair_once():
@@ -207,7 +235,7 @@ def test_after_worker_death_tries_again_then_writes_a_resumable_error_line(tmp_p
     assert "worker process died while matching it, 2 times" in line["error"]
     assert "out of memory" in line["error"]
     assert after_worker_death(pair, 2, Config(), max_deaths=3) is None
-    # the line is a batch error line: a resumed batch counts it
+    # the line is a batch error line: a resumed batch counts it, --retry-errors retries it
     out = write(tmp_path / "r.jsonl", dumps(line) + "\n")
     assert scan_output(out, config_json(Config())).errors == {pair.key}
 
@@ -335,11 +363,68 @@ def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
     assert "1 of them errors" in again.stderr
 
 
+def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path):
+    out, later = tmp_path / "r.jsonl", tmp_path / "later.png"  # later.png: missing at first
+    # an error line of a pair another CSV gave: not this CSV's, so not retried, kept as it is
+    elsewhere = write(tmp_path / "elsewhere.csv", f"{images}/low.png,{tmp_path}/gone.png\n")
+    assert run("batch", elsewhere, "--output", out, "-q").exit_code == 3
+    pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n"
+                                          f"{images}/low.png,{later}\n"
+                                          f"{images}/noise_low.png,{images}/noise_high.png\n")
+    assert run("batch", pairs, "--output", out, "-q").exit_code == 3
+    before = out.read_bytes().splitlines(keepends=True)
+    assert len(before) == 4 and sum(b'"error"' in x for x in before) == 2
+    shutil.copy(images / "high.png", later)  # the image is there now
+
+    plain = run("batch", pairs, "--output", out)  # without the flag: the error line stays
+    assert plain.exit_code == 3 and out.read_bytes() == b"".join(before)
+    assert "(3 done before, 1 of them errors)" in plain.stderr
+
+    with open(out, "ab") as fh:
+        fh.write(b'{"low": {"path": "x"}, "matc')  # a line torn by an interruption
+    os.chmod(out, 0o640)
+    result = run("batch", pairs, "--output", out, "--retry-errors")
+    assert result.exit_code == 0, result.output
+    after = out.read_bytes().splitlines(keepends=True)
+    assert after[:3] == [x for x in before if str(later).encode() not in x]  # byte for byte
+    new = json.loads(after[3])
+    assert len(after) == 4 and new["high"]["path"] == str(later) and new["matched"] is True
+    assert abs(new["resolution_ratio"] - RATIO) < 0.05
+    assert "resuming: 2 of 3" in result.stderr and "retrying 1 pairs" in result.stderr
+    assert "1 pairs: 1 matched, 0 no reliable match, 0 errors (2 done before, 0 of them errors)" \
+        in result.stderr
+    assert stat.S_IMODE(out.stat().st_mode) == 0o640
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
+
+
+def test_retry_errors_keeps_exit_3_while_a_pair_still_fails(images, tmp_path):
+    out = tmp_path / "r.jsonl"
+    pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n"
+                                          f"{images}/low.png,{tmp_path}/gone.png\n")
+    assert run("batch", pairs, "--output", out, "-q").exit_code == 3
+    first = out.read_text().splitlines()
+    result = run("batch", pairs, "--output", out, "--retry-errors")
+    assert result.exit_code == 3, result.output
+    lines = out.read_text().splitlines()
+    good = [x for x in first if '"error"' not in x]
+    assert len(lines) == 2 and lines[0] == good[0] and "gone.png" in json.loads(lines[1])["error"]
+    assert "1 pairs: 0 matched, 0 no reliable match, 1 errors (1 done before, 0 of them errors)" \
+        in result.stderr
+
+
+def test_retry_errors_needs_an_output_file(images):
+    pairs = write(images / "p12.csv", "low.png,high.png\n")
+    assert_one_line_error(run("batch", pairs, "--retry-errors"), "give that file with --output")
+
+
+@pytest.mark.parametrize("retry", [[], ["--retry-errors"]])
 @pytest.mark.parametrize("content", ["my notes\nsecond line\n", "low,high\na.png,b.png\n"])
-def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_path, content):
+def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_path, content,
+                                                                 retry):
     pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n")
     notes = write(tmp_path / "notes.txt", content)
-    assert_one_line_error(run("batch", pairs, "--output", notes), "not a scalematch result")
+    assert_one_line_error(run("batch", pairs, "--output", notes, *retry),
+                          "not a scalematch result")
     assert notes.read_text() == content
 
 
