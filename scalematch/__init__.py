@@ -10,6 +10,7 @@ A scene and a copy shrunk 3 times and turned 20 degrees (``transform`` maps the 
 pixels to the coarser one's):
 
 >>> import cv2, numpy as np
+>>> from scalematch import match
 >>> from scalematch.geometry import similarity_matrix
 >>> noise = np.random.default_rng(0).uniform(0, 255, (240, 320)).astype(np.float32)
 >>> scene = cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 3), None, 0, 255, cv2.NORM_MINMAX)

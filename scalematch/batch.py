@@ -4,10 +4,13 @@ or a Dask cluster.
 In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``unique_pairs``
 (repeated rows matched once, paths resolved), ``scan_output`` (what an earlier run left in the
 output file: the pairs done and which of them errored; it refuses a file holding anything but
-result lines, or results made with another configuration), ``match_pair`` (one pair -> one JSON
-line, never raises), and the runners ``run_serial``, ``run_pool`` and ``run_dask``: each yields
-the lines in the order pairs finish and keeps at most a few pairs per worker in flight, so the
-main process stays the same size however many pairs there are (docs/BATCH.md).
+result lines, or results made with another configuration), ``drop_error_lines`` (with
+``--retry-errors``: the error lines of pairs to match again removed, the file replaced in one
+step), ``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
+``run_pool`` and ``run_dask``: each yields the lines in the order pairs finish and keeps at most
+a few pairs per worker in flight, so the main process stays the same size however many pairs
+there are (docs/BATCH.md). ``run_pool`` starts a new pool when a worker process is killed (out of
+memory) and tries the pairs in flight again; ``after_worker_death`` says when to give one up.
 
 Errors here are ``BatchError`` (a ``ValueError``) with a one-line message; the command line turns
 them into exit code 2.
@@ -25,10 +28,11 @@ import signal
 import sys
 import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import (Any, Callable, Dict, FrozenSet, Hashable, Iterable, Iterator, List, Optional,
-                    Sequence, Tuple)
+from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
+                    List, Optional, Sequence, Set, Tuple)
 
 from . import __version__
 from .config import Config
@@ -55,6 +59,12 @@ DASK_CONNECT_TIMEOUT_S = 10.0
 DASK_RECHECK_S = 5.0
 #: The start of every line ``dumps`` writes: a last line torn by an interruption starts so too.
 LINE_START = b'{"'
+#: Pool breaks (a worker process killed by the system: out of memory, SIGKILL, a crash in native
+#: code) a pair may be in flight at before it gets an error line instead of another try. One
+#: worker's death fails every pair in flight, so the first break may be another pair's doing or a
+#: passing shortage of memory: the pairs are tried again, one at a time. A second break while the
+#: pair ran alone is its own; a third try would cost the batch another pool start for nothing.
+MAX_WORKER_DEATHS_PER_PAIR = 2
 
 
 class BatchError(ValueError):
@@ -209,6 +219,32 @@ def _result_key(line: bytes) -> Optional[Tuple[Tuple[str, str], Dict[str, Any]]]
     return key, obj
 
 
+def _result_lines(fh: Any, path: Path, config: Dict[str, Any]
+                  ) -> Iterator[Tuple[bytes, Optional[Tuple[str, str]], bool]]:
+    """(line, its (low, high) or None when blank, whether it is an error) of every complete line
+    of the open batch output ``fh``; stops before a torn last line. Raises ``BatchError`` at a
+    line that is not a result of configuration ``config`` (see ``scan_output``)."""
+    for n, line in enumerate(fh, 1):
+        if not line.endswith(b"\n") and line.startswith(LINE_START):
+            return  # torn by an interruption: the only line that may end so
+        if not line.strip():
+            yield line, None, False
+            continue
+        found = _result_key(line)
+        if found is None:
+            raise BatchError(
+                f"{path} line {n} is not a scalematch result; the output file must "
+                f"be new or the output of an earlier batch (left unchanged)")
+        key, obj = found
+        if "config" in obj and obj["config"] != config:
+            changes = config_changes(obj["config"], config)
+            raise BatchError(
+                f"{path} holds results made with other options ({'; '.join(changes[:3])}"
+                f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
+                f"options or write to another file")
+        yield line, key, "error" in obj
+
+
 def scan_output(path: Path, config: Dict[str, Any]) -> Done:
     """What the batch output ``path`` already holds, read without changing it.
 
@@ -224,24 +260,10 @@ def scan_output(path: Path, config: Dict[str, Any]) -> Done:
     complete = 0
     try:
         with open(path, "rb") as fh:
-            for n, line in enumerate(fh, 1):
-                if not line.endswith(b"\n") and line.startswith(LINE_START):
-                    break  # torn by an interruption: the only line that may end so
-                if line.strip():
-                    found = _result_key(line)
-                    if found is None:
-                        raise BatchError(
-                            f"{path} line {n} is not a scalematch result; the output file must "
-                            f"be new or the output of an earlier batch (left unchanged)")
-                    key, obj = found
-                    if "config" in obj and obj["config"] != config:
-                        changes = config_changes(obj["config"], config)
-                        raise BatchError(
-                            f"{path} holds results made with other options ({'; '.join(changes[:3])}"
-                            f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
-                            f"options or write to another file")
+            for line, key, error in _result_lines(fh, path, config):
+                if key is not None:
                     pairs.add(key)
-                    if "error" in obj:
+                    if error:
                         errors.add(key)
                 complete += len(line)
     except OSError as exc:
@@ -253,6 +275,71 @@ def cut_torn_line(path: Path, done: Done) -> None:
     """Remove what follows the complete lines of ``path`` (a line torn by an interruption)."""
     if path.is_file() and path.stat().st_size > done.complete_bytes:
         os.truncate(path, done.complete_bytes)
+
+
+def drop_error_lines(path: Path, keys: Collection[Tuple[str, str]],
+                     config: Dict[str, Any]) -> Done:
+    """Remove from the batch output ``path`` the error lines of the pairs ``keys`` (to match them
+    again) and a torn last line; every other line is kept, byte for byte and in order. Returns
+    what the file holds then (``scan_output``).
+
+    The kept lines go to a temporary file in the same folder, which is flushed to disk and then
+    put in the place of ``path`` in one step (``os.replace``): an interruption at any moment
+    leaves the old file or the new one, never a part. The file keeps its permissions. Raises
+    ``BatchError`` as ``scan_output`` does, or when the folder is not writable (``path`` is then
+    unchanged).
+    """
+    import stat
+    import tempfile
+
+    target = Path(os.path.realpath(path))  # a symbolic link stays one
+    pairs, errors = set(), set()
+    complete = 0
+    tmp = None
+    try:
+        with open(target, "rb") as src, tempfile.NamedTemporaryFile(
+                "wb", dir=target.parent, prefix=f".{target.name}.", suffix=".tmp",
+                delete=False) as dst:
+            tmp = dst.name
+            for line, key, error in _result_lines(src, path, config):
+                if error and key in keys:
+                    continue
+                dst.write(line)
+                complete += len(line)
+                if key is not None:
+                    pairs.add(key)
+                    if error:
+                        errors.add(key)
+            dst.flush()
+            os.fsync(dst.fileno())
+            os.chmod(tmp, stat.S_IMODE(os.fstat(src.fileno()).st_mode))
+        os.replace(tmp, target)
+        tmp = None
+        _fsync_folder(target.parent)
+    except OSError as exc:
+        raise BatchError(f"cannot rewrite {path} without its error lines: "
+                         f"{exc.strerror or exc} (left unchanged)")
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return Done(frozenset(pairs), frozenset(errors), complete)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Flush the folder's entries to disk (a renamed file survives a power cut); not on Windows."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 # --------------------------------------------------------------------------- one pair
@@ -279,6 +366,17 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
     return error_line(pair, error, config, time.perf_counter() - t0)
 
 
+def after_worker_death(pair: Pair, deaths: int, config: Config,
+                       max_deaths: int = MAX_WORKER_DEATHS_PER_PAIR) -> Optional[Dict[str, Any]]:
+    """What becomes of ``pair`` when its worker process died: None to submit it again (the
+    ``deaths``-th pool break it was in flight at is not yet ``max_deaths``), else its error line."""
+    if deaths < max_deaths:
+        return None
+    return error_line(pair, f"its worker process died while matching it, {deaths} times (killed "
+                            f"by the system, e.g. out of memory); try the pair alone: scalematch "
+                            f"LOW HIGH", config)
+
+
 def _outcome(future: Any, pair: Pair, config: Config) -> Dict[str, Any]:
     """The line of a finished future; an error line when its worker failed (died, cancelled)."""
     try:
@@ -293,15 +391,18 @@ def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
             stop: Callable[[List[Any]], None]) -> Iterator[Dict[str, Any]]:
     """Submit ``pairs`` with at most ``limit()`` unfinished at once; yield each line as its pair
     finishes. ``wait_first(futures)`` blocks until at least one is done and returns the done;
-    ``stop(futures)`` is given the unfinished ones if the iteration ends early (Ctrl-C)."""
+    ``outcome(future, pair)`` is the pair's line, or None to submit the pair again (before any
+    new pair); ``stop(futures)`` is given the unfinished ones if the iteration ends early
+    (Ctrl-C)."""
     todo = iter(pairs)
+    again: List[Pair] = []  # to submit again, oldest first
     pending: Dict[Any, Pair] = {}
     more = True
     try:
         while True:
             room = max(limit(), 1) - len(pending)
-            while more and room > 0:
-                pair = next(todo, None)
+            while room > 0 and (again or more):
+                pair = again.pop(0) if again else next(todo, None)
                 if pair is None:
                     more = False
                 else:
@@ -309,8 +410,14 @@ def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
                     room -= 1
             if not pending:
                 return
-            for future in wait_first(list(pending)):
-                yield outcome(future, pending.pop(future))
+            done = set(wait_first(list(pending)))
+            for future in [f for f in pending if f in done]:  # in the order submitted
+                pair = pending.pop(future)
+                line = outcome(future, pair)
+                if line is None:
+                    again.append(pair)
+                else:
+                    yield line
     finally:
         if pending:
             stop(list(pending))
@@ -358,17 +465,68 @@ def _init_worker(parent_pid: int) -> None:
     cv2.setNumThreads(1)
 
 
+def _start_pool(jobs: int) -> concurrent.futures.ProcessPoolExecutor:
+    """A pool of ``jobs`` worker processes (started as pairs are submitted) that die with this
+    process."""
+    ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
+    return concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
+                                                  initargs=(os.getpid(),))
+
+
+def _lost(future: Any) -> bool:
+    """Whether ``future`` failed because its pool broke (a worker process died), not its pair."""
+    return not future.cancelled() and isinstance(future.exception(), BrokenProcessPool)
+
+
 def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int,
              jobs: int) -> Iterator[Dict[str, Any]]:
     """The lines of ``pairs``, matched by ``jobs`` worker processes, in the order they finish.
 
-    Workers die with this process (``die_with_parent``). When the iteration stops early (Ctrl-C,
-    or the consumer closes it) the workers are terminated at once; the pairs they held get no
-    line, so a resumed batch redoes them.
+    Workers die with this process (``die_with_parent``). When one is killed by the system (out
+    of memory, SIGKILL, a crash) the pool breaks and fails every pair in flight: a new pool is
+    started and those pairs are submitted again, one at a time, no new pair beside them; a pair
+    in flight at MAX_WORKER_DEATHS_PER_PAIR breaks gets an error line (``after_worker_death``).
+    When the iteration stops early (Ctrl-C, or the consumer closes it) the workers are
+    terminated at once; the pairs they held get no line, so a resumed batch redoes them.
     """
-    ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
-    pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
-                                                  initargs=(os.getpid(),))
+    pool = _start_pool(jobs)
+    generation = 0  # pools started before the current one
+    born: Dict[Any, int] = {}  # unfinished future -> generation of the pool it went to
+    deaths: Dict[Tuple[str, str], int] = {}  # pair -> pool breaks it was in flight at
+    retrying: Set[Tuple[str, str]] = set()  # lost at a break, not yet finished: run alone
+
+    def restart() -> None:
+        nonlocal pool, generation
+        old = pool
+        pool, generation = _start_pool(jobs), generation + 1
+        old.shutdown(wait=True)  # its workers are gone and it has failed every future it held,
+        for future, born_in in born.items():  # but for one submitted as it broke (CPython
+            if born_in < generation and not future.done():  # 3.11 races so): it would hang
+                future.set_exception(BrokenProcessPool("submitted as the pool broke"))
+
+    def submit(pair: Pair) -> Any:
+        try:
+            future = pool.submit(match_pair, pair, config, max_pixels)
+        except BrokenProcessPool:  # broke since the last wait
+            restart()
+            future = pool.submit(match_pair, pair, config, max_pixels)
+        born[future] = generation
+        return future
+
+    def outcome(future: Any, pair: Pair) -> Optional[Dict[str, Any]]:
+        born_in = born.pop(future)
+        if not _lost(future):
+            retrying.discard(pair.key)
+            return _outcome(future, pair, config)
+        if born_in == generation:
+            restart()
+        deaths[pair.key] = deaths.get(pair.key, 0) + 1
+        line = after_worker_death(pair, deaths[pair.key], config)
+        if line is None:
+            retrying.add(pair.key)
+        else:
+            retrying.discard(pair.key)
+        return line
 
     def stop(_: List[Any]) -> None:
         procs = list((getattr(pool, "_processes", None) or {}).values())
@@ -378,12 +536,11 @@ def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int,
 
     try:
         yield from bounded(
-            pairs,
-            submit=lambda pair: pool.submit(match_pair, pair, config, max_pixels),
+            pairs, submit=submit,
             wait_first=lambda fs: concurrent.futures.wait(
                 fs, return_when=concurrent.futures.FIRST_COMPLETED).done,
-            outcome=lambda fut, pair: _outcome(fut, pair, config),
-            limit=lambda: IN_FLIGHT_PER_WORKER * jobs, stop=stop)
+            outcome=outcome,
+            limit=lambda: 1 if retrying else IN_FLIGHT_PER_WORKER * jobs, stop=stop)
     finally:
         pool.shutdown(wait=True)
 

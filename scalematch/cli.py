@@ -16,7 +16,7 @@ import importlib.util
 import math
 import sys
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, FrozenSet, Iterator, List, Optional, Sequence, Tuple
 
 import click
 import numpy as np
@@ -584,6 +584,9 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
               help="Append JSON lines here instead of stdout; resumable: the pairs already in it "
                    "are skipped. It must be new or the output of an earlier batch run with the "
                    "same options (anything else is refused, exit 2).")
+@click.option("--retry-errors", is_flag=True,
+              help="When resuming, match again the pairs whose line in --output is an error "
+                   "(the file is rewritten without those lines first; every other line kept).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes on this machine.")
 @click.option("--scheduler", metavar="ADDRESS",
@@ -591,8 +594,8 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
                    "local processes; needs pip install 'scalematch[dask]'.")
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no summary on stderr.")
-def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler: Optional[str],
-                  quiet: bool, max_pixels: int, **kwargs: Any) -> None:
+def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, jobs: int,
+                  scheduler: Optional[str], quiet: bool, max_pixels: int, **kwargs: Any) -> None:
     """Match every pair of PAIRS.csv, one JSON line per pair.
 
     PAIRS.csv has two columns low,high (no header), or a header row naming the columns low and
@@ -600,17 +603,21 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler:
     from the CSV's folder; a repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
-    gets a line with "error" and the batch goes on.
+    gets a line with "error" and the batch goes on. When a worker process is killed by the
+    system (out of memory), the workers are started again and the pairs in flight tried again,
+    one at a time; a pair whose worker died twice gets an error line.
 
     Resuming: with --output, running the same command again after an interruption (Ctrl-C,
-    kill, power cut) skips the pairs already in the file (delete a line to redo its pair). The
-    options must be the same: a file holding results made with other options is refused
-    (exit 2), never mixed.
+    kill, power cut) skips the pairs already in the file (delete a line to redo its pair), error
+    lines included; with --retry-errors the pairs of the CSV whose line is an error are matched
+    again (a fixed image, more memory), their error lines removed first. The options must be
+    the same: a file holding results made with other options is refused (exit 2), never mixed.
 
     \b
     Examples:
       scalematch batch pairs.csv > results.jsonl
       scalematch batch pairs.csv --output results.jsonl --jobs 4 --mode paper
+      scalematch batch pairs.csv --output results.jsonl --retry-errors
       scalematch batch pairs.csv --output results.jsonl --scheduler tcp://host:8786
 
     \b
@@ -623,16 +630,26 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler:
     if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
         raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
                                "workers' threads set the parallelism.")
+    if retry_errors and output is None:
+        raise click.UsageError("--retry-errors matches again the pairs whose line in the output "
+                               "file is an error; give that file with --output.")
     config = _config_from(kwargs)
     done = batch.NOTHING_DONE
+    retried: FrozenSet[Tuple[str, str]] = frozenset()  # pairs whose error line is removed
     try:
         rows = batch.read_pairs(pairs_csv)
         pairs = batch.unique_pairs(rows, pairs_csv.resolve().parent)
         if output is not None:
             check_out_file(output, "--output")
             done = batch.scan_output(output, batch.config_json(config))
-            batch.cut_torn_line(output, done)
         client = batch.connect(scheduler) if scheduler is not None else None
+        if retry_errors:  # the file is changed only once nothing else can refuse the run
+            retried = done.errors & {p.key for p in pairs}
+        if retried:
+            done = batch.drop_error_lines(output, retried, batch.config_json(config))
+            retried -= done.pairs  # a pair with a good line too keeps it and is not redone
+        elif output is not None:
+            batch.cut_torn_line(output, done)
     except batch.BatchError as exc:
         raise InputError(str(exc))
     todo = [p for p in pairs if p.key not in done.pairs]
@@ -643,6 +660,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], jobs: int, scheduler:
                    f"matched once)", err=True)
     if not quiet and skipped:
         click.echo(f"resuming: {skipped} of {len(pairs)} pairs already in {output}", err=True)
+    if not quiet and retried:
+        click.echo(f"retrying {len(retried)} pairs whose line was an error (removed from "
+                   f"{output})", err=True)
 
     counts = {"matched": 0, "no match": 0, "error": 0}
     out_fh = open(output, "a") if output is not None else sys.stdout

@@ -1,26 +1,35 @@
 """Batch: the pairs CSV (columns, header, repeated rows), the output file (refused when it holds
-anything but results, or results of other options; a torn line cut), bounded in-flight work,
-exit codes (3 when a pair errored), worker processes that die with the main process (kill -9),
-resume after it, and the Dask backend on a LocalCluster on loopback."""
+anything but results, or results of other options; a torn line cut; error lines removed to retry
+their pairs), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
+die with the main process (kill -9), resume after it, a worker killed mid-run (the pool started
+again, its pairs retried, a pair that kills its worker given up), Ctrl-C, and the Dask backend on
+a LocalCluster on loopback."""
 
 from __future__ import annotations
 
 import concurrent.futures
 import json
 import os
+import shutil
 import signal
+import stat
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from scalematch.batch import (NOTHING_DONE, BatchError, Pair, bounded, config_changes,
-                              config_json, cut_torn_line, read_pairs, scan_output, unique_pairs)
+from scalematch import batch
+from scalematch.batch import (NOTHING_DONE, BatchError, Pair, after_worker_death, bounded,
+                              config_changes, config_json, cut_torn_line, drop_error_lines,
+                              read_pairs, scan_output, unique_pairs)
 from scalematch.config import Config
+from scalematch.result import dumps
 from scalematch.lab.synthetic import make_zoom_pair
 from test_cli import JSON_KEYS, assert_one_line_error, run
 
@@ -161,6 +170,31 @@ def test_config_changes_names_every_difference_by_path():
     assert config_changes(old, new) == ['gone 1 (now "absent")', "ransac.threshold_px 2.0 (now 3.0)"]
 
 
+def test_drop_error_lines_removes_only_those_asked_and_keeps_every_other_byte(tmp_path):
+    good, blank = _line("a", "b"), "\n"
+    kept_error = _line("e", "f", error=True)  # not asked: kept
+    both_error, both_good = _line("g", "h", error=True), _line("g", "h")  # a pair with two lines
+    real = write(tmp_path / "real.jsonl", good + blank + _line("c", "d", error=True) + kept_error
+                 + both_error + both_good + _line("x", "y")[:30])  # ... and a torn last line
+    os.chmod(real, 0o640)
+    out = tmp_path / "r.jsonl"
+    out.symlink_to(real)
+    done = drop_error_lines(out, {("c", "d"), ("g", "h")}, config_json(Config()))
+    assert real.read_text() == good + blank + kept_error + both_good
+    assert done == scan_output(out, config_json(Config()))
+    assert done.pairs == {("a", "b"), ("e", "f"), ("g", "h")} and done.errors == {("e", "f")}
+    assert out.is_symlink() and stat.S_IMODE(real.stat().st_mode) == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.jsonl", "real.jsonl"]  # no temp file
+
+
+def test_drop_error_lines_refuses_a_file_with_other_lines_and_leaves_it(tmp_path):
+    text = _line("c", "d", error=True) + "my notes\n"
+    out = write(tmp_path / "r.jsonl", text)
+    with pytest.raises(BatchError, match="line 2 is not a scalematch result"):
+        drop_error_lines(out, {("c", "d")}, config_json(Config()))
+    assert out.read_text() == text and [p.name for p in tmp_path.iterdir()] == ["r.jsonl"]
+
+
 # --------------------------------------------------------------------------- bounded in-flight
 
 def test_bounded_keeps_at_most_limit_in_flight_and_yields_each_pair_once():
@@ -189,6 +223,96 @@ def test_bounded_keeps_at_most_limit_in_flight_and_yields_each_pair_once():
     assert next(early)["low"]["path"] == "0"
     early.close()  # as on Ctrl-C: the unfinished futures are handed to stop
     assert len(stopped) == 2 and all(not f.done() for f in stopped)  # 3 in flight, 1 yielded
+
+
+# --------------------------------------------------------------------------- worker deaths
+
+def test_after_worker_death_tries_again_then_writes_a_resumable_error_line(tmp_path):
+    pair = Pair("a.png", "b.png", "/data/a.png", "/data/b.png")
+    assert after_worker_death(pair, 1, Config()) is None  # maybe another pair's doing: again
+    line = after_worker_death(pair, 2, Config())
+    assert line["matched"] is False and (line["low"]["path"], line["high"]["path"]) == pair.key
+    assert "worker process died while matching it, 2 times" in line["error"]
+    assert "out of memory" in line["error"]
+    assert after_worker_death(pair, 2, Config(), max_deaths=3) is None
+    # the line is a batch error line: a resumed batch counts it, --retry-errors retries it
+    out = write(tmp_path / "r.jsonl", dumps(line) + "\n")
+    assert scan_output(out, config_json(Config())).errors == {pair.key}
+
+
+class FakePool:
+    """A process pool as ``run_pool`` uses one, without processes. Submitting a pair whose low
+    path is in ``poison`` breaks the pool, as its worker dying would: every unfinished future of
+    the pool fails with BrokenProcessPool (but those of pairs in ``orphans``, left pending as one
+    submitted while a pool of CPython 3.11 breaks can be) and the pool refuses new work. Any
+    other pair's line comes DELAY_S after it was submitted, unless the pool broke first."""
+
+    DELAY_S = 0.2  # long against the microseconds between two submits of run_pool's loop
+
+    def __init__(self, poison, orphans, log, every_future):
+        self.poison, self.orphans = poison, orphans
+        self.log = log  # (pool, pair, unfinished futures of every pool) at each submit
+        self.every_future = every_future  # of every pool
+        self.futures, self.broken, self.shut = [], False, False
+
+    def submit(self, fn, pair, *args):
+        if self.broken:
+            raise BrokenProcessPool("the pool is not usable anymore")
+        self.log.append((self, pair, sum(not f.done() for f in self.every_future)))
+        future = concurrent.futures.Future()
+        self.futures.append((future, pair))
+        self.every_future.append(future)
+        if pair.low in self.poison:
+            self.broken = True
+            for f, p in self.futures:
+                if p.low not in self.orphans:
+                    _settle(f.set_exception, BrokenProcessPool("a worker died"))
+        elif pair.low not in self.orphans:
+            line = {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": True}
+            timer = threading.Timer(self.DELAY_S, _settle, (future.set_result, line))
+            timer.daemon = True
+            timer.start()
+        return future
+
+    def shutdown(self, wait=True, cancel_futures=False):
+        self.shut = True
+
+
+def _settle(setter, value):
+    try:
+        setter(value)
+    except concurrent.futures.InvalidStateError:  # settled already (the pool broke first)
+        pass
+
+
+@pytest.mark.parametrize("orphans", [set(), {"l1"}])
+def test_run_pool_starts_a_new_pool_and_gives_up_on_a_pair_that_kills_its_worker(monkeypatch,
+                                                                                orphans):
+    pairs = [Pair(f"l{k}", f"h{k}", "", "") for k in range(8)]
+    pools, log, every_future, lines = [], [], [], []
+
+    def start_pool(jobs):
+        pools.append(FakePool({"l2"}, orphans if not pools else set(), log, every_future))
+        return pools[-1]
+
+    monkeypatch.setattr(batch, "_start_pool", start_pool)
+    runner = threading.Thread(target=lambda: lines.extend(batch.run_pool(pairs, Config(), 0, 2)),
+                              daemon=True)  # 2 workers: 4 pairs in flight at most
+    runner.start()
+    runner.join(timeout=30)
+    assert not runner.is_alive(), "run_pool hangs"
+    assert sorted(x["low"]["path"] for x in lines) == [p.low for p in pairs]  # one line each
+    errors = {x["low"]["path"]: x["error"] for x in lines if "error" in x}
+    assert list(errors) == ["l2"] and "died while matching it, 2 times" in errors["l2"]
+    # l0..l2 were in flight at the first break (l2 broke the pool as it was submitted, l3 met
+    # the broken pool and went to a second one): l0..l2 tried again, one at a time, nothing
+    # beside them; l2 broke the second pool alone; l4..l7 went to a third
+    submits = [(pools.index(pool), pair.low) for pool, pair, _ in log]
+    assert submits == [(0, "l0"), (0, "l1"), (0, "l2"), (1, "l3"), (1, "l0"), (1, "l1"),
+                       (1, "l2"), (2, "l4"), (2, "l5"), (2, "l6"), (2, "l7")]
+    unfinished = [n for _, _, n in log]  # other pairs in flight as each was submitted
+    assert unfinished[4:7] == [0, 0, 0] and max(unfinished) <= 3
+    assert len(pools) == 3 and all(p.shut for p in pools)
 
 
 # --------------------------------------------------------------------------- the command
@@ -239,11 +363,68 @@ def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
     assert "1 of them errors" in again.stderr
 
 
+def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path):
+    out, later = tmp_path / "r.jsonl", tmp_path / "later.png"  # later.png: missing at first
+    # an error line of a pair another CSV gave: not this CSV's, so not retried, kept as it is
+    elsewhere = write(tmp_path / "elsewhere.csv", f"{images}/low.png,{tmp_path}/gone.png\n")
+    assert run("batch", elsewhere, "--output", out, "-q").exit_code == 3
+    pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n"
+                                          f"{images}/low.png,{later}\n"
+                                          f"{images}/noise_low.png,{images}/noise_high.png\n")
+    assert run("batch", pairs, "--output", out, "-q").exit_code == 3
+    before = out.read_bytes().splitlines(keepends=True)
+    assert len(before) == 4 and sum(b'"error"' in x for x in before) == 2
+    shutil.copy(images / "high.png", later)  # the image is there now
+
+    plain = run("batch", pairs, "--output", out)  # without the flag: the error line stays
+    assert plain.exit_code == 3 and out.read_bytes() == b"".join(before)
+    assert "(3 done before, 1 of them errors)" in plain.stderr
+
+    with open(out, "ab") as fh:
+        fh.write(b'{"low": {"path": "x"}, "matc')  # a line torn by an interruption
+    os.chmod(out, 0o640)
+    result = run("batch", pairs, "--output", out, "--retry-errors")
+    assert result.exit_code == 0, result.output
+    after = out.read_bytes().splitlines(keepends=True)
+    assert after[:3] == [x for x in before if str(later).encode() not in x]  # byte for byte
+    new = json.loads(after[3])
+    assert len(after) == 4 and new["high"]["path"] == str(later) and new["matched"] is True
+    assert abs(new["resolution_ratio"] - RATIO) < 0.05
+    assert "resuming: 2 of 3" in result.stderr and "retrying 1 pairs" in result.stderr
+    assert "1 pairs: 1 matched, 0 no reliable match, 0 errors (2 done before, 0 of them errors)" \
+        in result.stderr
+    assert stat.S_IMODE(out.stat().st_mode) == 0o640
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
+
+
+def test_retry_errors_keeps_exit_3_while_a_pair_still_fails(images, tmp_path):
+    out = tmp_path / "r.jsonl"
+    pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n"
+                                          f"{images}/low.png,{tmp_path}/gone.png\n")
+    assert run("batch", pairs, "--output", out, "-q").exit_code == 3
+    first = out.read_text().splitlines()
+    result = run("batch", pairs, "--output", out, "--retry-errors")
+    assert result.exit_code == 3, result.output
+    lines = out.read_text().splitlines()
+    good = [x for x in first if '"error"' not in x]
+    assert len(lines) == 2 and lines[0] == good[0] and "gone.png" in json.loads(lines[1])["error"]
+    assert "1 pairs: 0 matched, 0 no reliable match, 1 errors (1 done before, 0 of them errors)" \
+        in result.stderr
+
+
+def test_retry_errors_needs_an_output_file(images):
+    pairs = write(images / "p12.csv", "low.png,high.png\n")
+    assert_one_line_error(run("batch", pairs, "--retry-errors"), "give that file with --output")
+
+
+@pytest.mark.parametrize("retry", [[], ["--retry-errors"]])
 @pytest.mark.parametrize("content", ["my notes\nsecond line\n", "low,high\na.png,b.png\n"])
-def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_path, content):
+def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_path, content,
+                                                                 retry):
     pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n")
     notes = write(tmp_path / "notes.txt", content)
-    assert_one_line_error(run("batch", pairs, "--output", notes), "not a scalematch result")
+    assert_one_line_error(run("batch", pairs, "--output", notes, *retry),
+                          "not a scalematch result")
     assert notes.read_text() == content
 
 
@@ -396,6 +577,76 @@ def test_kill_9_leaves_no_worker_alive_and_resume_loses_nothing(images, tmp_path
     lines = lines_of(out)  # every line whole (a torn one was cut)
     assert keys_of(lines) == sorted((f"l{k}.png", f"h{k}.png") for k in range(n))  # once each
     assert all(x["matched"] for x in lines)
+
+
+def _workers(pid: int):
+    """Pids of the pool workers among the children of ``pid`` (not the resource tracker)."""
+    return [w for w in _children(pid)
+            if b"spawn_main" in Path(f"/proc/{w}/cmdline").read_bytes()]
+
+
+#: Runs ``scalematch`` with the arguments given, Ctrl-C raising KeyboardInterrupt even when the
+#: tests run where SIGINT is ignored (a shell's background job inherits that).
+CLI_WITH_CTRL_C = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                   "from scalematch.cli import main; main(sys.argv[1:])")
+
+
+def _start_batch(tmp_path: Path, images: Path, n: int):
+    """(pairs CSV, output, the running ``scalematch batch --jobs 2`` of n distinct tiny pairs),
+    once the first line is written."""
+    for k in range(n):  # hard links: distinct pairs, no copies
+        os.link(images / "low.png", tmp_path / f"l{k}.png")
+        os.link(images / "high.png", tmp_path / f"h{k}.png")
+    pairs = write(tmp_path / "pairs.csv", "".join(f"l{k}.png,h{k}.png\n" for k in range(n)))
+    out = tmp_path / "r.jsonl"
+    cmd = [sys.executable, "-c", CLI_WITH_CTRL_C, "batch", str(pairs), "--output", str(out),
+           "--jobs", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while _complete_lines(out) < 1 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.01)
+    return pairs, out, proc
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_worker_killed_mid_run_is_replaced_and_every_pair_matched(images, tmp_path):
+    n = 24
+    _, out, proc = _start_batch(tmp_path, images, n)
+    try:
+        workers = _workers(proc.pid)
+        done_at_kill = _complete_lines(out)
+        os.kill(workers[0], signal.SIGKILL)  # as the out-of-memory killer does
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert 1 <= done_at_kill < n, "the kill came too late to test anything"
+    assert proc.returncode == 0, stderr
+    lines = lines_of(out)
+    assert keys_of(lines) == sorted((f"l{k}.png", f"h{k}.png") for k in range(n))  # once each
+    assert not [x["error"] for x in lines if "error" in x] and all(x["matched"] for x in lines)
+    assert f"{n} pairs: {n} matched, 0 no reliable match, 0 errors" in stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_ctrl_c_exits_130_and_stops_the_workers_at_once(images, tmp_path):
+    n = 24
+    _, out, proc = _start_batch(tmp_path, images, n)
+    try:
+        workers = _workers(proc.pid)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert len(workers) == 2, workers
+    assert proc.returncode == 130, stderr
+    assert _complete_lines(out) < n, "the batch ended before Ctrl-C"
+    assert "interrupted:" in stderr and "run the same command again to resume" in stderr
+    deadline = time.monotonic() + 5
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [w for w in workers if _alive(w)], "a worker outlived Ctrl-C"
 
 
 # --------------------------------------------------------------------------- Dask
