@@ -22,7 +22,7 @@ import click
 import numpy as np
 
 from . import __version__
-from .config import MODELS, MODES, ORDERS, Config
+from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, dumps
 from .stages.estimator import model_of
@@ -447,6 +447,9 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                               + (f"order={kwargs.pop('order')}",
                                  f"views.enabled={kwargs.pop('views')}"))
         working = kwargs.pop("working_size")
+        if working is not None and 0 < working < MIN_WORKING_SIDE_PX:
+            raise ValueError(f"--working-size must be 0 (always full size) or at least "
+                             f"{MIN_WORKING_SIDE_PX} px, got {working}")
         if working is not None:  # 0: always full size
             config = dataclasses.replace(config, low_max_side=working or None,
                                          high_max_side=working or None)

@@ -76,6 +76,11 @@ class ModelCheckParams:
     min_extra: int = 10
 
 
+#: Smallest working size, px: below it the 24 px minimum side of a level (detector.MIN_SIDE_PX)
+#: leaves a shrunk image only its first scales.
+MIN_WORKING_SIDE_PX = 64
+
+
 @dataclass(frozen=True)
 class Config:
     """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper.
@@ -145,8 +150,9 @@ class Config:
             raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
         for name in ("low_max_side", "high_max_side"):
             side = getattr(self, name)
-            if side is not None and side < 64:
-                raise ValueError(f"{name} must be None or at least 64 px, got {side}")
+            if side is not None and side < MIN_WORKING_SIDE_PX:
+                raise ValueError(f"{name} must be None or at least {MIN_WORKING_SIDE_PX} px, "
+                                 f"got {side}")
         if not self.scales or min(self.scales) < 1.0:
             raise ValueError("scales must be a non-empty list of values >= 1")
 

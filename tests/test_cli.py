@@ -255,3 +255,14 @@ def test_working_size_and_order_options_reach_the_config(tmp_path):
     assert swapped["order"] == "swapped" and swapped["low"]["path"].endswith("demo_low.png")
     given = run(DEMO_HIGH, DEMO_LOW, "--order", "given", "--no-views", "--json", "-", "-q")
     assert given.exit_code == 1 and json.loads(given.stdout)["config"]["order"] == "given"
+
+
+def test_a_working_size_too_small_names_the_option(tmp_path):
+    """--working-size below the minimum is a usage error in the option's own words (exit 2)."""
+    from scalematch.config import MIN_WORKING_SIDE_PX
+
+    low, high = str(ROOT / "data" / "demo_low.png"), str(ROOT / "data" / "demo_high.png")
+    result = CliRunner().invoke(cli, ["match", low, high, "--working-size", "10"])
+    assert result.exit_code == 2
+    assert f"--working-size must be 0 (always full size) or at least {MIN_WORKING_SIDE_PX} px" \
+        in result.output and "low_max_side" not in result.output
