@@ -16,7 +16,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .config import Config
-from .geometry import compose, invert, similarity_parts
+from .geometry import compose, finer_to_coarser, similarity_parts
 from .imageio import grey_levels
 from .result import MatchResult, ScaleRow
 from .stages.constraints import orientation_groups, semi_local_filter
@@ -387,14 +387,6 @@ def _pooled_refit(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attem
     return est.transform, inliers[keep]
 
 
-def _as_finer_to_coarser(t: np.ndarray, inliers: np.ndarray, swapped: bool, model: str):
-    """Flip a match whose transform implies a ratio below 1 (the 'high' image is the coarser)."""
-    ratio = similarity_parts(t)[0]
-    if not model_of(model).has_ratio or not (math.isfinite(ratio) and ratio < 1.0):
-        return t, inliers, swapped
-    return invert(t), inliers[:, [2, 3, 0, 1]], not swapped
-
-
 def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
           progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
     """Match a low-resolution image against a high-resolution one of the same scene.
@@ -539,7 +531,8 @@ def _search(low: np.ndarray, high: np.ndarray, config: Config,
     t, inliers, model = _refit_in_high(winner, config)
     t, inliers, model = _richer_model(t, inliers, model, winner, config)
     t, inliers = _pooled_refit(t, inliers, model, winner, config)
-    t, inliers, swapped = _as_finer_to_coarser(t, inliers, winner.swapped, model)
+    t, inliers, swapped = finer_to_coarser(t, inliers, winner.swapped,
+                                           model_of(model).has_ratio)
     evidence = dict(winner.verdict.evidence, searches=searches,
                     search_order="swapped" if winner.swapped else "given",
                     view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)

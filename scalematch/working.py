@@ -22,14 +22,13 @@ reported in the original pixels, in the direction of the search they come from
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Dict, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
 
-from .geometry import as_matrix3, compose, invert, similarity_parts
+from .geometry import apply, as_matrix3, compose, finer_to_coarser, invert, similarity_parts
 from .result import MatchResult
 from .stages.estimator import model_of
 
@@ -80,9 +79,10 @@ def _to_original(f: float) -> np.ndarray:
     return np.array([[f, 0.0, c], [0.0, f, c]])
 
 
-def _transform_in_original(t: np.ndarray, model: str, f_finer: float, f_coarser: float):
-    """``t`` (finer working px -> coarser working px) in the original pixels of both images."""
-    s_fine, s_coarse = _to_original(f_finer), _to_original(f_coarser)
+def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
+                           s_coarse: np.ndarray) -> np.ndarray:
+    """``t`` (finer working px -> coarser working px) in the original pixels of both images,
+    given each image's ``S`` (working px -> original px)."""
     if not model_of(model).has_ratio:  # the fundamental matrix: x_coarse^T F x_fine = 0
         return as_matrix3(invert(s_coarse)).T @ t @ as_matrix3(invert(s_fine))
     return compose(s_coarse, compose(t, invert(s_fine)))
@@ -104,19 +104,16 @@ def in_original(result: MatchResult, f_low: float, f_high: float, config) -> Mat
                   evidence=evidence)
     if not result.matched:
         return out
-    low_is_coarser = result.order == "given"
-    f_fine, f_coarse = (f_high, f_low) if low_is_coarser else (f_low, f_high)
-    t = _transform_in_original(result.transform, result.model, f_fine, f_coarse)
-    inliers = np.array(result.inliers, dtype=np.float64)
-    inliers[:, 0:2] = inliers[:, 0:2] * f_fine + (f_fine - 1.0) / 2.0
-    inliers[:, 2:4] = inliers[:, 2:4] * f_coarse + (f_coarse - 1.0) / 2.0
+    swapped = result.order == "swapped"
+    f_fine, f_coarse = (f_low, f_high) if swapped else (f_high, f_low)
+    s_fine, s_coarse = _to_original(f_fine), _to_original(f_coarse)
+    t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
+    inliers = np.hstack([apply(s_fine, result.inliers[:, :2]),
+                         apply(s_coarse, result.inliers[:, 2:4])])
     if not model_of(result.model).has_ratio:
         return replace(out, transform=t, inliers=inliers)
-    ratio = similarity_parts(t)[0]
-    order = result.order
-    if math.isfinite(ratio) and ratio < 1.0:  # the shrinking swapped which image is finer
-        t, inliers = invert(t), inliers[:, [2, 3, 0, 1]]
-        order = "swapped" if low_is_coarser else "given"
+    # the shrinking can make the finer working image the coarser original one
+    t, inliers, swapped = finer_to_coarser(t, inliers, swapped)
     ratio, angle, tr = similarity_parts(t)
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
-                   rotation_deg=angle, translation=tr, order=order)
+                   rotation_deg=angle, translation=tr, order="swapped" if swapped else "given")

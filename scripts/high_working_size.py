@@ -2,9 +2,9 @@
 
 Usage: python scripts/high_working_size.py [--ratios 1.5,2,3,5,10] [--seed 0]
 
-For each ratio r: the largest photo of ../shared enlarged to 9000x6000, its centre 6000x4000 cut
-as the high image, and the whole scene zoomed out by r in a low window of 1800x1200 px or the
-footprint's size plus a margin (``lab.synthetic.zoom_pair_from_crop``, exact truth, EVALUATION.md).
+For each ratio r: the large pair of ``speed_bench.py`` (the largest photo of ../shared enlarged
+to 9000x6000, its centre 6000x4000 the high image, exact truth, EVALUATION.md) zoomed out by r,
+in a low window of 1800x1200 px or the footprint's size plus a margin.
 Then ``scalematch.match`` in this process with ``high_max_side=None`` (full size, as before)
 and with the default (2048 px), alternately. Prints one Markdown row per ratio and setting:
 seconds, error (low px), the ratio found and the order.
@@ -17,31 +17,27 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Tuple
 
-import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
 from scalematch import Config, match  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import reprojection_error  # noqa: E402
-from scalematch.lab.synthetic import zoom_pair_from_crop  # noqa: E402
+from speed_bench import LARGE_HIGH, LARGE_SCENE, enlarged_scene, large_pair  # noqa: E402
 
-HIGH = (6000, 4000)  #: the high image, px (24 MP)
-SCENE = (9000, 6000)  #: the enlarged photo it is cut from
 LOW_MIN_WINDOW = (1800, 1200)  #: the low window, px, unless the footprint needs more
 MARGIN = 1.3  #: low window / footprint side when the footprint is larger than LOW_MIN_WINDOW
 
 
-def pair(scene: np.ndarray, ratio: float, seed: int):
-    w, h = HIGH
-    x0, y0 = (SCENE[0] - w) // 2, (SCENE[1] - h) // 2
-    side = int(np.ceil(np.hypot(w, h) / ratio * MARGIN))  # any angle fits
-    window = (max(LOW_MIN_WINDOW[0], side), max(LOW_MIN_WINDOW[1], side))
-    return zoom_pair_from_crop(scene, (x0, y0, w, h), ratio, np.random.default_rng([seed, 7]),
-                               window, source="large")
+def low_window(ratio: float) -> Tuple[int, int]:
+    """A low window holding the high image's footprint at any angle."""
+    side = int(np.ceil(np.hypot(*LARGE_HIGH) / ratio * MARGIN))
+    return max(LOW_MIN_WINDOW[0], side), max(LOW_MIN_WINDOW[1], side)
 
 
 def main() -> None:
@@ -53,16 +49,15 @@ def main() -> None:
     if shared is None:
         sys.exit("../shared is absent")
     photo = max(list_photos(shared), key=lambda p: p.stat().st_size)
-    grey = cv2.imread(str(photo), cv2.IMREAD_GRAYSCALE).astype(np.float32)
-    scene = cv2.resize(grey, SCENE, interpolation=cv2.INTER_CUBIC)
-    del grey
-    print(f"{photo.name} enlarged to {SCENE[0]}x{SCENE[1]}, high {HIGH[0]}x{HIGH[1]}, seed "
+    scene = enlarged_scene(photo)
+    print(f"{photo.name} enlarged to {LARGE_SCENE[0]}x{LARGE_SCENE[1]}, high "
+          f"{LARGE_HIGH[0]}x{LARGE_HIGH[1]}, seed "
           f"{a.seed}, load average {os.getloadavg()[0]:.1f}\n")
     print("| ratio | low px | high image matched at | seconds | error px | ratio found | order |")
     print("|---|---|---|---:|---:|---:|---|")
     settings = (("full size", Config(high_max_side=None)), ("2048 px (default)", Config()))
     for k, ratio in enumerate(float(r) for r in a.ratios.split(",")):
-        p = pair(scene, ratio, a.seed)
+        p = large_pair(scene, a.seed, ratio, low_window(ratio), photo.name)
         for name, config in settings if k % 2 == 0 else settings[::-1]:
             t0 = time.perf_counter()
             r = match(p.low, p.high, config)

@@ -77,18 +77,24 @@ def load() -> str:
     return "/".join(f"{v:.1f}" for v in os.getloadavg())
 
 
-def large_pair(photo: Path, seed: int):
-    """The 6000x4000 / ~2 MP pair (the first seeded draw whose footprint fits the window)."""
+def enlarged_scene(photo: Path) -> np.ndarray:
+    """The photo, grey, enlarged (bicubic) to LARGE_SCENE px: the scene of the large pairs."""
     grey = cv2.imread(str(photo), cv2.IMREAD_GRAYSCALE).astype(np.float32)
-    scene = cv2.resize(grey, LARGE_SCENE, interpolation=cv2.INTER_CUBIC)
+    return cv2.resize(grey, LARGE_SCENE, interpolation=cv2.INTER_CUBIC)
+
+
+def large_pair(scene: np.ndarray, seed: int, ratio: float = LARGE_RATIO,
+               low_max: Tuple[int, int] = LARGE_LOW_MAX, source: str = ""):
+    """The scene's centre LARGE_HIGH window as the high image, the scene zoomed out by ``ratio``
+    in a window of at most ``low_max`` as the low one (the first seeded draw whose footprint
+    fits the window)."""
     w, h = LARGE_HIGH
-    x0, y0 = (LARGE_SCENE[0] - w) // 2, (LARGE_SCENE[1] - h) // 2
+    x0, y0 = (scene.shape[1] - w) // 2, (scene.shape[0] - h) // 2
     for k in range(100):
         try:
-            pair = zoom_pair_from_crop(scene, (x0, y0, w, h), LARGE_RATIO,
-                                       np.random.default_rng([seed, 12, k]), LARGE_LOW_MAX,
-                                       source=photo.name)
-            return pair
+            return zoom_pair_from_crop(scene, (x0, y0, w, h), ratio,
+                                       np.random.default_rng([seed, 12, k]), low_max,
+                                       source=source)
         except ValueError:
             continue
     raise RuntimeError("no angle fits the large pair's window")
@@ -129,7 +135,7 @@ def time_in_process(pairs) -> Tuple[str, str]:
 
 def time_large(photo: Path, seed: int, folder: Path, scalematch_cmd: str) -> str:
     """The 6000x4000 / ~2 MP pair, whole processes, two rounds: a Markdown table."""
-    pair = large_pair(photo, seed)
+    pair = large_pair(enlarged_scene(photo), seed, source=photo.name)
     lo = write_png(folder / "large_low.png", pair.low)
     hi = write_png(folder / "large_high.png", pair.high)
     h, w = pair.low.shape
