@@ -137,8 +137,8 @@ class Config:
     low_max_side: Optional[int] = 2048
     #: the same for the high image (None: its full size). Shrinking it can make it the coarser
     #: image, found then in the other order, so it applies only with ``order="auto"``. At 2048
-    #: px a 24 MP high image was matched 1.5-4 times faster, 0.009-0.024 px from the truth at
-    #: ratios 1.5 to 10 (full size: 0.012-0.035 px; docs/PERFORMANCE.md, section 5).
+    #: px a 24 MP high image was matched 2.1-5.9 times faster, 0.008-0.021 px from the truth
+    #: at ratios 1.5 to 10 (full size: 0.008-0.041 px; docs/PERFORMANCE.md, section 5).
     high_max_side: Optional[int] = 2048
 
     def __post_init__(self) -> None:
