@@ -9,12 +9,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, Optional, Tuple
 
+from .checks import in_range, one_of
 from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
 from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.matcher import MatcherParams
+from .stages.probe import ProbeParams
+from .stages.refit import ModelCheckParams
 from .stages.views import ViewParams
 
 #: Names of the models the robust estimator can fit (the records: ``stages.estimator.MODELS``).
@@ -41,39 +44,6 @@ def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float
         out.append(round(s, 3))
         k += 1
     return tuple(out)
-
-
-@dataclass(frozen=True)
-class ProbeParams:
-    """Skipping hopeless scales from the initial matches of their strongest points (paper 5)."""
-
-    enabled: bool = True  #: False runs the full matching at every scale
-    #: strongest points per scale used to score it (100 and 150 measured the same success on
-    #: the 38 photos at ratios 8 and 10; 100 is 16 % faster)
-    points: int = 100
-    keep: int = 3  #: best-scoring scales kept, each with its two neighbours
-    #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
-    #: with 99.9 % confidence down to an inlier fraction of 12 %
-    ransac_iters: int = 500
-
-
-@dataclass(frozen=True)
-class ModelCheckParams:
-    """A similarity answer is checked against richer models on the same candidates.
-
-    A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
-    measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
-    tens of px off away from its inliers. When an affine map or a homography fitted to the
-    winning scale's candidates explains clearly more of them, that model is reported instead
-    (``MatchResult.model`` says which); on plain zoom pairs the similarity is exact and stays.
-    """
-
-    enabled: bool = True  #: False: the similarity is always the answer when asked for
-    models: Tuple[str, ...] = ("affine", "homography")  #: tried in this order (simplest first)
-    #: a richer model is taken when its inliers reach ``min_gain`` x the similarity's and at
-    #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
-    min_gain: float = 1.25
-    min_extra: int = 10
 
 
 #: Smallest working size, px: below it the 24 px minimum side of a level (detector.MIN_SIDE_PX)
@@ -116,9 +86,6 @@ class Config:
     #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged
     #: scalematch/data/jet_covariance.json)
     covariance_path: Optional[str] = None
-    #: recorded by match() in the paper mode: which Lambda was used ("packaged" or the resolved
-    #: path, and the first 12 hex digits of the file's SHA-256); "" before a match
-    covariance_used: str = ""
     matcher: MatcherParams = field(default_factory=MatcherParams)
     orientation: OrientationParams = field(default_factory=OrientationParams)  #: default mode
     semi_local: SemiLocalParams = field(default_factory=SemiLocalParams)  #: paper mode
@@ -142,19 +109,18 @@ class Config:
     high_max_side: Optional[int] = 2048
 
     def __post_init__(self) -> None:
-        if self.order not in ORDERS:
-            raise ValueError(f"order must be one of {ORDERS}, got {self.order!r}")
-        if self.mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
-        if self.model not in MODELS:
-            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        one_of("", "order", self.order, ORDERS)
+        one_of("", "mode", self.mode, MODES)
+        one_of("", "model", self.model, MODELS)
+        in_range("", "seed", self.seed, lo=0, integer=True)
         for name in ("low_max_side", "high_max_side"):
             side = getattr(self, name)
-            if side is not None and side < MIN_WORKING_SIDE_PX:
-                raise ValueError(f"{name} must be None or at least {MIN_WORKING_SIDE_PX} px, "
-                                 f"got {side}")
-        if not self.scales or min(self.scales) < 1.0:
-            raise ValueError("scales must be a non-empty list of values >= 1")
+            if side is not None:  # None: always full size
+                in_range("", name, side, lo=MIN_WORKING_SIDE_PX, integer=True)
+        if len(self.scales) == 0:
+            raise ValueError("scales must hold at least one scale (>= 1)")
+        for s in self.scales:  # the high-resolution image is never enlarged
+            in_range("", "scales", s, lo=1)
 
     @staticmethod
     def paper(**changes) -> "Config":

@@ -16,6 +16,9 @@ import numpy as np
 
 #: Points per side of the grid spanning the high image (EVALUATION.md: 21x21).
 GRID_POINTS = 21
+#: Smallest |w| a homography's point is divided by: a point on the horizon (w = 0) is sent
+#: 1e12 px away instead of to a division by zero (the estimator's residuals of a degenerate fit)
+W_MIN = 1e-12
 
 
 def similarity_matrix(scale: float, angle_deg: float, tx: float = 0.0, ty: float = 0.0) -> np.ndarray:
@@ -153,7 +156,34 @@ def apply(t: np.ndarray, xy: np.ndarray) -> np.ndarray:
     if t.shape == (2, 3):
         return xy @ t[:, :2].T + t[:, 2]
     p = np.hstack([xy, np.ones((xy.shape[0], 1))]) @ t.T
-    return p[:, :2] / p[:, 2:3]
+    w = p[:, 2:3]  # a point on the horizon (w = 0) goes far away, not to a division by zero
+    return p[:, :2] / np.where(np.abs(w) < W_MIN, W_MIN, w)
+
+
+def transfer_error(t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(N,) distances |t(src) - dst|, px of ``dst``'s image, for (N, 2) point pairs.
+
+    >>> transfer_error(similarity_matrix(1.0, 0.0, 3.0, 4.0), [[0, 0]], [[0, 0]]).tolist()
+    [5.0]
+    """
+    return np.linalg.norm(apply(t, src) - np.asarray(dst, np.float64).reshape(-1, 2), axis=1)
+
+
+def resize_map(fx: float, fy: Optional[float] = None) -> np.ndarray:
+    """2x3 map from a pixel of an image to its pixel in a copy resized by (fx, fy).
+
+    ``fx``, ``fy``: new size over old size (``fy`` defaults to ``fx``). The convention is
+    ``cv2.resize``'s, centre-aligned: the edges of the images coincide, so
+    ``x' = fx (x + 0.5) - 0.5``. Its inverse, ``resize_map(1 / fx)``, maps back; decimating
+    by ``d`` (one pixel of the copy every ``d`` pixels) is ``resize_map(1 / d)``.
+
+    >>> resize_map(0.5).tolist()      # halved: pixels 0 and 1 become pixel 0 (at 0.5 -> 0)
+    [[0.5, 0.0, -0.25], [0.0, 0.5, -0.25]]
+    >>> apply(resize_map(4.0), [[0.0, 0.0]]).tolist()   # pixel 0 shrunk by 4, back to full size
+    [[1.5, 1.5]]
+    """
+    fy = fx if fy is None else fy
+    return np.array([[fx, 0.0, (fx - 1.0) / 2.0], [0.0, fy, (fy - 1.0) / 2.0]])
 
 
 def grid(shape: Tuple[int, int], n: int = GRID_POINTS) -> np.ndarray:

@@ -1,9 +1,13 @@
-"""The one-to-many matcher: every scale of the high image against the low image (paper 4.2, 5).
+"""The one-to-many matcher: every scale of the finer image against the coarser one (paper 4.2, 5).
 
-``match(low, high, config)`` runs, for each scale s of the high-resolution image: detection
-(scale-adapted Harris), description, candidate matching against the low image's points (found
-once, at s = 1), geometric constraints, and robust estimation; the scale with the most inliers
-wins (ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says whether the evidence is enough.
+``match(low, high, config)`` checks its inputs once, brings very large images to their working
+size, and runs the search plan (:mod:`scalematch.search`): each step detects the views of the
+finer image at every scale (scale-adapted Harris), describes their strongest points, scores the
+scales with the probe, and matches the promising ones in full against the coarser image's
+points (found once, at s = 1): candidates, geometric constraints, robust estimation. The scale
+with the most inliers wins (ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says
+whether the evidence is enough; the winner is refit in the finer image's pixels
+(:mod:`scalematch.stages.refit`) and turned into one :class:`MatchResult`.
 """
 
 from __future__ import annotations
@@ -11,25 +15,31 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .config import Config
-from .geometry import compose, finer_to_coarser, similarity_parts
+from .geometry import finer_to_coarser, similarity_parts
 from .imageio import grey_levels
-from .result import MatchResult, ScaleRow
+from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
+from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, overwhelming, probe_best,
+                     search_plan, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Decision, decide, folded
+from .stages.decision import decide
 from .stages.descriptors import Described, describe_gradients, describe_jets
 from .stages.detector import MIN_SIDE_PX, Keypoints, detect_on_level
-from .stages.estimator import MIN_SAMPLE, Estimate, estimate, model_of, refine, residuals
+from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
-from .stages.matcher import Candidates, match_descriptors
-from .stages.scalespace import Level, as_float_image, scale_space
+from .stages.matcher import distinct_pairs, match_descriptors
+from .stages.probe import probe_scores, select_scales
+from .stages.refit import pooled_refit, refit_in_high, richer_model
+from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, keep_inside, to_high, view_plan, views_of
-from .working import direction_scales, in_original, shrink, working_factor
+from .stages.views import View, keep_inside, views_of
+from .working import WorkImages, at_working_size, in_original
+
+__all__ = ["match", "distinct_pairs"]
 
 #: Largest view of the high image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
@@ -37,15 +47,85 @@ from .working import direction_scales, in_original, shrink, working_factor
 #: images. The result is the same either way.
 KEEP_LEVELS_MAX_PX = 4_000_000
 
-@dataclass(frozen=True)
-class ScaleOutcome:
-    """What one scale produced (internal to the pipeline; summarised as a ScaleRow)."""
 
-    row: ScaleRow
-    estimate: Optional[Estimate]
-    src: np.ndarray  #: (K, 2) high px of the candidates given to the estimator
-    dst: np.ndarray  #: (K, 2) low px
-    candidates: int  #: initial candidate matches
+def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
+          progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
+    """Match a low-resolution image against a high-resolution one of the same scene.
+
+    The search runs progressively and stops at the first reliable match (MODS, Mishkin et al.
+    2015): the given order (``low`` coarser than ``high``) on the image itself; then, with
+    ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
+    the finer image (``config.views``), in both orders (:func:`scalematch.search.search_plan`).
+    The a-contrario test counts every search made, so trying more cannot make a chance
+    transform look reliable.
+
+    An image longer than its working size (``config.low_max_side``, ``config.high_max_side``)
+    is matched shrunk and the answer given in its own pixels (:mod:`scalematch.working`).
+    Independent pieces of work run on as many threads as OpenCV uses
+    (:mod:`scalematch.stages.threads`); the answer does not depend on them.
+
+    Parameters
+    ----------
+    low, high : (H, W) arrays
+        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`), 16-bit integers
+        (scaled by 255/65535), or floats in [0, 1] (scaled by 255); ``ValueError`` for bool,
+        NaN or constant arrays, more than two dimensions, a side under 24 px.
+    config : Config
+        Every parameter; recorded in the result.
+    progress : callable, optional
+        ``progress(done, total)`` as the search goes; ``total`` is the plan's length, and
+        ``done`` reaches it when the search ends (early or not).
+
+    Returns
+    -------
+    MatchResult
+        ``matched`` False with a ``reason`` when the evidence is too weak: a wrong transform
+        reported as a match is the worst outcome, so the decision errs on the side of no.
+        ``order`` says whether the images were found in the order given; ``transform`` always
+        maps the finer image's pixels to the coarser image's; ``search`` lists the steps run.
+    """
+    t0 = time.perf_counter()
+    # the one check at the door, before anything is shrunk: ValueError for what cannot match
+    work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config)
+    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
+    whitening = cov.whitening() if cov is not None else None
+    plan = search_plan(config, work.scales)
+    meter = Meter(progress, sum(step.cost for step in plan))
+    coarser: Dict[Direction, LowFeatures] = {}
+    attempts: List[Attempt] = []
+    records: List[StepRecord] = []
+    stopped = "plan done"
+    for step in plan:
+        if skips(step, attempts):
+            meter.tick(step.cost)
+            continue
+        found, record = run_step(step, work, config, whitening, coarser, meter,
+                                 searches=sum(r.views for r in records))
+        attempts += found
+        records.append(record)
+        stopped = stop_reason(step, attempts, plan, config)
+        if stopped:
+            break
+    meter.finish()
+    result = build_result(attempts, tuple(records), plan, stopped, config,
+                          cov.source if cov is not None else "", time.perf_counter() - t0)
+    return in_original(result, work, config)
+
+
+class Meter:
+    """``progress(done, total)`` over the plan: one unit per scale detected or matched."""
+
+    def __init__(self, progress: Optional[Callable[[int, int], None]], total: int) -> None:
+        self.progress, self.total, self.done = progress, total, 0
+
+    def tick(self, units: int = 1) -> None:
+        self.done = min(self.done + units, self.total)
+        if self.progress is not None:
+            self.progress(self.done, self.total)
+
+    def finish(self) -> None:
+        if self.done < self.total:
+            self.tick(self.total - self.done)
 
 
 def _describe(level: Level, kp: Keypoints, config: Config, whitening) -> Described:
@@ -67,21 +147,6 @@ def _constrain(config: Config, high: Described, low: Described, cand, level: Lev
         return [semi_local_filter(p, q, level, low_image, config.semi_local)]
     dtheta = low.angle[cand.j] - high.angle[cand.i]
     return orientation_groups(dtheta, config.orientation)
-
-
-def distinct_pairs(src: np.ndarray, dst: np.ndarray):
-    """The distinct rows of the point pairs (src, dst), (K, 2) each, in their first order.
-
-    A keypoint with several dominant orientations is described once per orientation, so the
-    same pair of positions can be matched more than once; counting it once keeps the inlier
-    count and the a-contrario test honest.
-    """
-    if len(src) == 0:
-        return src, dst
-    rows = np.round(np.hstack([src, dst]), 3)
-    _, first = np.unique(rows, axis=0, return_index=True)
-    keep = np.sort(first)
-    return src[keep], dst[keep]
 
 
 def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
@@ -114,72 +179,43 @@ def _part(kp: Keypoints, rows: slice) -> Keypoints:
     return Keypoints(s=kp.s, xy=kp.xy[rows], response=kp.response[rows])
 
 
-def probe_scores(highs: Sequence[Described], low: Described, config: Config) -> List[float]:
-    """How promising each scale looks from the initial matches of its strongest points alone.
-
-    The paper (section 5) notes that the initial matches already point at the best scale.
-    Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
-    paper mode a scale's score is their number of candidate matches. In the default mode it is
-    the number of inliers of a quick similarity fit to the candidates in the dominant rotation
-    peak, counted only when the fit's ratio agrees with the scale: rotation alone cannot rank
-    scales where the scene's edges share a few directions (facades), geometry can. One
-    nearest-neighbour search serves every scale (each candidate depends on its own row only;
-    one large product is faster than many small ones).
-    """
-    if not highs:
-        return []
-    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
-    bounds = np.cumsum([0] + [len(h) for h in highs])
-    out = []
-    for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
-        rows = (cand.i >= lo) & (cand.i < hi)
-        part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
-        out.append(_score(h, low, part, config))
-    return out
-
-
-def _score(high: Described, low: Described, cand: Candidates, config: Config) -> float:
-    if len(cand) == 0:
-        return 0.0
-    if config.mode == "paper":
-        return float(len(cand))
-    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], config.orientation)
-    best = 0.0
-    for mask in groups:
-        est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
-                       replace(config.ransac, max_iters=config.probe.ransac_iters),
-                       seed=config.seed)
-        if est.transform is None:
-            continue
-        ratio = similarity_parts(est.transform)[0]
-        if math.isfinite(ratio) and abs(math.log(ratio / high.s)) <= math.log(
-                config.decision.scale_agreement):
-            best = max(best, float(est.n_inliers))
-    return best
-
-
-def select_scales(scores: List[float], keep: int) -> List[int]:
-    """Indices of the ``keep`` best-scoring scales and their immediate neighbours."""
-    order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
-    chosen = set()
-    for i in order:
-        chosen.update(j for j in (i - 1, i, i + 1) if 0 <= j < len(scores))
-    return sorted(chosen)
-
-
-
 @dataclass(frozen=True)
 class LowFeatures:
     """The low-resolution image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
 
     image: np.ndarray = field(repr=False)  #: (H, W) float32
     described: Described = field(repr=False)
+    keypoints: Keypoints = field(repr=False)  #: strongest first (``harris_low``)
+
+    def strongest(self, n_points: int, n_described: int) -> Tuple[Keypoints, Described, Described]:
+        """(keypoints, descriptors of the ``n_described`` strongest, of all) of the ``n_points``
+        strongest points: what detecting and describing the same image at s = 1 with a cap of
+        ``n_points`` gives (detection sorts strongest first and caps last; a point's
+        descriptors depend on that point alone)."""
+        kp = Keypoints(s=1.0, xy=self.keypoints.xy[:n_points],
+                       response=self.keypoints.response[:n_points])
+        d = self.described
+
+        def rows(n: int) -> Described:
+            keep = d.index < n
+            return Described(s=d.s, xy=d.xy[keep], index=d.index[keep], angle=d.angle[keep],
+                             desc=d.desc[keep])
+
+        return kp, rows(min(n_described, len(kp))), rows(len(kp))
 
 
 def describe_low(low: np.ndarray, config: Config, whitening) -> LowFeatures:
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
-    return LowFeatures(low, _describe(level, detect_on_level(level, config.harris_low), config,
-                                      whitening))
+    kp = detect_on_level(level, config.harris_low)
+    return LowFeatures(low, _describe(level, kp, config, whitening), kp)
+
+
+def shares_first_level(config: Config) -> bool:
+    """True when an image's s = 1 points as the coarser one give its s = 1 points as the finer:
+    the same detector but for a cap at least as large."""
+    high, low = config.harris, config.harris_low
+    return replace(low, max_points=high.max_points) == high and high.max_points > 0 and (
+        low.max_points == 0 or low.max_points >= high.max_points)
 
 
 def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
@@ -195,9 +231,7 @@ class Probed:
     """A view of the high image detected at every scale and scored by the probe."""
 
     view: View = field(repr=False)
-    #: per scale: (keypoints, descriptors of the probe points -- of all points without the
-    #: probe --, the level when kept for the full pass or None)
-    detected: Tuple = field(repr=False)
+    detected: Tuple[Detected, ...] = field(repr=False)  #: per scale
     usable: Tuple[int, ...]  #: scales with described points
     run: Tuple[int, ...]  #: scales to match in full
     score: float  #: the best probe score over the scales (inf when the probe is off)
@@ -217,25 +251,44 @@ def _joined(head: Described, rest: Described, offset: int) -> Described:
                      desc=np.vstack([head.desc, rest.desc]))
 
 
+class Detected(NamedTuple):
+    """One scale of a view, detected and (its probe's points) described."""
+
+    keypoints: Keypoints
+    #: descriptors of the probe's points (of every point without the probe); None: too small
+    probe: Optional[Described]
+    level: Optional[Level]  #: the level, when kept for the full pass
+    #: every point described already (s = 1, shared with the other direction), or None
+    full: Optional[Described] = None
+
+
 def detect_view(view: View, config: Config, whitening,
-                step: Callable[[], None] = lambda: None) -> Tuple[Tuple, bool]:
+                step: Callable[[], None] = lambda: None,
+                known: Optional[LowFeatures] = None) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``step()`` is called once per scale detected. The levels of a view of at most
-    ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass.
+    ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
+    described as the coarser one (the other direction), whose points give this view's s = 1
+    points when it is the image itself (:func:`shares_first_level`).
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
+    n_probe = config.probe.points if probing else config.harris.max_points
+    reuse = known is not None and view.is_identity and shares_first_level(config)
     detected = []
     for level in scale_space(view.image, scales, **_space(config)):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
-            detected.append((Keypoints.empty(level.s), None, None))
+            detected.append(Detected(Keypoints.empty(level.s), None, None))
+        elif reuse and level.s == 1.0:  # found already: the coarser image of the other direction
+            kp, part, full = known.strongest(config.harris.max_points, n_probe)
+            detected.append(Detected(kp, part, level if keep else None, full))
         else:
             kp = _inside(view, detect_on_level(level, config.harris), config.views.edge_margin_px)
             part = _part(kp, slice(config.probe.points)) if probing else kp
-            detected.append((kp, _describe(level, part, config, whitening),
-                             level if keep else None))
+            detected.append(Detected(kp, _describe(level, part, config, whitening),
+                                     level if keep else None))
         step()
     return tuple(detected), probing
 
@@ -243,9 +296,9 @@ def detect_view(view: View, config: Config, whitening,
 def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
                config: Config) -> Probed:
     """Score each scale of a detected view from its strongest points (paper 5)."""
-    usable = [i for i, (kp, d, _) in enumerate(detected) if d is not None and len(d)]
+    usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
-        scores = probe_scores([detected[i][1] for i in usable], low.described, config)
+        scores = probe_scores([detected[i].probe for i in usable], low.described, config)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -262,17 +315,19 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
     """
     scales = sorted(config.scales)
     detected, run = probed.detected, probed.run
-    kept = all(detected[i][2] is not None for i in run)
+    kept = all(detected[i].level is not None for i in run)
     if kept:
-        levels = ((i, detected[i][2]) for i in run)
+        levels = ((i, detected[i].level) for i in run)
     else:  # the detection's cascade again, up to the largest scale run (bounded memory)
         levels = ((i, level) for i, level in enumerate(scale_space(
             probed.view.image, scales[:run[-1] + 1], **_space(config))) if i in run)
 
     def one(item) -> ScaleOutcome:
         i, level = item
-        kp, desc, _ = detected[i]
-        if probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
+        kp, desc, _, full = detected[i]
+        if full is not None:
+            desc = full
+        elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
             rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
                              whitening)
             desc = _joined(desc, rest, config.probe.points)
@@ -288,261 +343,88 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
             outcomes.append(full[n])
         else:
             # skipped: the probe judged it hopeless (not: too small, or no points at all)
-            row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n][0]), initial=0,
+            row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n].keypoints), initial=0,
                            kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         step()
     return outcomes
 
 
-@dataclass(frozen=True)
-class Attempt:
-    """One search: a direction (which image is taken as the finer one) and a view of it."""
-
-    swapped: bool  #: True: the second image given was found to be the coarser one
-    view: View = field(repr=False)
-    outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
-    verdict: Decision = field(repr=False)
 
 
-def _winning_outcome(attempt: Attempt) -> ScaleOutcome:
-    """The outcome of the scale the decision chose."""
-    return next(o for o in attempt.outcomes if o.row.s == attempt.verdict.best_scale)
+def run_step(step: Step, work: WorkImages, config: Config, whitening,
+             coarser: Dict[Direction, "LowFeatures"], meter: Meter,
+             searches: int) -> Tuple[List[Attempt], StepRecord]:
+    """Run one step of the plan: probe its views, match the promising ones in full, decide.
 
-
-def _refit_in_high(attempt: Attempt, config: Config) -> Tuple[np.ndarray, np.ndarray, str]:
-    """(transform, inliers (N, 4), model) of a tilted view's match, in high-image pixels.
-
-    The view's similarity composed with the view's compression is an affine map; it is refit
-    on the inliers mapped back to the high image (an affine map, or a homography when that is
-    the model asked for), so the answer is exact rather than limited to the sampled tilts.
+    ``coarser`` caches each direction's coarser image, described once; ``searches`` counts
+    the views probed by earlier steps (the a-contrario test counts them all).
     """
-    v = attempt.verdict
-    if attempt.view.is_identity:
-        return v.transform, v.inliers, config.model
-    src = to_high(attempt.view, v.inliers[:, :2])
-    dst = v.inliers[:, 2:4]
-    model = "homography" if config.model == "homography" else "affine"
-    # every candidate of the winning scale, not only the view's similarity inliers: the sampled
-    # tilt differs from the true one, so the similarity holds on part of the image only
-    best = _winning_outcome(attempt)
-    cand_src = to_high(attempt.view, best.src)
-    est = estimate(model, cand_src, best.dst, config.ransac, seed=config.seed)
-    if est.transform is not None and est.n_inliers >= len(src):
-        return est.transform, np.hstack([cand_src[est.inliers], best.dst[est.inliers]]), model
-    est = estimate(model, src, dst, config.ransac, seed=config.seed)
-    if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
-        composed = compose(v.transform, attempt.view.to_view)
-        return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
-    inl = est.inliers
-    return est.transform, np.hstack([src[inl], dst[inl]]), model
-
-
-def _richer_model(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attempt,
-                  config: Config):
-    """(transform, inliers, model): a richer model when the similarity explains too little.
-
-    The candidates of the winning scale are refit with each of ``config.model_check.models``;
-    the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
-    whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
-    """
-    check = config.model_check
-    if not check.enabled or model != "similarity" or not attempt.view.is_identity:
-        return t, inliers, model
-    best = _winning_outcome(attempt)
-    k = len(inliers)
-    for richer in check.models:
-        est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
-        if est.transform is None or folded(est.transform):
-            continue
-        if est.n_inliers >= check.min_gain * k and est.n_inliers - k >= check.min_extra:
-            inl = est.inliers
-            return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
-    return t, inliers, model
-
-
-def _pooled_refit(t: np.ndarray, inliers: np.ndarray, model: str, attempt: Attempt,
-                  config: Config):
-    """(transform, inliers): ``t`` refined on the candidates of every scale matched in full.
-
-    The neighbouring scales of a true match find the same transform (the paper's Table 1) from
-    other points; pooled, they spread the inliers wider over the image, which pins a homography
-    or an affine map down where the winning scale alone had few points. Kept only when it
-    explains at least as many pooled pairs as ``t``; the inliers reported stay those of the
-    winning scale (the pairs the decision counted) that the refined transform still explains.
-    """
-    if not model_of(model).has_ratio:
-        return t, inliers
-    done = [o for o in attempt.outcomes if o.estimate is not None and len(o.src)]
-    if len(done) < 2:
-        return t, inliers
-    src = to_high(attempt.view, np.vstack([o.src for o in done]))
-    src, dst = distinct_pairs(src, np.vstack([o.dst for o in done]))
-    before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
-    est = refine(model, t, src, dst, config.ransac)
-    if est.n_inliers < before or folded(est.transform):
-        return t, inliers
-    keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
-        config.ransac.threshold_px
-    return est.transform, inliers[keep]
-
-
-def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
-          progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
-    """Match a low-resolution image against a high-resolution one of the same scene.
-
-    The search runs progressively and stops at the first reliable match (MODS, Mishkin et al.
-    2015): the given order (``low`` coarser than ``high``) on the image itself; then, with
-    ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
-    the finer image (``config.views``), in both orders. The a-contrario test counts every search
-    made, so trying more cannot make a chance transform look reliable.
-
-    An image longer than its working size (``config.low_max_side``, ``config.high_max_side``)
-    is matched shrunk and the answer given in its own pixels (:mod:`scalematch.working`).
-    Independent pieces of work run on as many threads as OpenCV uses
-    (:mod:`scalematch.stages.threads`); the answer does not depend on them.
-
-    Parameters
-    ----------
-    low, high : (H, W) arrays
-        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`), or floats in
-        [0, 1] (scaled by 255); ``ValueError`` for bool, NaN or constant arrays.
-    config : Config
-        Every parameter; recorded in the result.
-    progress : callable, optional
-        ``progress(done, total)`` after each scale detected or matched; ``total`` grows when
-        the search goes on to the other order or to tilted views.
-
-    Returns
-    -------
-    MatchResult
-        ``matched`` False with a ``reason`` when the evidence is too weak: a wrong transform
-        reported as a match is the worst outcome, so the decision errs on the side of no.
-        ``order`` says whether the images were found in the order given; ``transform`` always
-        maps the finer image's pixels to the coarser image's.
-    """
-    f_low = working_factor(np.shape(low), config.low_max_side)
-    # a shrunk high image can become the coarser one: only the automatic order finds it then
-    f_high = working_factor(np.shape(high), config.high_max_side) \
-        if config.order == "auto" else 1.0
-    if f_low > 1.0 or f_high > 1.0:  # very large images: matched at their working size
-        low_w = shrink(as_float_image(low), f_low) if f_low > 1.0 else low
-        high_w = shrink(as_float_image(high), f_high) if f_high > 1.0 else high
-        inner = replace(config, low_max_side=None, high_max_side=None)
-        found = _search(low_w, high_w, inner, direction_scales(config.scales, f_low, f_high),
-                        progress)
-        return in_original(found, f_low, f_high, config)
-    return _search(low, high, config, {False: config.scales, True: config.scales}, progress)
-
-
-def _search(low: np.ndarray, high: np.ndarray, config: Config,
-            scales: Dict[bool, Tuple[float, ...]],
-            progress: Optional[Callable[[int, int], None]]) -> MatchResult:
-    """:func:`match` on images of their working size; ``scales[swapped]``: each direction's."""
-    t0 = time.perf_counter()
-    # ValueError: bool, NaN, constant, or a side under MIN_SIDE_PX
-    low = as_float_image(grey_levels(low, "low"))
-    high = as_float_image(grey_levels(high, "high"))
-    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
-    config = replace(config, covariance_used=cov.source) if cov is not None else config
-    whitening = cov.whitening() if cov is not None else None
-    images = {False: (low, high), True: (high, low)}
-    # a direction may have no scale of its own at working size (direction_scales)
-    directions = tuple(d for d in ((False, True) if config.order == "auto" else (False,))
-                       if scales[d])
-    plain = [[(1.0, 0.0)]]
-    passes = plain + (view_plan(config.views) if model_of(config.model).has_ratio else [])
-    configs = {d: replace(config, scales=tuple(scales[d])) for d in directions}
-    feats = {}
-    count = {"done": 0, "total": 0}
-
-    def step() -> None:
-        count["done"] += 1
-        if progress is not None:
-            progress(count["done"], count["total"])
-
+    cfg = replace(config, scales=step.scales)
+    lo_img, hi_img = step.direction.coarser_finer(work.low, work.high)
+    start = meter.done
+    probed = []
+    # the finer image described as the coarser one by the other direction: its s = 1 points
+    known = coarser.get(step.direction.other)
+    for view in views_of(hi_img, step.views, config.views):
+        if step.direction in coarser:
+            detected = detect_view(view, cfg, whitening, meter.tick, known)
+        else:  # the coarser image is described while the first view is detected
+            coarser[step.direction], detected = thread_map(lambda job: job(), [
+                lambda: describe_low(lo_img, cfg, whitening),
+                lambda: detect_view(view, cfg, whitening, meter.tick, known)])
+        probed.append(score_view(view, *detected, coarser[step.direction], cfg))
+    searches += len(probed)
+    chosen = sorted(probed, key=lambda p: -p.score)
+    if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
+        chosen = [p for p in chosen[:step.full_searches]
+                  if p.score >= config.views.min_probe_score]
     attempts: List[Attempt] = []
-    searches = 0  # every view probed counts: the best ones are chosen among them all
-    winner: Optional[Attempt] = None
-    matches: List[Attempt] = []  # every reliable match found so far
+    for p in chosen:
+        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
+        verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg, searches=searches)
+        attempts.append(Attempt(step, p.view, p.score, outcomes, verdict))
+        if overwhelming(attempts[-1], config):
+            break  # no other view of this step can do better
+    meter.tick(start + step.cost - meter.done)  # the views the probe left out
+    record = StepRecord(step.direction, step.view_pass, len(probed), len(attempts),
+                        probe_best([p.score for p in probed]), any(a.matched for a in attempts))
+    return attempts, record
 
-    def strength(a: Attempt) -> float:
-        return a.verdict.evidence["log10_nfa"]
 
-    for k, views in enumerate(passes):
-        found: List[Attempt] = []
-        for swapped in directions:
-            lo_img, hi_img = images[swapped]
-            cfg = configs[swapped]
-            per_search = 2 * len(cfg.scales)  # progress steps: detect + match each scale
-            count["total"] += len(views) * per_search // 2
-            probed = []
-            for v in views_of(hi_img, views, config.views):
-                if swapped in feats:
-                    found_view = detect_view(v, cfg, whitening, step)
-                else:  # the coarser image is described while the first view is detected
-                    feats[swapped], found_view = thread_map(lambda job: job(), [
-                        lambda: describe_low(lo_img, config, whitening),
-                        lambda: detect_view(v, cfg, whitening, step)])
-                probed.append(score_view(v, *found_view, feats[swapped], cfg))
-            searches += len(probed)
-            chosen = sorted(probed, key=lambda p: -p.score)
-            if k > 0:  # a pass of simulated views (pass 0 is the image itself)
-                chosen = [p for p in chosen[:config.views.full_searches]
-                          if p.score >= config.views.min_probe_score]
-            count["total"] += len(chosen) * per_search // 2
-            for p in chosen:
-                outcomes = tuple(finish_view(p, feats[swapped], cfg, whitening, step))
-                verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg,
-                                 searches=searches)
-                attempt = Attempt(swapped, p.view, outcomes, verdict)
-                attempts.append(attempt)
-                if verdict.matched:
-                    found.append(attempt)
-                    if verdict.evidence["log10_nfa"] <= config.decision.max_log_nfa_alone:
-                        break  # overwhelming: no other view of this pass can do better
-            if found:
-                break
-        matches += found
-        if matches:
-            best = min(matches, key=strength)
-            # a plain match on a handful of inliers can be a repeated structure seen through a
-            # viewpoint change: the first pass of views gets to show a stronger answer
-            weak = best.verdict.evidence["inliers"] < config.views.confirm_below_inliers
-            if not (weak and k == 0 and len(passes) > 1):
-                winner = best
-                break
-    if winner is None and matches:
-        winner = min(matches, key=strength)
-    timings = {"total": time.perf_counter() - t0}
+def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
+                 plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
+                 seconds: float) -> MatchResult:
+    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
+
+    A match shows the strongest matched attempt, refit in the finer image's pixels; no match
+    shows the first search made (the finer image itself, in the given order), with its reason.
+    """
+    winner = strongest(attempts)
+    shown = winner or attempts[0]
+    searches = sum(r.views for r in records)
+    evidence = replace(shown.verdict.evidence, searches=searches,
+                       search_order=shown.step.direction, view_tilt=shown.view.tilt,
+                       view_longitude_deg=shown.view.longitude_deg, probe_score=shown.probe,
+                       probe_best=probe_best([r.probe_best for r in records]),
+                       steps_run=len(records), steps_planned=len(plan), stopped=stopped)
+    common = dict(model=config.model, best_scale=shown.verdict.best_scale,
+                  scales=tuple(o.row for o in shown.outcomes), timings={"total": seconds},
+                  config=config, evidence=evidence, search=records,
+                  covariance_used=covariance_used)
     if winner is None:
-        first = attempts[0]
-        tried = searches
-        more = f" ({tried} searches: both orders, tilted views)" if tried > 1 else ""
-        return MatchResult(matched=False, reason=first.verdict.reason + more, model=config.model,
-                           transform=None, resolution_ratio=float("nan"),
-                           rotation_deg=float("nan"), translation=(float("nan"), float("nan")),
-                           best_scale=first.verdict.best_scale, inliers=np.zeros((0, 4)),
-                           scales=tuple(o.row for o in first.outcomes), timings=timings,
-                           config=config, evidence=dict(
-                               first.verdict.evidence, searches=tried,
-                               search_order="swapped" if first.swapped else "given"),
-                           order="given")
-    t, inliers, model = _refit_in_high(winner, config)
-    t, inliers, model = _richer_model(t, inliers, model, winner, config)
-    t, inliers = _pooled_refit(t, inliers, model, winner, config)
-    t, inliers, swapped = finer_to_coarser(t, inliers, winner.swapped,
-                                           model_of(model).has_ratio)
-    evidence = dict(winner.verdict.evidence, searches=searches,
-                    search_order="swapped" if winner.swapped else "given",
-                    view_tilt=winner.view.tilt, view_longitude_deg=winner.view.longitude_deg)
-    if not model_of(model).has_ratio:
-        ratio, angle, tr = float("nan"), float("nan"), (float("nan"), float("nan"))
-    else:
-        ratio, angle, tr = similarity_parts(t)
-    return MatchResult(matched=True, reason="", model=model, transform=t,
+        more = f" ({searches} searches: both orders, tilted views)" if searches > 1 else ""
+        return MatchResult(matched=False, reason=shown.verdict.reason + more, **common)
+    best = winner.winning_outcome()
+    fit = refit_in_high(winner.view, winner.verdict, best, config)
+    fit = richer_model(fit, winner.view, best, config)
+    t, inliers, model = pooled_refit(fit, winner.view, winner.outcomes, config)
+    has_ratio = model_of(model).has_ratio
+    t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
+                                           has_ratio)
+    ratio, angle, tr = similarity_parts(t) if has_ratio else (math.nan, math.nan,
+                                                              (math.nan, math.nan))
+    return MatchResult(**dict(common, model=model), matched=True, transform=t,
                        resolution_ratio=ratio, rotation_deg=angle, translation=tr,
-                       best_scale=winner.verdict.best_scale, inliers=inliers,
-                       scales=tuple(o.row for o in winner.outcomes), timings=timings,
-                       config=config, evidence=evidence,
-                       order="swapped" if swapped else "given")
+                       inliers=inliers,
+                       order=Direction.SWAPPED if swapped else Direction.GIVEN)

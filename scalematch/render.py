@@ -113,8 +113,8 @@ def summary_line(result: MatchResult) -> str:
         return f"no reliable match: {result.reason}" if result.reason else "no reliable match"
     if not model_of(result.model).has_ratio:
         return f"{result.model} matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
-    tilt = float(result.evidence.get("view_tilt", 1.0))
-    view = (f", seen tilted by {tilt:g} at {result.evidence.get('view_longitude_deg', 0.0):g} deg"
+    tilt = float(result.evidence.view_tilt)
+    view = (f", seen tilted by {tilt:g} at {result.evidence.view_longitude_deg:g} deg"
             if tilt > 1.0 else "")
     order = ", order swapped" if result.order == "swapped" else ""
     return (f"{result.model}: ratio {result.resolution_ratio:.2f}, rotation "

@@ -8,12 +8,79 @@ integer coordinates); ``transform`` maps a *high-resolution* pixel to a *low-res
 
 from __future__ import annotations
 
+import enum
 import json
 import math
 from dataclasses import asdict, dataclass, field, is_dataclass
 from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
+
+
+class Direction(str, enum.Enum):
+    """Which of the two images given is the coarser one: the one way the order is told.
+
+    A ``str`` enum, so it compares equal to its value and is written to JSON as that value.
+
+    >>> Direction.SWAPPED == "swapped", Direction.GIVEN.other
+    (True, <Direction.SWAPPED: 'swapped'>)
+    """
+
+    GIVEN = "given"  #: the first image given is the coarser one (the ``low`` argument)
+    SWAPPED = "swapped"  #: the second image given is the coarser one
+
+    @property
+    def other(self) -> "Direction":
+        return Direction.SWAPPED if self is Direction.GIVEN else Direction.GIVEN
+
+    def coarser_finer(self, first, second):
+        """(coarser, finer) of the two images given (first, second) in this direction."""
+        return (first, second) if self is Direction.GIVEN else (second, first)
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """The figures behind the decision (JSON ``evidence``); NaN where a figure was not reached.
+
+    The decision (:mod:`scalematch.stages.decision`) fills the first group from the best
+    transform of one search; the search (:mod:`scalematch.pipeline`) the second; the working
+    size (:mod:`scalematch.working`) the last.
+    """
+
+    inliers: int = 0  #: distinct inliers of the best transform
+    candidates: int = 0  #: distinct candidate matches at its scale
+    log10_nfa: float = math.inf  #: log10 expected number of chance transforms as good (a contrario)
+    chance_p: float = math.nan  #: chance that one random candidate fits the transform
+    implied_ratio: float = math.nan  #: the ratio the transform implies at the winning scale
+    footprint_area_px: float = math.nan  #: area of the high image's footprint, low px^2
+    footprint_inside: float = math.nan  #: fraction of the footprint inside the low image
+    agreeing_scales: int = 0  #: other scales whose transform agrees with the winner's
+    searches: int = 0  #: searches made (one per direction and view probed)
+    search_order: Direction = Direction.GIVEN  #: the direction of the search shown
+    view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)
+    view_longitude_deg: float = 0.0  #: its longitude, degrees
+    probe_score: float = math.nan  #: the probe's best score in the search shown
+    probe_best: float = math.nan  #: the best probe score of every search made
+    steps_run: int = 0  #: steps of the search plan run (``MatchResult.search``)
+    steps_planned: int = 0  #: steps in the plan
+    stopped: str = ""  #: why the search stopped (``pipeline.STOP_REASONS``)
+    low_working_factor: float = 1.0  #: the low image was matched shrunk by this factor
+    high_working_factor: float = 1.0  #: the high image was matched shrunk by this factor
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What one step of the search plan did (JSON ``search``, one object per step run)."""
+
+    direction: Direction  #: which image was taken as the coarser one
+    view_pass: int  #: 0: the finer image itself; k: the k-th pass of simulated tilted views
+    views: int  #: views detected and probed
+    full: int  #: views matched in full (the probe's choice)
+    probe_best: float  #: the best probe score among its views
+    matched: bool  #: a reliable match was found in this step
 
 
 @dataclass(frozen=True)
@@ -36,23 +103,30 @@ class MatchResult:
     """Everything a match produced; ``matched`` False means "no reliable match" (see ``reason``)."""
 
     matched: bool
-    reason: str  #: why not matched ("" when matched)
     model: str  #: similarity | affine | homography | fundamental
-    transform: Optional[np.ndarray] = field(repr=False)  #: high px -> low px (None when not matched)
-    resolution_ratio: float  #: 1/h: high-res pixels per low-res pixel (nan when not matched)
-    rotation_deg: float  #: atan2(T[1,0], T[0,0]) in degrees (nan when not matched)
-    translation: Tuple[float, float]  #: (T[0,2], T[1,2]) (nan when not matched)
-    best_scale: float  #: the winning scale s (nan when none)
-    inliers: np.ndarray = field(repr=False)  #: (N, 4) x_high, y_high, x_low, y_low
-    scales: Tuple[ScaleRow, ...] = field(repr=False)
-    timings: Dict[str, float] = field(repr=False)  #: stage name -> seconds
-    config: Any = field(repr=False)  #: the Config used
-    evidence: Dict[str, float] = field(default_factory=dict, repr=False)  #: decision figures
-    #: "given": the first image given is the coarser one; "swapped": the second is (the
+    reason: str = ""  #: why not matched ("" when matched)
+    #: high px -> low px (None when not matched)
+    transform: Optional[np.ndarray] = field(default=None, repr=False)
+    resolution_ratio: float = math.nan  #: 1/h: high-res pixels per low-res pixel
+    rotation_deg: float = math.nan  #: atan2(T[1,0], T[0,0]) in degrees
+    translation: Tuple[float, float] = (math.nan, math.nan)  #: (T[0,2], T[1,2])
+    best_scale: float = math.nan  #: the winning scale s (nan when none)
+    #: (N, 4) x_high, y_high, x_low, y_low
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)), repr=False)
+    scales: Tuple[ScaleRow, ...] = field(default=(), repr=False)
+    timings: Dict[str, float] = field(default_factory=dict, repr=False)  #: stage -> seconds
+    config: Any = field(default=None, repr=False)  #: the Config used
+    evidence: Evidence = field(default_factory=Evidence, repr=False)  #: decision figures
+    #: GIVEN: the first image given is the coarser one; SWAPPED: the second is (the
     #: transform and the inliers always go from the finer image to the coarser one)
-    order: str = "given"
+    order: Direction = Direction.GIVEN
+    search: Tuple[StepRecord, ...] = field(default=(), repr=False)  #: the steps run, in order
+    #: provenance of the paper mode: which Lambda was used ("packaged" or the resolved path,
+    #: with the first 12 hex digits of the file's SHA-256); "" in the default mode
+    covariance_used: str = ""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "order", Direction(self.order))
         # frozen means frozen: the arrays are read-only copies, so a result cannot be edited
         # in place (a caller's own array stays writable)
         for name in ("transform", "inliers"):
@@ -95,14 +169,14 @@ class MatchResult:
         """
         from . import __version__
 
-        if self.order == "swapped":
+        if self.order == Direction.SWAPPED:
             low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
         t = self.transform
         return {
             "matched": bool(self.matched),
             "reason": None if self.matched else (self.reason or "no reliable match"),
             "model": self.model,
-            "order": self.order,
+            "order": str(self.order),
             "transform": None if t is None else to_jsonable(np.asarray(t, dtype=np.float64)),
             "resolution_ratio": to_jsonable(float(self.resolution_ratio)),
             "rotation_deg": to_jsonable(float(self.rotation_deg)),
@@ -114,7 +188,9 @@ class MatchResult:
             "seconds": round(self.seconds, 3),
             "timings": to_jsonable({k: round(float(v), 3) for k, v in self.timings.items()}),
             "evidence": to_jsonable(self.evidence),
+            "search": [to_jsonable(step) for step in self.search],
             "config": to_jsonable(self.config),
+            "covariance_used": self.covariance_used or None,
             "version": __version__,
             "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
             "high": {"path": str(high_path), "width": int(high_shape[1]),
@@ -132,6 +208,8 @@ def to_jsonable(obj: Any) -> Any:
     """Dataclasses, numpy arrays and scalars -> plain JSON types (nan -> None)."""
     if is_dataclass(obj) and not isinstance(obj, type):
         return {k: to_jsonable(v) for k, v in asdict(obj).items()}
+    if isinstance(obj, enum.Enum):
+        return to_jsonable(obj.value)
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

@@ -17,19 +17,20 @@ ratio by ``f_low / f_high``. Each search direction runs on its own scales
 found in the other order: that is why the high image is shrunk only when the order is searched
 automatically. The per-scale table and ``best_scale`` are
 reported in the original pixels, in the direction of the search they come from
-(``evidence["search_order"]``).
+(``Evidence.search_order``).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import Dict, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
 
-from .geometry import apply, as_matrix3, compose, finer_to_coarser, invert, similarity_parts
-from .result import MatchResult
+from .geometry import (apply, as_matrix3, compose, finer_to_coarser, invert, resize_map,
+                       similarity_parts)
+from .result import Direction, MatchResult
 from .stages.estimator import model_of
 
 
@@ -45,9 +46,33 @@ def shrink(image: np.ndarray, f: float) -> np.ndarray:
     return cv2.resize(image, (0, 0), fx=1.0 / f, fy=1.0 / f, interpolation=cv2.INTER_AREA)
 
 
+@dataclass(frozen=True)
+class WorkImages:
+    """The two images as the search sees them: each at its working size, with its factor."""
+
+    low: np.ndarray = field(repr=False)  #: (H, W) float32, the first image given, working size
+    high: np.ndarray = field(repr=False)  #: (H, W) float32, the second image given
+    f_low: float  #: ``low`` is the first image shrunk by this (1: full size)
+    f_high: float  #: ``high`` is the second image shrunk by this
+    scales: Dict[Direction, Tuple[float, ...]] = field(repr=False)  #: each direction's scales
+
+
+def at_working_size(low: np.ndarray, high: np.ndarray, config) -> WorkImages:
+    """``low`` and ``high`` (checked float32 grey levels) at their working sizes.
+
+    The high image is shrunk only with ``config.order == "auto"``: shrinking can make it the
+    coarser one, which only the automatic order then finds.
+    """
+    f_low = working_factor(low.shape, config.low_max_side)
+    f_high = working_factor(high.shape, config.high_max_side) if config.order == "auto" else 1.0
+    return WorkImages(shrink(low, f_low) if f_low > 1.0 else low,
+                      shrink(high, f_high) if f_high > 1.0 else high, f_low, f_high,
+                      direction_scales(config.scales, f_low, f_high))
+
+
 def direction_scales(scales: Sequence[float], f_low: float,
-                     f_high: float) -> Dict[bool, Tuple[float, ...]]:
-    """The working scales of each search direction (key: the order swapped?).
+                     f_high: float) -> Dict[Direction, Tuple[float, ...]]:
+    """The working scales of each search direction.
 
     A search direction's working ratio is its ratio in the original pixels times ``h``:
     ``h = f_low / f_high`` in the given direction, ``1 / h`` in the other. Each configured
@@ -56,27 +81,27 @@ def direction_scales(scales: Sequence[float], f_low: float,
     ``1 / (s * h)`` in the other direction. So the configured ratios are searched, either way
     round, at the same spacing and with the same tolerance around each as at full size.
 
-    >>> direction_scales((1.0, 2.0, 4.0, 8.0), 1.0, 4.0)
-    {False: (1.0, 2.0), True: (2.0, 4.0, 8.0, 16.0, 32.0)}
-    >>> [round(s, 3) for s in direction_scales((1.0, 1.5, 3.0), 1.0, 1.2)[False]]
+    >>> given, swapped = direction_scales((1.0, 2.0, 4.0, 8.0), 1.0, 4.0).values()
+    >>> given, swapped
+    ((1.0, 2.0), (2.0, 4.0, 8.0, 16.0, 32.0))
+    >>> [round(s, 3) for s in direction_scales((1.0, 1.5, 3.0), 1.0, 1.2)[Direction.GIVEN]]
     [1.25, 2.5]
     """
-    h = {False: f_low / f_high, True: f_high / f_low}
-    out: Dict[bool, Dict[float, float]] = {False: {}, True: {}}  # rounded (to merge) -> exact
-    for d in (False, True):
+    h = {Direction.GIVEN: f_low / f_high, Direction.SWAPPED: f_high / f_low}
+    out: Dict[Direction, Dict[float, float]] = {d: {} for d in Direction}  # rounded -> exact
+    for d in Direction:
         for s in scales:
             w = s * h[d]
             if w >= 1.0 - 1e-9:  # exact values: reported back, they give the configured scales
                 out[d].setdefault(round(w, 6), max(w, 1.0))
             else:
-                out[not d].setdefault(round(1.0 / w, 6), 1.0 / w)
+                out[d.other].setdefault(round(1.0 / w, 6), 1.0 / w)
     return {d: tuple(sorted(v.values())) for d, v in out.items()}
 
 
 def _to_original(f: float) -> np.ndarray:
     """S (2x3): working px -> original px of an image shrunk by ``f``."""
-    c = (f - 1.0) / 2.0
-    return np.array([[f, 0.0, c], [0.0, f, c]])
+    return resize_map(f)
 
 
 def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
@@ -88,23 +113,26 @@ def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
     return compose(s_coarse, compose(t, invert(s_fine)))
 
 
-def in_original(result: MatchResult, f_low: float, f_high: float, config) -> MatchResult:
-    """``result`` of a match on the images shrunk by ``f_low`` and ``f_high``, in their
+def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
+    """``result`` of a match on the images at their working sizes (``work``), in their
     original pixels.
 
     ``config`` is the configuration the caller asked for (recorded in the result). A match
     whose ratio in the original pixels is below 1 is turned round, as the pipeline does.
     """
+    f_low, f_high = work.f_low, work.f_high
+    if f_low == 1.0 and f_high == 1.0:
+        return result
     # a row's scale is finer px per coarser px of its search: original = working * f_fine / f_coarse
-    search_given = result.evidence.get("search_order", result.order) == "given"
+    search_given = result.evidence.search_order == Direction.GIVEN
     g = f_high / f_low if search_given else f_low / f_high
     rows = tuple(replace(r, s=r.s * g, ratio=r.ratio * g) for r in result.scales)
-    evidence = dict(result.evidence, low_working_factor=f_low, high_working_factor=f_high)
+    evidence = replace(result.evidence, low_working_factor=f_low, high_working_factor=f_high)
     out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config,
                   evidence=evidence)
     if not result.matched:
         return out
-    swapped = result.order == "swapped"
+    swapped = result.order == Direction.SWAPPED
     f_fine, f_coarse = (f_low, f_high) if swapped else (f_high, f_low)
     s_fine, s_coarse = _to_original(f_fine), _to_original(f_coarse)
     t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
@@ -116,4 +144,5 @@ def in_original(result: MatchResult, f_low: float, f_high: float, config) -> Mat
     t, inliers, swapped = finer_to_coarser(t, inliers, swapped)
     ratio, angle, tr = similarity_parts(t)
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
-                   rotation_deg=angle, translation=tr, order="swapped" if swapped else "given")
+                   rotation_deg=angle, translation=tr,
+                   order=Direction.SWAPPED if swapped else Direction.GIVEN)

@@ -7,6 +7,11 @@ once and given to the two workers in turn, pair by pair, so both see the same ma
 Prints success per ratio, median error of the successes and the median in-process time of each.
 
     python scripts/compare_versions.py --old ../old-checkout --photos 38
+    python scripts/compare_versions.py --old ../old-checkout --photos 13 --swapped --unrelated 50
+
+``--swapped`` gives each pair in the other order too (the answer must still map the finer image
+into the coarser one); ``--unrelated N`` adds N pairs of unrelated photos (the low image of one
+scene, the high image of another), where any match claimed is false.
 """
 
 from __future__ import annotations
@@ -44,17 +49,28 @@ def main() -> None:
     ap.add_argument("--new", default=str(ROOT), help="source tree of the newer version")
     ap.add_argument("--photos", type=int, default=38, help="first N photos of ../shared")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--ratios", default=",".join(map(str, RATIOS)),
+                    help="comma-separated ratios (default: %(default)s)")
+    ap.add_argument("--swapped", action="store_true", help="each pair in both orders")
+    ap.add_argument("--unrelated", type=int, default=0, help="unrelated pairs added")
     a = ap.parse_args()
+    ratios = tuple(float(r) for r in a.ratios.split(","))
     sys.path.insert(0, a.new)
     from scalematch.lab.datasets import find_shared, list_photos
     from scalematch.lab.evaluation import is_success, reprojection_error
-    from scalematch.lab.synthetic import pairs_from_photos
+    from scalematch.lab.datasets import scene_of
+    from scalematch.lab.synthetic import pairs_from_photos, unrelated_from_pairs
     from scalematch.stages.decision import mean_transfer_gap
 
     shared = find_shared()
     if shared is None:
         sys.exit("../shared is absent")
-    pairs = list(pairs_from_photos(list_photos(shared)[:a.photos], RATIOS, a.seed))
+    pairs = list(pairs_from_photos(list_photos(shared)[:a.photos], ratios, a.seed))
+    nulls = unrelated_from_pairs(pairs, a.unrelated, np.random.default_rng([a.seed, 1]), scene_of)
+    # (kind, pair, swapped): the answer is judged against pair.truth either way round
+    jobs_list = [("zoom", p, False) for p in pairs]
+    jobs_list += [("swapped", p, True) for p in pairs] if a.swapped else []
+    jobs_list += [("unrelated", p, False) for p in nulls]
     ctx = mp.get_context("spawn")
     workers = {}
     for name, tree in (("old", a.old), ("new", a.new)):
@@ -65,39 +81,44 @@ def main() -> None:
     rows = {name: [] for name in workers}
     found = {name: [] for name in workers}  # the transforms, to compare the answers
     load = os.getloadavg()
-    for k, p in enumerate(pairs):
+    claims = {name: 0 for name in workers}
+    for k, (kind, p, swapped) in enumerate(jobs_list):
         order = ("old", "new") if k % 2 == 0 else ("new", "old")
         for name in order:
             _, jobs, results = workers[name]
-            jobs.put((k, p.low, p.high))
+            jobs.put((k, p.high, p.low) if swapped else (k, p.low, p.high))
             _, secs, t = results.get()
+            found[name].append(t)
+            if kind == "unrelated":
+                claims[name] += t is not None
+                continue
             err = reprojection_error(t, p.truth, p.high.shape, p.low.shape)
             rows[name].append((p.ratio, secs, err, is_success(err)))
-            found[name].append(t)
     for proc, jobs, _ in workers.values():
         jobs.put(None)
         proc.join()
-    print(f"{len(pairs)} pairs ({a.photos} photos x ratios {RATIOS}), seed {a.seed}, load average "
+    print(f"{len(pairs)} pairs ({a.photos} photos x ratios {ratios}){' in both orders' if a.swapped else ''}"
+          f", {len(nulls)} unrelated, seed {a.seed}, load average "
           f"at start {load[0]:.1f}, at end {os.getloadavg()[0]:.1f}")
-    print("| version | " + " | ".join(f"x{r}" for r in RATIOS) + " | all | median error px "
-          "| median s |")
-    print("|---|" + "---:|" * (len(RATIOS) + 3))
+    print("| version | " + " | ".join(f"x{r:g}" for r in ratios) + " | all | median error px "
+          "| median s | false claims |")
+    print("|---|" + "---:|" * (len(ratios) + 4))
     for name, rs in rows.items():
-        per = [sum(ok for r, _, _, ok in rs if r == ratio) for ratio in RATIOS]
-        n = len(rs) // len(RATIOS)
+        per = [sum(ok for r, _, _, ok in rs if r == ratio) for ratio in ratios]
+        n = len(rs) // len(ratios)
         errs = [e for _, _, e, ok in rs if ok]
         print(f"| {name} | " + " | ".join(f"{v}/{n}" for v in per)
               + f" | {sum(per)}/{len(rs)} | {np.median(errs):.3f} | "
-              f"{np.median([s for _, s, _, _ in rs]):.3f} |")
+              f"{np.median([s for _, s, _, _ in rs]):.3f} | {claims[name]}/{len(nulls)} |")
     ratio = np.median([s for _, s, _, _ in rows["new"]]) / np.median(
         [s for _, s, _, _ in rows["old"]])
     print(f"median time new / old: {ratio:.2f}")
     same = sum((a is None and b is None) or (a is not None and b is not None
                                              and np.array_equal(a, b))
                for a, b in zip(found["old"], found["new"]))
-    gaps = [mean_transfer_gap(a, b, p.high.shape) for a, b, p in
-            zip(found["old"], found["new"], pairs) if a is not None and b is not None]
-    print(f"answers: {same}/{len(pairs)} identical; both matched {len(gaps)}, mean transfer gap "
+    gaps = [mean_transfer_gap(a, b, p.high.shape) for a, b, (_, p, _) in
+            zip(found["old"], found["new"], jobs_list) if a is not None and b is not None]
+    print(f"answers: {same}/{len(jobs_list)} identical; both matched {len(gaps)}, mean transfer gap "
           f"median {np.median(gaps):.4f} px, max {np.max(gaps):.4f} px")
 
 

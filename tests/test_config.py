@@ -5,7 +5,11 @@ from __future__ import annotations
 import pytest
 
 from scalematch.config import MODES, PRESETS, Config, ProbeParams
-from scalematch.stages.detector import PAPER_SCALES
+from scalematch.stages.decision import DecisionParams
+from scalematch.stages.detector import PAPER_SCALES, HarrisParams
+from scalematch.stages.estimator import RansacParams
+from scalematch.stages.matcher import MatcherParams
+from scalematch.stages.views import ViewParams
 
 
 def test_the_modes_are_presets_and_presets_take_changes():
@@ -28,3 +32,43 @@ def test_every_preset_is_a_valid_config_and_the_variants_differ_from_their_base(
 def test_an_unknown_preset_names_the_known_ones():
     with pytest.raises(ValueError, match="unknown preset 'fast'; one of default, paper"):
         Config.preset("fast")
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda: Config(matcher=MatcherParams(ratio=5.0)), "matcher.ratio must be in (0, 1], got 5.0"),
+    (lambda: Config(ransac=RansacParams(threshold_px=-1)),
+     "ransac.threshold_px must be > 0, got -1"),
+    (lambda: RansacParams(max_iters=2.5), "ransac.max_iters must be an integer >= 1, got 2.5"),
+    (lambda: HarrisParams(threshold=float("nan")), "harris.threshold must be >= 0, got nan"),
+    (lambda: DecisionParams(min_inside=1.5), "decision.min_inside must be in [0, 1]"),
+    (lambda: ViewParams(passes=((0.5,),)), "views.passes must be >= 1, got 0.5"),
+    (lambda: ProbeParams(points=0), "probe.points must be an integer >= 1, got 0"),
+    (lambda: Config(scales=(0.5, 2.0)), "scales must be >= 1, got 0.5"),
+    (lambda: Config(scales=()), "scales must hold at least one scale"),
+    (lambda: Config(low_max_side=10), "low_max_side must be an integer >= 64, got 10"),
+    (lambda: Config(order="sideways"), "order must be one of"),
+])
+def test_every_params_refuses_values_that_mean_nothing(make, message):
+    """Issue 16: the ranges live in the parameters themselves, so the library refuses what the
+    command line refuses, with the message that names the value as --set does."""
+    with pytest.raises(ValueError) as exc:
+        make()
+    assert message in str(exc.value)
+
+
+def test_the_command_line_says_what_the_library_says():
+    from click.testing import CliRunner
+
+    from scalematch.cli import cli
+
+    with pytest.raises(ValueError) as exc:
+        Config(ransac=RansacParams(threshold_px=-1.0))
+    out = CliRunner().invoke(cli, ["data/demo_low.png", "data/demo_high.png",
+                                   "--set", "ransac.threshold_px=-1"])
+    assert out.exit_code == 2 and str(exc.value) in out.output
+
+
+def test_the_defaults_and_presets_pass_their_own_checks():
+    for name in PRESETS:
+        Config.preset(name)  # would raise
+    assert Config().ransac == RansacParams()

@@ -138,7 +138,7 @@ def test_paper_mode_matches_a_ratio_3_pair(raccoon):
     _check_known_answer(r, pair)
     assert r.config.mode == "paper" and r.config.scales == (1, 2, 3, 4, 5, 6, 7, 8)
     # which Lambda was used is recorded with the result (the packaged one, by its hash)
-    assert r.config.covariance_used.startswith("packaged sha256:")
+    assert r.covariance_used.startswith("packaged sha256:")
 
 
 def test_unrelated_pair_is_no_reliable_match(raccoon):
@@ -189,6 +189,61 @@ def test_unusable_arrays_raise_a_clear_value_error(bad, needle):
         match(bad, good)
 
 
+@pytest.mark.parametrize("bad,needle", [
+    (np.eye(2100, 64, dtype=bool), "bool"),  # longer than the working size (2048 px)
+    (np.zeros((2100, 100, 3), np.uint8) + np.arange(3, dtype=np.uint8), "2-D"),
+    (np.full((2100, 100), 7.0), "constant"),
+])
+def test_arrays_beyond_the_working_size_are_checked_before_they_are_shrunk(bad, needle):
+    """Issue 16: the check at the door runs before the working size shrinks anything."""
+    good = np.random.default_rng(0).uniform(0, 255, (100, 100))
+    with pytest.raises(ValueError, match=f"the high image .*{needle}"):
+        match(good, bad)
+
+
+def test_a_16_bit_image_beyond_the_working_size_is_scaled_like_a_small_one(raccoon):
+    """Issue 16: a uint16 image over the working size is scaled by 255/65535 before shrinking
+    (it used to be shrunk first, as floats, and then taken as 0-65535 grey levels)."""
+    pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(5), high_size=(320, 240),
+                          low_max=(400, 300))
+    low8 = np.clip(pair.low, 0, 255).astype(np.uint8)
+    high8 = np.clip(pair.high, 0, 255).astype(np.uint8)
+    config = Config(low_max_side=200, high_max_side=200)  # both are shrunk
+    as8 = match(low8, high8, config)
+    as16 = match(low8.astype(np.uint16) * 257, high8.astype(np.uint16) * 257, config)
+    assert as8.matched and as16.matched
+    assert np.allclose(as16.transform, as8.transform, atol=1e-3)
+    assert as16.n_inliers == as8.n_inliers
+
+
+def test_progress_counts_up_to_the_plans_length_and_ends_there(raccoon):
+    """progress(done, total): total fixed by the plan, done never going back, ending at total,
+    whether the search stops at once (a match) or runs the whole plan (no match)."""
+    pair = _pair(raccoon, 3.0, 4)
+    unrelated = raccoon[:300, :400], raccoon[400:, 500:900]
+    for low, high in ((pair.low, pair.high), unrelated):
+        calls = []
+        result = match(low, high, progress=lambda done, total: calls.append((done, total)))
+        totals = {t for _, t in calls}
+        assert len(totals) == 1 and calls[-1][0] == calls[-1][1]
+        assert all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+        assert result.evidence.steps_run == len(result.search) >= 1
+        assert result.evidence.stopped in ("matched", "plan done")
+
+
+def test_the_search_record_says_what_ran(raccoon):
+    """A plain pair stops after the first step; an unrelated one runs every step of the plan."""
+    pair = _pair(raccoon, 3.0, 4)
+    found = match(pair.low, pair.high)
+    assert [(str(r.direction), r.view_pass, r.matched) for r in found.search] == [
+        ("given", 0, True)]
+    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 6
+    none = match(raccoon[:300, :400], raccoon[400:, 500:900])
+    assert not none.matched and none.evidence.stopped == "plan done"
+    assert [r.view_pass for r in none.search] == [0, 0, 1, 1, 2, 2]
+    assert none.evidence.searches == sum(r.views for r in none.search) == 32
+
+
 # ------------------------------------------------------------- issue 9: order, overlap, tilt
 
 def _error(result, pair):
@@ -235,7 +290,7 @@ def test_partial_overlap_with_overwhelming_evidence_is_a_match(raccoon):
     low = np.ascontiguousarray(pair.low[:, :cut])
     result = match(low, pair.high)
     assert result.matched, result.reason
-    assert result.evidence["footprint_inside"] < 0.5
+    assert result.evidence.footprint_inside < 0.5
     assert reprojection_error(result.transform, pair.truth, pair.high.shape, low.shape) < 1.0
 
 
@@ -244,7 +299,7 @@ def test_tilted_views_solve_an_oblique_zoom(raccoon, tilt, seed):
     pair = make_tilted_pair(raccoon, 2.0, tilt, np.random.default_rng(seed), high_size=(320, 240))
     result = match(pair.low, pair.high)
     assert result.matched, result.reason
-    assert result.model == "affine" and result.evidence["view_tilt"] > 1
+    assert result.model == "affine" and result.evidence.view_tilt > 1
     assert _error(result, pair) < ERROR_TOL_PX
 
 
@@ -253,7 +308,7 @@ def test_inliers_count_distinct_point_pairs(raccoon):
     result = match(pair.low, pair.high)
     assert result.matched
     rows = np.round(result.inliers, 3)
-    assert len(np.unique(rows, axis=0)) == len(rows) == result.evidence["inliers"]
+    assert len(np.unique(rows, axis=0)) == len(rows) == result.evidence.inliers
 
 
 def test_distinct_pairs_drops_repeated_rows():

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 import scalematch
 from scalematch.cli import cli
 from scalematch.config import Config
-from scalematch.result import MatchResult, ScaleRow, dumps
+from scalematch.result import Evidence, MatchResult, ScaleRow, dumps
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,7 +30,7 @@ def hand_result(t=None) -> MatchResult:
     return MatchResult(matched=True, reason="", model="similarity", transform=t,
                        resolution_ratio=2.0, rotation_deg=0.0, translation=(5.0, -3.0),
                        best_scale=2.0, inliers=inliers, scales=rows, timings={"total": 0.25},
-                       config=Config(), evidence={"log10_nfa": -5.0})
+                       config=Config(), evidence=Evidence(log10_nfa=-5.0))
 
 
 def test_the_arrays_of_a_result_are_read_only_copies():

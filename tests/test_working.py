@@ -9,6 +9,7 @@ import pytest
 from scalematch import Config, match
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.result import Direction
 from scalematch.stages.decision import mean_transfer_gap
 from scalematch.working import direction_scales, shrink, working_factor
 
@@ -44,13 +45,13 @@ def test_factor_and_scales():
     # direction; the other direction's ratios s (low image the finer) at s / 3 when that is
     # at least 1, else at 3 / s in the given direction
     scales = direction_scales((1.0, 2.0, 4.0), 3.0, 1.0)
-    assert scales[False] == pytest.approx((1.5, 3.0, 6.0, 12.0))
-    assert scales[True] == pytest.approx((4 / 3,))
+    assert scales[Direction.GIVEN] == pytest.approx((1.5, 3.0, 6.0, 12.0))
+    assert scales[Direction.SWAPPED] == pytest.approx((4 / 3,))
     # the paper's unit steps keep their spacing at working size (the high image shrunk 2.93x:
     # ratio 8 is searched at 8 / 2.93 = 2.73, as the bench's ratio-10 pair needs)
     paper = direction_scales(tuple(float(s) for s in range(1, 9)), 1.0, 2.93)
-    assert paper[False] == pytest.approx(tuple(s / 2.93 for s in range(3, 9)))
-    assert paper[True][:2] == pytest.approx((2.93 / 2, 2.93))
+    assert paper[Direction.GIVEN] == pytest.approx(tuple(s / 2.93 for s in range(3, 9)))
+    assert paper[Direction.SWAPPED][:2] == pytest.approx((2.93 / 2, 2.93))
 
 
 @pytest.mark.parametrize("ratio,seed", [(2.0, 0), (3.0, 1)])
@@ -60,7 +61,7 @@ def test_working_size_gives_the_full_size_answer(raccoon, ratio, seed):
     full = match(pair.low, pair.high, Config(low_max_side=None))
     small = match(pair.low, pair.high, Config(low_max_side=side))
     assert full.matched and small.matched, small.reason
-    assert small.evidence["low_working_factor"] == pytest.approx(max(pair.low.shape) / side)
+    assert small.evidence.low_working_factor == pytest.approx(max(pair.low.shape) / side)
     assert small.config.low_max_side == side
     err = reprojection_error(small.transform, pair.truth, pair.high.shape, pair.low.shape)
     assert err < ERROR_TOL_PX
@@ -68,7 +69,7 @@ def test_working_size_gives_the_full_size_answer(raccoon, ratio, seed):
     assert small.resolution_ratio == pytest.approx(full.resolution_ratio, rel=0.02)
     # inliers in original low px: each fits the transform within the RANSAC threshold (in
     # working px, so f times it here)
-    f = small.evidence["low_working_factor"]
+    f = small.evidence.low_working_factor
     fit = cv2.transform(small.inliers[None, :, :2], small.transform)[0]
     assert np.linalg.norm(fit - small.inliers[:, 2:], axis=1).max() <= f * 3.0 + 1e-6
     assert abs(small.best_scale / ratio - 1) < 0.3  # reported in the original pixels
@@ -102,7 +103,7 @@ def _check(result, pair, full=None):
         assert mean_transfer_gap(result.transform, full.transform, pair.high.shape) < GAP_TOL_PX
     # inliers in original px: (finer x, y, coarser x, y) fit the transform within the RANSAC
     # threshold in the coarser image's working px (at most f of its original px)
-    f = max(result.evidence["low_working_factor"], result.evidence["high_working_factor"])
+    f = max(result.evidence.low_working_factor, result.evidence.high_working_factor)
     fit = cv2.transform(result.inliers[None, :, :2], result.transform)[0]
     assert np.linalg.norm(fit - result.inliers[:, 2:], axis=1).max() <= f * 3.0 + 1e-6
 
@@ -112,7 +113,7 @@ def test_a_shrunk_high_image_gives_the_full_size_answer(raccoon):
     pair = _pair_large(raccoon, 3.0, 3)
     full = match(pair.low, pair.high, Config(high_max_side=None))
     small = match(pair.low, pair.high, Config(high_max_side=240))
-    assert small.evidence["high_working_factor"] == pytest.approx(2.0)
+    assert small.evidence.high_working_factor == pytest.approx(2.0)
     assert small.order == "given" and small.config.high_max_side == 240
     _check(small, pair, full)
     assert small.resolution_ratio == pytest.approx(full.resolution_ratio, rel=0.02)
@@ -126,7 +127,7 @@ def test_a_high_image_shrunk_past_the_low_one_is_found_in_the_other_order(raccoo
     pixels: low px per high px, 1/2 at the best scale."""
     pair = _pair_large(raccoon, 2.0, 4)
     small = match(pair.low, pair.high, Config(high_max_side=120))
-    assert small.evidence["search_order"] == "swapped"
+    assert small.evidence.search_order == "swapped"
     assert small.order == "given" and small.resolution_ratio == pytest.approx(2.0, rel=0.03)
     assert small.best_scale == pytest.approx(0.5, rel=0.3)
     _check(small, pair)
@@ -135,7 +136,7 @@ def test_a_high_image_shrunk_past_the_low_one_is_found_in_the_other_order(raccoo
 def test_both_images_shrunk_keep_the_ratio(raccoon):
     pair = _pair_large(raccoon, 2.0, 5)
     result = match(pair.low, pair.high, Config(low_max_side=160, high_max_side=320))
-    assert result.evidence["low_working_factor"] > 1 and result.evidence["high_working_factor"] > 1
+    assert result.evidence.low_working_factor > 1 and result.evidence.high_working_factor > 1
     assert result.order == "given"
     _check(result, pair)
 
@@ -144,7 +145,7 @@ def test_the_given_order_keeps_the_high_image_at_full_size(raccoon):
     """With order='given' a shrunk high image could not be found coarser: it is not shrunk."""
     pair = _pair_large(raccoon, 3.0, 3)
     result = match(pair.low, pair.high, Config(order="given", high_max_side=160))
-    assert "high_working_factor" not in result.evidence
+    assert result.evidence.high_working_factor == 1.0
     _check_given = reprojection_error(result.transform, pair.truth, pair.high.shape,
                                       pair.low.shape)
     assert result.matched and _check_given < ERROR_TOL_PX

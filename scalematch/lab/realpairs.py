@@ -164,7 +164,7 @@ def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, An
     # default configuration elsewhere, as a user would run it
     r = match(pair.low, pair.high, Config(model="homography") if pair.set == "oxford" else Config())
     info = {"inliers": r.n_inliers, "order": r.order, "model": r.model, "reason": r.reason,
-            "view_tilt": r.evidence.get("view_tilt", 1.0)}
+            "view_tilt": r.evidence.view_tilt}
     return (r.transform if r.matched else None), r.order == "given", info
 
 

@@ -22,6 +22,7 @@ from typing import List
 import cv2
 import numpy as np
 
+from ..checks import in_range
 from .scalespace import Level
 
 # --------------------------------------------------------------- orientation consistency (default)
@@ -33,6 +34,13 @@ class OrientationParams:
     tolerance_deg: float = 20.0  #: kept around a peak (orientation error of true matches ~5-10)
     second_peak: float = 0.5  #: a second peak at least this fraction of the first is also tried
     max_peaks: int = 2  #: peaks tried at most
+
+    def __post_init__(self) -> None:
+        in_range("orientation", "bins", self.bins, lo=1, integer=True)
+        in_range("orientation", "tolerance_deg", self.tolerance_deg, lo=0, hi=180,
+                 lo_open=True)
+        in_range("orientation", "second_peak", self.second_peak, lo=0, hi=1)
+        in_range("orientation", "max_peaks", self.max_peaks, lo=1, integer=True)
 
 
 def orientation_groups(dtheta: np.ndarray, params: OrientationParams = OrientationParams()
@@ -86,6 +94,14 @@ class SemiLocalParams:
     #: final check (paper eq. 5): zero-mean normalised SSD of the two patches, as a correlation
     correlation_min: float = 0.5
     patch_radius_px: float = 6.0  #: half-size of the correlation patches, low px
+
+    def __post_init__(self) -> None:
+        for name in ("radius_px", "tolerance_px", "patch_radius_px"):
+            in_range("semi_local", name, getattr(self, name), lo=0, lo_open=True)
+        in_range("semi_local", "max_neighbours", self.max_neighbours, lo=1, integer=True)
+        in_range("semi_local", "scale_tolerance", self.scale_tolerance, lo=1)
+        in_range("semi_local", "min_support", self.min_support, lo=0, integer=True)
+        in_range("semi_local", "correlation_min", self.correlation_min, lo=-1, hi=1)
 
 
 def _similarity_from_pairs(p0, q0, p1, q1):

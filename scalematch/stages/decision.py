@@ -30,12 +30,14 @@ show evidence that an unrelated pair cannot produce:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Dict, Optional, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
 
 import numpy as np
 
+from ..checks import in_range
 from ..geometry import apply, footprint, grid
+from ..result import Evidence
 from .estimator import model_of
 
 
@@ -63,6 +65,16 @@ class DecisionParams:
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
 
+    def __post_init__(self) -> None:
+        for name in ("min_inliers", "min_agreeing_scales"):
+            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+        for name in ("max_log_nfa", "max_log_nfa_alone"):
+            in_range("decision", name, getattr(self, name))
+        in_range("decision", "scale_agreement", self.scale_agreement, lo=1)
+        in_range("decision", "min_inside", self.min_inside, lo=0, hi=1)
+        in_range("decision", "agreement_px", self.agreement_px, lo=0, lo_open=True)
+        in_range("decision", "min_area_px", self.min_area_px, lo=0)
+
 
 @dataclass(frozen=True)
 class Decision:
@@ -71,7 +83,7 @@ class Decision:
     best_scale: float
     transform: Optional[np.ndarray] = field(repr=False)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) x_high, y_high, x_low, y_low
-    evidence: Dict[str, float] = field(default_factory=dict)
+    evidence: Evidence = field(default_factory=Evidence)
 
 
 def log10_binom(n: int, k: int) -> float:
@@ -137,7 +149,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     spec = model_of(model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
-    evidence: Dict[str, float] = {}
+    evidence = Evidence()
     if not with_t:
         return Decision(False, "no scale produced a transform (too few candidate matches)",
                         math.nan, None, np.zeros((0, 4)), evidence)
@@ -168,8 +180,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     lnfa = log10_nfa(n, k, m, p, tests)
     inl = est.inliers
     pairs = np.hstack([best.src[inl], best.dst[inl]])
-    evidence.update({"inliers": float(k), "candidates": float(n), "log10_nfa": lnfa,
-                     "chance_p": p})
+    evidence = replace(evidence, inliers=int(k), candidates=int(n), log10_nfa=lnfa, chance_p=p)
 
     def no(reason: str) -> Decision:
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence)
@@ -182,11 +193,11 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
                   f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, evidence)
-    evidence["implied_ratio"] = best.row.ratio
     poly = footprint(t, high_shape, edges=False)  # corner pixel centres, as measured
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
     inside = _inside_fraction(t, high_shape, low_shape)
-    evidence.update({"footprint_area_px": area, "footprint_inside": inside})
+    evidence = replace(evidence, implied_ratio=best.row.ratio, footprint_area_px=area,
+                       footprint_inside=inside)
     if folded(t):
         return no("the transform folds the high image over (a mirror image): not a view of it")
     if area < params.min_area_px:
@@ -199,7 +210,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
             continue
         if mean_transfer_gap(o.estimate.transform, t, high_shape) <= params.agreement_px:
             agreeing += 1
-    evidence["agreeing_scales"] = float(agreeing)
+    evidence = replace(evidence, agreeing_scales=agreeing)
     if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone:
         return no(f"no other scale agrees with the best one (scale {best.row.s:g}, {k} inliers)")
     return Decision(True, "", best.row.s, t, pairs, evidence)

@@ -23,6 +23,7 @@ from typing import List, Optional, Sequence
 import cv2
 import numpy as np
 
+from ..checks import in_range
 from .filters import gaussian_derivative
 from .scalespace import Level, gaussian_blur, scale_space
 
@@ -49,6 +50,15 @@ class HarrisParams:
     subpixel: bool = True  #: refine positions by a quadratic fit of the 3x3 response
     decimate: bool = True  #: compute coarse scales on decimated levels (same response)
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
+
+    def __post_init__(self) -> None:
+        for name in ("sigma", "sigma_tilde", "min_level_sigma"):
+            in_range("harris", name, getattr(self, name), lo=0, lo_open=True)
+        # alpha >= 0.25 makes every cornerness negative (det <= tr^2 / 4)
+        in_range("harris", "alpha", self.alpha, lo=0, hi=0.25, hi_open=True)
+        for name in ("threshold", "nms_radius", "border"):
+            in_range("harris", name, getattr(self, name), lo=0)
+        in_range("harris", "max_points", self.max_points, lo=0, integer=True)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,9 @@ from typing import Callable, Dict, Optional, Tuple
 import cv2
 import numpy as np
 
+from ..checks import in_range
+from ..geometry import transfer_error
+
 @dataclass(frozen=True)
 class RansacParams:
     #: inlier threshold in low-resolution px at the matching scale. The paper lets it depend on s
@@ -27,6 +30,13 @@ class RansacParams:
     confidence: float = 0.999  #: RANSAC confidence (OpenCV default 0.99; higher for few inliers)
     max_iters: int = 5000  #: RANSAC iterations cap
     refine_iters: int = 10  #: Levenberg-Marquardt refinement iterations (OpenCV default)
+
+    def __post_init__(self) -> None:
+        in_range("ransac", "threshold_px", self.threshold_px, lo=0, lo_open=True)
+        in_range("ransac", "confidence", self.confidence, lo=0, hi=1, lo_open=True,
+                 hi_open=True)
+        in_range("ransac", "max_iters", self.max_iters, lo=1, integer=True)
+        in_range("ransac", "refine_iters", self.refine_iters, lo=0, integer=True)
 
 
 @dataclass(frozen=True)
@@ -41,16 +51,6 @@ class Estimate:
     @property
     def n_inliers(self) -> int:
         return int(self.inliers.sum())
-
-
-def _transfer_error(t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """|T(src) - dst| in low px for a 2x3 or 3x3 point-to-point map."""
-    if t.shape == (2, 3):
-        mapped = src @ t[:, :2].T + t[:, 2]
-    else:
-        p = np.hstack([src, np.ones((len(src), 1))]) @ t.T
-        mapped = p[:, :2] / np.where(np.abs(p[:, 2:3]) < 1e-12, 1e-12, p[:, 2:3])
-    return np.linalg.norm(mapped - dst, axis=1)
 
 
 def _sampson_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -127,9 +127,9 @@ class Model:
 
 #: The models of the paper (section 5 and "Further examples"), by name.
 MODELS: Dict[str, Model] = {m.name: m for m in (
-    Model("similarity", 2, _fit_similarity, _transfer_error, _disc_area),
-    Model("affine", 3, _fit_affine, _transfer_error, _disc_area),
-    Model("homography", 4, _fit_homography, _transfer_error, _disc_area),
+    Model("similarity", 2, _fit_similarity, transfer_error, _disc_area),
+    Model("affine", 3, _fit_affine, transfer_error, _disc_area),
+    Model("homography", 4, _fit_homography, transfer_error, _disc_area),
     Model("fundamental", 8, _fit_fundamental, _sampson_distance, _band_area, has_ratio=False),
 )}
 #: minimal sample of each model by name (kept for callers of the mapping; see MODELS)

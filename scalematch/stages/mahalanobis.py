@@ -37,7 +37,7 @@ class Covariance:
     samples: int = 0
     provenance: dict = field(default_factory=dict, repr=False)
     #: which Lambda this is: "packaged" or the resolved path, then the first 12 hex digits of
-    #: the file's SHA-256 (recorded in the result's ``config.covariance_used``)
+    #: the file's SHA-256 (recorded in the result's ``covariance_used``)
     source: str = ""
 
     def whitening(self) -> np.ndarray:

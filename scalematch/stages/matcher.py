@@ -15,9 +15,11 @@ How candidates are selected is the named parameter ``MatcherParams.selection``:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Tuple
 
 import numpy as np
 
+from ..checks import in_range, one_of
 from .threads import thread_map
 
 SELECTIONS = ("nn", "knn", "threshold", "ratio")
@@ -38,6 +40,13 @@ class MatcherParams:
     ratio: float = 0.9  #: nearest / second-nearest distance for "ratio" (Lowe 2004: 0.8)
     max_distance: float = float("inf")  #: absolute distance limit (descriptor units)
     mutual: bool = False  #: keep only matches that are also nearest the other way round
+
+    def __post_init__(self) -> None:
+        one_of("matcher", "selection", self.selection, SELECTIONS)
+        in_range("matcher", "k", self.k, lo=1, integer=True)
+        in_range("matcher", "ratio", self.ratio, lo=0, hi=1, lo_open=True)
+        in_range("matcher", "max_distance", self.max_distance, lo=0, lo_open=True,
+                 allow_inf=True)
 
 
 @dataclass(frozen=True)
@@ -131,3 +140,22 @@ def match_descriptors(high: np.ndarray, low: np.ndarray,
         i, j, d, sec = i[ok], j[ok], d[ok], sec[ok]
     return Candidates(i=i.astype(int), j=j.astype(int), distance=d.astype(np.float32),
                       second=sec.astype(np.float32))
+
+
+def distinct_pairs(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of the point pairs (src, dst), (K, 2) each, in their first order.
+
+    A keypoint with several dominant orientations is described once per orientation, so the
+    same pair of positions can be matched more than once; counting it once keeps the inlier
+    count and the a-contrario test honest.
+
+    >>> src, dst = distinct_pairs(np.array([[1.0, 2], [1, 2], [3, 4]]), np.zeros((3, 2)))
+    >>> src.tolist()
+    [[1.0, 2.0], [3.0, 4.0]]
+    """
+    if len(src) == 0:
+        return src, dst
+    rows = np.round(np.hstack([src, dst]), 3)
+    _, first = np.unique(rows, axis=0, return_index=True)
+    keep = np.sort(first)
+    return src[keep], dst[keep]

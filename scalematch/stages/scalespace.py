@@ -26,6 +26,8 @@ from typing import Iterator, Sequence
 import cv2
 import numpy as np
 
+from ..geometry import apply, resize_map
+
 #: Camera blur, in pixels of the image it is measured in, assumed by the decimation (EVALUATION.md:
 #: low images are blurred by 0.5*sqrt(r^2-1) before shrinking by r, "so that after shrinking the
 #: camera blur is about 0.5 px").
@@ -57,11 +59,11 @@ class Level:
 
     def to_full(self, xy: np.ndarray) -> np.ndarray:
         """Level pixel coordinates (N, 2) -> full-resolution pixel coordinates (N, 2)."""
-        return xy * self.d + (self.d - 1.0) / 2.0
+        return apply(resize_map(self.d), xy)
 
     def to_level(self, xy: np.ndarray) -> np.ndarray:
         """Full-resolution pixel coordinates (N, 2) -> level pixel coordinates (N, 2)."""
-        return (xy - (self.d - 1.0) / 2.0) / self.d
+        return apply(resize_map(1.0 / self.d), xy)
 
 
 def as_float_image(image: np.ndarray) -> np.ndarray:
@@ -87,9 +89,7 @@ def resample(image: np.ndarray, factor: float) -> np.ndarray:
     h, w = image.shape
     out_w = max(int(np.floor((w - 1 - (factor - 1) / 2) / factor)) + 1, 1)
     out_h = max(int(np.floor((h - 1 - (factor - 1) / 2) / factor)) + 1, 1)
-    c = (factor - 1.0) / 2.0
-    m = np.array([[factor, 0.0, c], [0.0, factor, c]], dtype=np.float64)
-    return cv2.warpAffine(image, m, (out_w, out_h),
+    return cv2.warpAffine(image, resize_map(factor), (out_w, out_h),
                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REFLECT_101)
 

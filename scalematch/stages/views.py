@@ -22,7 +22,8 @@ from typing import List, Sequence, Tuple
 import cv2
 import numpy as np
 
-from ..geometry import apply, compose, invert
+from ..checks import in_range
+from ..geometry import apply, compose, invert, resize_map
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,17 @@ class ViewParams:
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0
+
+    def __post_init__(self) -> None:
+        for tilts in self.passes:
+            for t in tilts:
+                in_range("views", "passes", t, lo=1)
+        in_range("views", "longitude_step_deg", self.longitude_step_deg, lo=0, lo_open=True)
+        for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
+            in_range("views", name, getattr(self, name), lo=0)
+        in_range("views", "full_searches", self.full_searches, lo=1, integer=True)
+        in_range("views", "confirm_below_inliers", self.confirm_below_inliers, lo=0,
+                 integer=True)
 
 
 @dataclass(frozen=True)
@@ -119,9 +131,7 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     nw = max(int(round(cw / tilt)), 1)
     img = cv2.resize(img, (nw, ch), interpolation=cv2.INTER_LINEAR)
     inside = cv2.resize(inside, (nw, ch), interpolation=cv2.INTER_NEAREST)
-    sx = nw / cw
-    shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, 1.0, 0.0]])
-    to_view = compose(shrink, turn)
+    to_view = compose(resize_map(nw / cw, 1.0), turn)
     dist = cv2.distanceTransform(inside, cv2.DIST_L2, 3)
     return View(float(tilt), float(longitude_deg), img, to_view, dist)
 

@@ -1,0 +1,147 @@
+"""The search as data: a plan of steps, what each step found, and the rule that stops the search.
+
+A match is searched for progressively (Mishkin, Matas & Perdoch 2015, "MODS"): first the
+finer image itself, then passes of simulated tilted views of it, each pass run only when the
+ones before found nothing; with the automatic order, each pass in both directions (which image
+is the coarser one). :func:`search_plan` writes that down as a tuple of :class:`Step`;
+:func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
+step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are
+pure functions of the configuration and of what the steps found (:class:`Attempt`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .result import Direction, ScaleRow
+from .stages.decision import Decision
+from .stages.estimator import Estimate, model_of
+from .stages.views import View, view_plan
+
+#: (tilt, longitude in degrees) of a view; (1, 0) is the finer image itself.
+ViewKey = Tuple[float, float]
+PLAIN: Tuple[ViewKey, ...] = ((1.0, 0.0),)
+
+#: Why a search stopped (``Evidence.stopped``).
+STOP_REASONS = {
+    "matched": "a reliable match was found",
+    "plan done": "every step of the plan was run",
+}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the plan: the views of one pass of the finer image, in one direction."""
+
+    direction: Direction  #: which image is taken as the coarser one
+    view_pass: int  #: 0: the finer image itself; k >= 1: the k-th pass of tilted views
+    views: Tuple[ViewKey, ...]  #: the views of the finer image to probe
+    scales: Tuple[float, ...]  #: the scales of the finer image searched (this direction's)
+    full_searches: int  #: at most this many views are matched in full
+
+    @property
+    def cost(self) -> int:
+        """Progress units: each view detected at each scale, each full search at each scale."""
+        return (len(self.views) + min(self.full_searches, len(self.views))) * len(self.scales)
+
+
+def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]]) -> Tuple[Step, ...]:
+    """The steps of the search, in the order they run.
+
+    ``scales[d]``: the scales of direction ``d`` (at working size a direction may have none,
+    :func:`scalematch.working.direction_scales`). Pass 0 is the finer image itself; the passes
+    of views (``config.views``) follow, for models with a ratio (a fundamental matrix has no
+    view to refit). With ``config.order == "auto"`` each pass runs the given direction first.
+
+    >>> from scalematch.config import Config
+    >>> plan = search_plan(Config(), {Direction.GIVEN: (1.0, 2.0), Direction.SWAPPED: (1.0,)})
+    >>> [(str(s.direction), s.view_pass, len(s.views)) for s in plan]
+    [('given', 0, 1), ('swapped', 0, 1), ('given', 1, 5), ('swapped', 1, 5), ('given', 2, 10), ('swapped', 2, 10)]
+    """
+    order = (Direction.GIVEN, Direction.SWAPPED) if config.order == "auto" else (Direction.GIVEN,)
+    directions = [d for d in order if scales.get(d)]
+    passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
+                        if model_of(config.model).has_ratio else [])
+    return tuple(Step(d, k, views, tuple(scales[d]),
+                      len(views) if k == 0 else config.views.full_searches)
+                 for k, views in enumerate(passes) for d in directions)
+
+
+@dataclass(frozen=True)
+class ScaleOutcome:
+    """What one scale of one search produced (summarised for users as a :class:`ScaleRow`)."""
+
+    row: ScaleRow
+    estimate: Optional[Estimate]
+    src: np.ndarray = field(repr=False)  #: (K, 2) finer px of the candidates given to the estimator
+    dst: np.ndarray = field(repr=False)  #: (K, 2) coarser px
+    candidates: int  #: initial candidate matches
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One search matched in full: a view of the finer image, in one direction, and its verdict."""
+
+    step: Step = field(repr=False)
+    view: View = field(repr=False)
+    probe: float  #: the probe's best score for this view (inf when the probe is off)
+    outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
+    verdict: Decision = field(repr=False)
+
+    @property
+    def matched(self) -> bool:
+        return self.verdict.matched
+
+    def winning_outcome(self) -> ScaleOutcome:
+        """The outcome of the scale the decision chose."""
+        return next(o for o in self.outcomes if o.row.s == self.verdict.best_scale)
+
+
+def strongest(attempts: Sequence[Attempt]) -> Optional[Attempt]:
+    """The matched attempt with the strongest evidence (lowest log10 NFA; the first of ties)."""
+    found = [a for a in attempts if a.matched]
+    return min(found, key=lambda a: a.verdict.evidence.log10_nfa) if found else None
+
+
+def skips(step: Step, attempts: Sequence[Attempt]) -> bool:
+    """A step is skipped when its pass already found a match (in the other direction)."""
+    return any(a.matched and a.step.view_pass == step.view_pass for a in attempts)
+
+
+def overwhelming(attempt: Attempt, config) -> bool:
+    """A match so far beyond chance that no other view of its step can do better."""
+    return attempt.matched and \
+        attempt.verdict.evidence.log10_nfa <= config.decision.max_log_nfa_alone
+
+
+def stop_reason(step: Step, attempts: Sequence[Attempt], plan: Sequence[Step],
+                config) -> Optional[str]:
+    """Why the search stops after ``step`` (a key of ``STOP_REASONS``), or None to go on.
+
+    The search stops once its pass is over (or skipped from here on: it found a match) with a
+    match found, unless that match must be confirmed: a plain match (pass 0) on fewer than
+    ``views.confirm_below_inliers`` distinct inliers can be a repeated structure seen through
+    a viewpoint change, so the first pass of views gets to show a stronger answer.
+    """
+    best = strongest(attempts)
+    rest = plan[plan.index(step) + 1:]
+    if best is None:
+        return None if rest else "plan done"
+    pass_over = not any(s.view_pass == step.view_pass for s in rest) or any(
+        a.matched and a.step.view_pass == step.view_pass for a in attempts)
+    if not pass_over:
+        return None
+    weak = best.verdict.evidence.inliers < config.views.confirm_below_inliers
+    confirm = weak and step.view_pass == 0 and any(s.view_pass > 0 for s in rest)
+    if confirm:
+        return None
+    return "matched"
+
+
+def probe_best(probes: Sequence[float]) -> float:
+    """The best of some probe scores (NaN when there are none)."""
+    return max(probes) if len(probes) else math.nan

@@ -1,0 +1,97 @@
+"""The probe: how promising each scale of a search looks from its strongest points (paper 5).
+
+The paper notes (section 5) that the initial matches already point at the best scale. The
+probe describes only the ``ProbeParams.points`` strongest points of each scale, matches them
+against the coarser image, and scores each scale; only the best-scoring scales (and their
+neighbours) are then matched in full. The same scores rank the simulated views of a pass, and
+tell a search with nothing in it from one worth finishing (:mod:`scalematch.search`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import List, Sequence
+
+import numpy as np
+
+from ..checks import in_range
+from ..geometry import similarity_parts
+from .constraints import orientation_groups
+from .descriptors import Described
+from .estimator import estimate
+from .matcher import Candidates, match_descriptors
+
+
+@dataclass(frozen=True)
+class ProbeParams:
+    """Skipping hopeless scales from the initial matches of their strongest points (paper 5)."""
+
+    enabled: bool = True  #: False runs the full matching at every scale
+    #: strongest points per scale used to score it (100 and 150 measured the same success on
+    #: the 38 photos at ratios 8 and 10; 100 is 16 % faster)
+    points: int = 100
+    keep: int = 3  #: best-scoring scales kept, each with its two neighbours
+    #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
+    #: with 99.9 % confidence down to an inlier fraction of 12 %
+    ransac_iters: int = 500
+
+    def __post_init__(self) -> None:
+        for name in ("points", "keep", "ransac_iters"):
+            in_range("probe", name, getattr(self, name), lo=1, integer=True)
+
+
+def probe_scores(highs: Sequence[Described], low: Described, config) -> List[float]:
+    """How promising each scale looks from the initial matches of its strongest points alone.
+
+    Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
+    paper mode a scale's score is their number of candidate matches. In the default mode it is
+    the number of inliers of a quick similarity fit to the candidates in the dominant rotation
+    peak, counted only when the fit's ratio agrees with the scale: rotation alone cannot rank
+    scales where the scene's edges share a few directions (facades), geometry can. One
+    nearest-neighbour search serves every scale (each candidate depends on its own row only;
+    one large product is faster than many small ones).
+    """
+    if not highs:
+        return []
+    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
+    bounds = np.cumsum([0] + [len(h) for h in highs])
+    out = []
+    for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
+        rows = (cand.i >= lo) & (cand.i < hi)
+        part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
+        out.append(_score(h, low, part, config))
+    return out
+
+
+def _score(high: Described, low: Described, cand: Candidates, config) -> float:
+    if len(cand) == 0:
+        return 0.0
+    if config.mode == "paper":
+        return float(len(cand))
+    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], config.orientation)
+    best = 0.0
+    for mask in groups:
+        est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
+                       replace(config.ransac, max_iters=config.probe.ransac_iters),
+                       seed=config.seed)
+        if est.transform is None:
+            continue
+        ratio = similarity_parts(est.transform)[0]
+        if math.isfinite(ratio) and abs(math.log(ratio / high.s)) <= math.log(
+                config.decision.scale_agreement):
+            best = max(best, float(est.n_inliers))
+    return best
+
+
+def select_scales(scores: List[float], keep: int) -> List[int]:
+    """Indices of the ``keep`` best-scoring scales and their immediate neighbours.
+
+    >>> select_scales([0.0, 5.0, 1.0, 0.0, 9.0], keep=1)
+    [3, 4]
+    """
+    order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
+    chosen = set()
+    for i in order:
+        chosen.update(j for j in (i - 1, i, i + 1) if 0 <= j < len(scores))
+    return sorted(chosen)

@@ -1,0 +1,129 @@
+"""After the decision: the winning search's transform refit in the finer image's own pixels.
+
+Three refinements, in this order, each keeping the answer unless the evidence says otherwise:
+
+1. :func:`refit_in_high`: a match found on a simulated tilted view is refit in the finer
+   image's pixels (the view's similarity composed with the view's compression is an affine map).
+2. :func:`richer_model`: a similarity that explains clearly fewer candidates than an affine map
+   or a homography gives way to it (``ModelCheckParams``).
+3. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
+
+Each takes the winning scale's outcome (``best``: its candidates ``src`` -> ``dst``) or all the
+outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence, Tuple
+
+import numpy as np
+
+from ..checks import in_range, one_of
+from ..geometry import compose
+from .decision import Decision, folded
+from .estimator import MIN_SAMPLE, MODELS, estimate, model_of, refine, residuals
+from .matcher import distinct_pairs
+from .views import View, to_high
+
+
+@dataclass(frozen=True)
+class ModelCheckParams:
+    """A similarity answer is checked against richer models on the same candidates.
+
+    A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
+    measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
+    tens of px off away from its inliers. When an affine map or a homography fitted to the
+    winning scale's candidates explains clearly more of them, that model is reported instead
+    (``MatchResult.model`` says which); on plain zoom pairs the similarity is exact and stays.
+    """
+
+    enabled: bool = True  #: False: the similarity is always the answer when asked for
+    models: Tuple[str, ...] = ("affine", "homography")  #: tried in this order (simplest first)
+    #: a richer model is taken when its inliers reach ``min_gain`` x the similarity's and at
+    #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
+    min_gain: float = 1.25
+    min_extra: int = 10
+
+    def __post_init__(self) -> None:
+        for name in self.models:
+            one_of("model_check", "models", name, MODELS)
+        in_range("model_check", "min_gain", self.min_gain, lo=1)
+        in_range("model_check", "min_extra", self.min_extra, lo=0, integer=True)
+
+
+Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)
+
+
+def refit_in_high(view: View, verdict: Decision, best, config) -> Refit:
+    """The winning view's match in finer-image pixels.
+
+    The view's similarity composed with the view's compression is an affine map; it is refit
+    on the inliers mapped back to the finer image (an affine map, or a homography when that is
+    the model asked for), so the answer is exact rather than limited to the sampled tilts.
+    """
+    if view.is_identity:
+        return verdict.transform, verdict.inliers, config.model
+    src = to_high(view, verdict.inliers[:, :2])
+    dst = verdict.inliers[:, 2:4]
+    model = "homography" if config.model == "homography" else "affine"
+    # every candidate of the winning scale, not only the view's similarity inliers: the sampled
+    # tilt differs from the true one, so the similarity holds on part of the image only
+    cand_src = to_high(view, best.src)
+    est = estimate(model, cand_src, best.dst, config.ransac, seed=config.seed)
+    if est.transform is not None and est.n_inliers >= len(src):
+        return est.transform, np.hstack([cand_src[est.inliers], best.dst[est.inliers]]), model
+    est = estimate(model, src, dst, config.ransac, seed=config.seed)
+    if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
+        composed = compose(verdict.transform, view.to_view)
+        return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
+    inl = est.inliers
+    return est.transform, np.hstack([src[inl], dst[inl]]), model
+
+
+def richer_model(fit: Refit, view: View, best, config) -> Refit:
+    """A richer model when the similarity explains too little of the winning scale.
+
+    The candidates of the winning scale are refit with each of ``config.model_check.models``;
+    the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
+    whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
+    """
+    t, inliers, model = fit
+    check = config.model_check
+    if not check.enabled or model != "similarity" or not view.is_identity:
+        return fit
+    k = len(inliers)
+    for richer in check.models:
+        est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
+        if est.transform is None or folded(est.transform):
+            continue
+        if est.n_inliers >= check.min_gain * k and est.n_inliers - k >= check.min_extra:
+            inl = est.inliers
+            return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
+    return fit
+
+
+def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
+    """``fit`` refined on the candidates of every scale matched in full.
+
+    The neighbouring scales of a true match find the same transform (the paper's Table 1) from
+    other points; pooled, they spread the inliers wider over the image, which pins a homography
+    or an affine map down where the winning scale alone had few points. Kept only when it
+    explains at least as many pooled pairs; the inliers reported stay those of the winning
+    scale (the pairs the decision counted) that the refined transform still explains.
+    """
+    t, inliers, model = fit
+    if not model_of(model).has_ratio:
+        return fit
+    done = [o for o in outcomes if o.estimate is not None and len(o.src)]
+    if len(done) < 2:
+        return fit
+    src = to_high(view, np.vstack([o.src for o in done]))
+    src, dst = distinct_pairs(src, np.vstack([o.dst for o in done]))
+    before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
+    est = refine(model, t, src, dst, config.ransac)
+    if est.n_inliers < before or folded(est.transform):
+        return fit
+    keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
+        config.ransac.threshold_px
+    return est.transform, inliers[keep], model

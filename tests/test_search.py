@@ -1,0 +1,92 @@
+"""search: the plan as data, the skip and stop rules, on fabricated attempts (no pixels)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from scalematch.config import Config
+from scalematch.result import Direction, Evidence
+from scalematch.search import (Attempt, Step, search_plan, skips, stop_reason, strongest)
+from scalematch.stages.decision import Decision
+from scalematch.stages.views import ViewParams, identity_view
+
+GIVEN, SWAPPED = Direction.GIVEN, Direction.SWAPPED
+BOTH = {GIVEN: (1.0, 2.0, 4.0), SWAPPED: (1.0, 2.0)}
+
+
+def attempt(step: Step, matched: bool, inliers: int = 50, lnfa: float = -30.0) -> Attempt:
+    verdict = Decision(matched, "" if matched else "too few inliers", 2.0, None,
+                       np.zeros((0, 4)), Evidence(inliers=inliers, log10_nfa=lnfa))
+    return Attempt(step, identity_view(np.zeros((30, 30), np.float32)), 10.0, (), verdict)
+
+
+def test_the_plan_runs_each_pass_in_both_directions_given_first():
+    plan = search_plan(Config(), BOTH)
+    assert [(s.direction, s.view_pass, len(s.views)) for s in plan] == [
+        (GIVEN, 0, 1), (SWAPPED, 0, 1), (GIVEN, 1, 5), (SWAPPED, 1, 5), (GIVEN, 2, 10),
+        (SWAPPED, 2, 10)]
+    assert plan[1].scales == (1.0, 2.0) and plan[0].scales == (1.0, 2.0, 4.0)
+    # progress units: 1 view detected + 1 matched at 3 scales; 5 views + 3 full searches at 3
+    assert plan[0].cost == 6 and plan[2].cost == (5 + 3) * 3
+
+
+def test_the_plan_follows_the_order_the_views_and_the_model():
+    assert [s.direction for s in search_plan(Config(order="given"), BOTH)] == [GIVEN] * 3
+    no_views = Config(views=ViewParams(enabled=False))
+    assert [s.view_pass for s in search_plan(no_views, BOTH)] == [0, 0]
+    # a fundamental matrix has no ratio, so no view to refit: the images themselves only
+    assert len(search_plan(Config(model="fundamental"), BOTH)) == 2
+    # a direction with no scale at working size is not searched
+    assert [s.direction for s in search_plan(no_views, {GIVEN: (), SWAPPED: (1.0,)})] == [SWAPPED]
+
+
+def test_a_strong_plain_match_stops_the_search_at_once():
+    plan = search_plan(Config(), BOTH)
+    found = [attempt(plan[0], True, inliers=40)]
+    assert stop_reason(plan[0], found, plan, Config()) == "matched"
+
+
+def test_nothing_found_goes_on_to_the_end_of_the_plan():
+    config = Config()
+    plan = search_plan(config, BOTH)
+    attempts = []
+    for step in plan[:-1]:
+        attempts.append(attempt(step, False))
+        assert stop_reason(step, attempts, plan, config) is None
+    assert stop_reason(plan[-1], attempts + [attempt(plan[-1], False)], plan, config) == \
+        "plan done"
+
+
+def test_a_weak_plain_match_is_confirmed_by_the_first_pass_of_views():
+    """Fewer than confirm_below_inliers: the other direction of pass 0 is skipped, the first
+    pass of views runs, and the stronger answer wins."""
+    config = Config()
+    plan = search_plan(config, BOTH)
+    weak = attempt(plan[0], True, inliers=config.views.confirm_below_inliers - 1, lnfa=-12.6)
+    assert stop_reason(plan[0], [weak], plan, config) is None
+    assert skips(plan[1], [weak]) and not skips(plan[2], [weak])
+    # the views find nothing in the given direction: the swapped views still run
+    none = attempt(plan[2], False)
+    assert stop_reason(plan[2], [weak, none], plan, config) is None
+    # ... and when the pass is over the weak match stands
+    assert stop_reason(plan[3], [weak, none, attempt(plan[3], False)], plan, config) == "matched"
+    # a view with stronger evidence wins
+    strong = attempt(plan[2], True, inliers=60, lnfa=-80.0)
+    assert stop_reason(plan[2], [weak, strong], plan, config) == "matched"
+    assert strongest([weak, strong]) is strong
+
+
+def test_strongest_is_none_without_a_match_and_prefers_the_lowest_nfa():
+    plan = search_plan(Config(), BOTH)
+    assert strongest([attempt(plan[0], False)]) is None
+    a, b = attempt(plan[0], True, lnfa=-5.0), attempt(plan[1], True, lnfa=-50.0)
+    assert strongest([a, b]) is b and math.isfinite(b.verdict.evidence.log10_nfa)
+
+
+@pytest.mark.parametrize("config", [Config(), Config(order="given"), Config.paper()])
+def test_every_plan_has_the_given_image_itself_first(config):
+    plan = search_plan(config, BOTH)
+    assert plan[0].direction is GIVEN and plan[0].view_pass == 0 and plan[0].views == ((1.0, 0.0),)
