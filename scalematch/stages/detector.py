@@ -105,9 +105,12 @@ CONTRAST_PERCENTILE = 90.0
 #: ../shared/data/photos at ratio 4, seed 0 (high 14.6, low 10.2, both 12.0).
 REFERENCE_CONTRAST = 12.0
 #: Largest Harris response C (s = 1) of pure Gaussian noise of std 1 grey level over a 640x480
-#: image: measured 1.08 for std 3 (C scales as std^4: 1.08 / 81), seed 0. It falls about as
-#: s^-4.4 at larger scales (4.5e-2 at s = 2, 1.1e-4 at s = 8), so the s = 1 value is the bound.
+#: image: measured 1.08 for std 3 (C scales as std^4: 1.08 / 81), seed 0.
 NOISE_RESPONSE_PER_STD4 = 1.08 / 81.0
+#: The largest pure-noise response falls with the scale as s^-4.4 to s^-4.7 (measured, same
+#: image: 4.5e-2 at s = 2, 1.7e-3 at s = 4, 1.1e-4 at s = 8, 1.8e-5 at s = 12.7); the floor
+#: falls as s^-NOISE_SCALE_EXPONENT, a little slower, so it stays above the noise at every scale.
+NOISE_SCALE_EXPONENT = 4.0
 #: The noise floor is this many times the largest pure-noise response (a factor 10 in C is a
 #: factor 1.8 in gradient: noise maxima do not reach it).
 NOISE_MARGIN = 10.0
@@ -157,18 +160,21 @@ def image_contrast(image: np.ndarray, sigma: float = 1.0) -> Contrast:
                     noise_std=noise_std(img))
 
 
-def noise_floor(contrast: Contrast) -> float:
-    """Response (C units) below which a local maximum may be noise: NOISE_MARGIN times the
-    largest response of pure noise of the image's noise std (``NOISE_RESPONSE_PER_STD4``)."""
-    return NOISE_MARGIN * NOISE_RESPONSE_PER_STD4 * contrast.noise_std ** 4
+def noise_floor(contrast: Contrast, s: float = 1.0) -> float:
+    """Response (C units) below which a local maximum at scale ``s`` may be noise: NOISE_MARGIN
+    times the largest response of pure noise of the image's noise std (``NOISE_RESPONSE_PER_STD4``
+    at s = 1, falling as ``s^-NOISE_SCALE_EXPONENT``)."""
+    return (NOISE_MARGIN * NOISE_RESPONSE_PER_STD4 * contrast.noise_std ** 4
+            / max(s, 1.0) ** NOISE_SCALE_EXPONENT)
 
 
-def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = None) -> float:
-    """The cornerness threshold used on an image of ``contrast``.
+def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = None,
+                        s: float = 1.0) -> float:
+    """The cornerness threshold used at scale ``s`` on an image of ``contrast``.
 
     ``params.threshold`` when ``contrast_relative`` is off; otherwise
     ``threshold * min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, but not below
-    :func:`noise_floor` (nor above ``threshold * contrast_cap``).
+    :func:`noise_floor` at ``s`` (nor above ``threshold * contrast_cap``).
 
     >>> p = HarrisParams(contrast_relative=True)
     >>> effective_threshold(p, Contrast(gradient=6.0, noise_std=0.0))  # half the reference
@@ -183,7 +189,7 @@ def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = N
                          "contrast=image_contrast(image) computed on the s = 1 image")
     factor = min(params.contrast_cap, (contrast.gradient / REFERENCE_CONTRAST) ** 4)
     top = params.threshold * params.contrast_cap
-    return float(min(max(params.threshold * factor, noise_floor(contrast)), top))
+    return float(min(max(params.threshold * factor, noise_floor(contrast, s)), top))
 
 
 def harris_response(level: Level, params: HarrisParams) -> np.ndarray:
@@ -264,9 +270,9 @@ def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
         return Keypoints.empty(level.s)
     contrast = _level_contrast(level, params, contrast)
     resp = harris_response(level, params)
-    threshold = effective_threshold(params, contrast)
+    threshold = effective_threshold(params, contrast, level.s)
     if params.min_points > 0:  # every maximum above the noise floor, the budget picks from them
-        floor = max(noise_floor(contrast), 0.0)
+        floor = max(noise_floor(contrast, level.s), 0.0)
         rc = _local_maxima(resp, radius, min(floor, threshold), border)
     else:
         rc = _local_maxima(resp, radius, threshold, border)
