@@ -13,6 +13,18 @@ threshold serves every scale. (The paper writes the s^4 both inside ``M_s`` and 
 
 Derivatives are taken in full-resolution units even when a level is decimated: a level gradient
 is divided by ``d``, so ``M`` on a level is multiplied by ``(s / d)^2``.
+
+**Adaptive detection (issue 18, off by default).** ``C`` scales as ``gain^4`` under
+``I -> gain * I``, so the absolute threshold lets contrast decide what the detector sees (a
+12-bit image read as 0-15 grey levels finds almost nothing). Two options, both measured on the
+s = 1 image once (:func:`image_contrast`) and applied at every scale:
+
+* ``contrast_relative``: the threshold is multiplied by ``min(contrast_cap, (c / c_ref)^4)``,
+  ``c`` the 90th percentile of the gradient magnitude and ``c_ref`` = ``REFERENCE_CONTRAST``
+  (that of the benchmark photos), never below the noise floor (:func:`noise_floor`: ten times
+  the largest response pure noise of the image's estimated noise std gives);
+* ``min_points``: when fewer points pass the threshold at a scale, the strongest local maxima
+  above the noise floor make up a floor of ``min_points`` (a per-scale point budget).
 """
 
 from __future__ import annotations
@@ -25,7 +37,7 @@ import numpy as np
 
 from ..checks import in_range
 from .filters import gaussian_derivative
-from .scalespace import Level, gaussian_blur, scale_space
+from .scalespace import Level, as_float_image, gaussian_blur, scale_space
 
 
 #: Smallest image side the matcher accepts, px (the one minimum: reading an image and matching
@@ -50,6 +62,22 @@ class HarrisParams:
     subpixel: bool = True  #: refine positions by a quadratic fit of the 3x3 response
     decimate: bool = True  #: compute coarse scales on decimated levels (same response)
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
+    #: adaptive detection (issue 18; False = the absolute threshold above, as before): multiply
+    #: ``threshold`` by ``min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, ``c`` the image's
+    #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`)
+    contrast_relative: bool = False
+    #: largest factor the contrast may put on ``threshold`` (1: it only ever lowers it, so images
+    #: at least as contrasted as the reference photos keep today's points; inf: fully relative)
+    contrast_cap: float = 1.0
+    #: per-scale point budget (0 = off): when fewer points pass the threshold, the strongest local
+    #: maxima above the noise floor are kept up to this many (the footprint at ratio 8-10 had
+    #: 5-14 points at the winning scale: issue 18)
+    min_points: int = 0
+
+    @property
+    def adaptive(self) -> bool:
+        """True when detection needs the image's :class:`Contrast`."""
+        return self.contrast_relative or self.min_points > 0
 
     def __post_init__(self) -> None:
         for name in ("sigma", "sigma_tilde", "min_level_sigma"):
@@ -75,6 +103,103 @@ class Keypoints:
     @staticmethod
     def empty(s: float) -> "Keypoints":
         return Keypoints(s=s, xy=np.zeros((0, 2)), response=np.zeros(0, np.float32))
+
+
+#: Percentile of the gradient magnitude (Gaussian derivatives of std sigma = 1 px, s = 1) taken
+#: as an image's contrast. The median measures the flat parts: on the low images cut from the
+#: shared photos it ranged 0.05 to 5.7 grey levels/px (sky, walls) while the 90th percentile
+#: ranged 6.4 to 17.9 (measured on 19 pairs at ratio 8, seed 0; docs/FEWPOINTS.md).
+CONTRAST_PERCENTILE = 90.0
+#: The contrast the absolute ``threshold`` = 100 was tuned at, grey levels/px: the median
+#: ``image_contrast`` of the 76 images (high crop and low image) cut from the 38 photos of
+#: ../shared/data/photos at ratio 4, seed 0 (high 14.6, low 10.2, both 12.0).
+REFERENCE_CONTRAST = 12.0
+#: Largest Harris response C (s = 1) of pure Gaussian noise of std 1 grey level over a 640x480
+#: image: measured 1.08 for std 3 (C scales as std^4: 1.08 / 81), seed 0.
+NOISE_RESPONSE_PER_STD4 = 1.08 / 81.0
+#: The largest pure-noise response falls with the scale as s^-4.4 to s^-4.7 (measured, same
+#: image: 4.5e-2 at s = 2, 1.7e-3 at s = 4, 1.1e-4 at s = 8, 1.8e-5 at s = 12.7); the floor
+#: falls as s^-NOISE_SCALE_EXPONENT, a little slower, so it stays above the noise at every scale.
+NOISE_SCALE_EXPONENT = 4.0
+#: The noise floor is this many times the largest pure-noise response (a factor 10 in C is a
+#: factor 1.8 in gradient: noise maxima do not reach it).
+NOISE_MARGIN = 10.0
+
+
+@dataclass(frozen=True)
+class Contrast:
+    """How strong an image's structure and noise are, measured once on the s = 1 image."""
+
+    gradient: float  #: CONTRAST_PERCENTILE of the gradient magnitude at sigma, grey levels/px
+    noise_std: float  #: estimated noise std, grey levels (Immerkaer 1996; texture inflates it)
+
+
+def noise_std(image: np.ndarray) -> float:
+    """Noise std (grey levels) of ``image`` (H, W) by Immerkaer's method (CVIU 64(2), 1996).
+
+    The mean absolute response to the 3x3 difference-of-Laplacians mask, times sqrt(pi/2)/6:
+    exact for white Gaussian noise on a locally linear image; texture makes it larger (so the
+    noise floor it sets is conservative). Linear in the image: gain g gives g times the value.
+    """
+    img = np.asarray(image, np.float32)
+    if min(img.shape[:2]) < 3:
+        return 0.0
+    mask = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+    r = cv2.filter2D(img, cv2.CV_32F, mask, borderType=cv2.BORDER_REFLECT_101)[1:-1, 1:-1]
+    return float(np.sqrt(np.pi / 2.0) / 6.0 * np.mean(np.abs(r)))
+
+
+def image_contrast(image: np.ndarray, sigma: float = 1.0) -> Contrast:
+    """The :class:`Contrast` of a grey image (H, W), to be computed once on the s = 1 image.
+
+    ``gradient`` is the ``CONTRAST_PERCENTILE`` (90th) percentile of the gradient magnitude
+    (Gaussian derivatives of std ``sigma`` px): robust to large flat areas, and exactly
+    proportional to a grey-level gain (offset-free). A flat image gives 0.
+
+    >>> rng = np.random.default_rng(0)
+    >>> img = rng.uniform(0, 255, (64, 64)).astype(np.float32)
+    >>> a, b = image_contrast(img), image_contrast(img / 16 + 3)
+    >>> round(a.gradient / b.gradient, 3), round(a.noise_std / b.noise_std, 3)
+    (16.0, 16.0)
+    """
+    img = np.asarray(image, np.float32)
+    gx = gaussian_derivative(img, sigma, 1, 0)
+    gy = gaussian_derivative(img, sigma, 0, 1)
+    mag = np.sqrt(gx * gx + gy * gy)
+    return Contrast(gradient=float(np.percentile(mag, CONTRAST_PERCENTILE)),
+                    noise_std=noise_std(img))
+
+
+def noise_floor(contrast: Contrast, s: float = 1.0) -> float:
+    """Response (C units) below which a local maximum at scale ``s`` may be noise: NOISE_MARGIN
+    times the largest response of pure noise of the image's noise std (``NOISE_RESPONSE_PER_STD4``
+    at s = 1, falling as ``s^-NOISE_SCALE_EXPONENT``)."""
+    return (NOISE_MARGIN * NOISE_RESPONSE_PER_STD4 * contrast.noise_std ** 4
+            / max(s, 1.0) ** NOISE_SCALE_EXPONENT)
+
+
+def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = None,
+                        s: float = 1.0) -> float:
+    """The cornerness threshold used at scale ``s`` on an image of ``contrast``.
+
+    ``params.threshold`` when ``contrast_relative`` is off; otherwise
+    ``threshold * min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, but not below
+    :func:`noise_floor` at ``s`` (nor above ``threshold * contrast_cap``).
+
+    >>> p = HarrisParams(contrast_relative=True)
+    >>> effective_threshold(p, Contrast(gradient=6.0, noise_std=0.0))  # half the reference
+    6.25
+    >>> effective_threshold(p, Contrast(gradient=24.0, noise_std=0.0))  # capped at 1x
+    100.0
+    """
+    if not params.contrast_relative:
+        return float(params.threshold)
+    if contrast is None:
+        raise ValueError("contrast_relative needs the image's contrast: pass "
+                         "contrast=image_contrast(image) computed on the s = 1 image")
+    factor = min(params.contrast_cap, (contrast.gradient / REFERENCE_CONTRAST) ** 4)
+    top = params.threshold * params.contrast_cap
+    return float(min(max(params.threshold * factor, noise_floor(contrast, s)), top))
 
 
 def harris_response(level: Level, params: HarrisParams) -> np.ndarray:
@@ -131,19 +256,43 @@ def _subpixel(resp: np.ndarray, rc: np.ndarray) -> np.ndarray:
     return np.stack([np.clip(oy, -0.5, 0.5), np.clip(ox, -0.5, 0.5)], axis=1)
 
 
-def detect_on_level(level: Level, params: HarrisParams = HarrisParams()) -> Keypoints:
-    """Scale-adapted Harris points of one scale-space level, in full-resolution pixels."""
+def _level_contrast(level: Level, params: HarrisParams,
+                    contrast: Optional[Contrast]) -> Optional[Contrast]:
+    if contrast is not None or not params.adaptive:
+        return contrast
+    if level.d == 1.0 and level.blur == 0.0 and level.s == 1.0:  # the s = 1 image itself
+        return image_contrast(level.image, params.sigma)
+    raise ValueError(f"adaptive detection at s = {level.s:g} needs the image's contrast: pass "
+                     f"contrast=image_contrast(image) computed on the s = 1 image")
+
+
+def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
+                    contrast: Optional[Contrast] = None) -> Keypoints:
+    """Scale-adapted Harris points of one scale-space level, in full-resolution pixels.
+
+    ``contrast`` (:func:`image_contrast` of the s = 1 image) is needed when ``params.adaptive``;
+    at s = 1 on an undecimated level it is measured here when not given.
+    """
     h, w = level.image.shape
     radius = params.nms_radius * level.s / level.d
     border = params.border * level.s / level.d
     if min(h, w) <= 2 * int(np.ceil(border)) + 2:
         return Keypoints.empty(level.s)
+    contrast = _level_contrast(level, params, contrast)
     resp = harris_response(level, params)
-    rc = _local_maxima(resp, radius, params.threshold, border)
+    threshold = effective_threshold(params, contrast, level.s)
+    if params.min_points > 0:  # every maximum above the noise floor, the budget picks from them
+        floor = max(noise_floor(contrast, level.s), 0.0)
+        rc = _local_maxima(resp, radius, min(floor, threshold), border)
+    else:
+        rc = _local_maxima(resp, radius, threshold, border)
     if rc.shape[0] == 0:
         return Keypoints.empty(level.s)
     score = resp[rc[:, 0], rc[:, 1]]
     order = np.argsort(-score, kind="stable")
+    if params.min_points > 0:
+        passed = int(np.count_nonzero(score > threshold))
+        order = order[: max(passed, params.min_points)]
     if params.max_points > 0:
         order = order[: params.max_points]
     rc, score = rc[order], score[order]
@@ -159,7 +308,8 @@ PAPER_SCALES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
 
 
 def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
-           params: HarrisParams = HarrisParams()) -> List[Keypoints]:
+           params: HarrisParams = HarrisParams(),
+           contrast: Optional[Contrast] = None) -> List[Keypoints]:
     """Scale-adapted Harris points of ``image`` at every scale in ``scales``.
 
     Parameters
@@ -169,6 +319,9 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     scales : sequence of float
         Scales s (>= 1); 1 gives the standard Harris detector with sigma, sigma~.
     params : HarrisParams
+    contrast : Contrast, optional
+        The image's contrast for adaptive detection (``params.adaptive``); measured on
+        ``image`` when not given.
 
     Returns
     -------
@@ -183,15 +336,17 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     >>> len(detect(np.zeros((64, 64), np.float32))[0])   # flat: no point, not an error
     0
     """
+    if params.adaptive and contrast is None:
+        contrast = image_contrast(as_float_image(image), params.sigma)
     levels = scale_space(image, scales, sigma=params.sigma,
                          min_level_sigma=params.min_level_sigma, decimate=params.decimate)
-    return [detect_on_level(level, params) for level in levels]
+    return [detect_on_level(level, params, contrast) for level in levels]
 
 
-def detect_one(image: np.ndarray, s: float = 1.0,
-               params: HarrisParams = HarrisParams()) -> Keypoints:
+def detect_one(image: np.ndarray, s: float = 1.0, params: HarrisParams = HarrisParams(),
+               contrast: Optional[Contrast] = None) -> Keypoints:
     """Harris points of ``image`` at the single scale ``s``."""
-    return detect(image, (s,), params)[0]
+    return detect(image, (s,), params, contrast)[0]
 
 
 def response_at(image: np.ndarray, s: float, params: Optional[HarrisParams] = None) -> np.ndarray:

@@ -1,0 +1,293 @@
+"""A check with the pixels (issue 18; paper eq. 3 and 5: grey-level correlation after the map).
+
+The high image, blurred for its resolution ratio ``r`` (the camera model of EVALUATION.md: a
+Gaussian of std ``0.5 sqrt(r^2 - 1)`` high px before shrinking by ``r``), is warped by the
+hypothesis onto its footprint in the low image, and the two are compared by zero-mean normalised
+cross-correlation (ZNCC) over the pixels they share. The same is measured for nearby wrong
+placements -- the hypothesis shifted by a fraction of the footprint's size along each axis,
+turned by a few degrees about the footprint's centre, and scaled by the neighbouring scale
+steps ``2^(+-1/3)`` -- so the figure reads "how much better than nearby wrong answers" and does
+not depend on how many corners the scene has.
+
+Why plain ZNCC: the low image differs from the warped high one by a grey-level gain and offset
+(EVALUATION.md step 2) and noise; ZNCC is exactly invariant to the former and averages the
+latter over the whole footprint. Its weakness, a high score for any placement over a smooth
+shading or one strong edge that both images share, is what the comparison with the perturbed
+placements removes: those share the shading too, so the *margin* is small unless the fine
+structure lines up.
+
+Cheap by construction: the high image is first shrunk by an integer factor ``k ~ r / 2`` with
+``cv2.INTER_AREA`` (a box filter) and blurred by the rest of the camera blur on the small copy;
+all placements are warped only onto the bounding box of the footprints in the low image, at the
+low image's resolution.
+
+Pixel convention: OpenCV's, (x, y), pixel centres at integers. Not wired into the pipeline yet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Tuple
+
+import cv2
+import numpy as np
+
+from ..geometry import apply, as_matrix3, footprint, similarity_matrix, similarity_parts
+from .scalespace import CAMERA_BLUR_PX
+
+
+@dataclass(frozen=True)
+class PixelParams:
+    """The pixel check; lengths in low-resolution px unless said otherwise."""
+
+    #: shift of the perturbed placements, fraction of the footprint's size (sqrt of its area):
+    #: a quarter moves every pixel well past the correlation length of the fine structure
+    #: while keeping 3/4 of the footprint over the same region (the same shading)
+    shift_fraction: float = 0.25
+    #: turn of the perturbed placements about the footprint's centre, degrees: at a 60 px
+    #: footprint (ratio 10-16) 10 degrees moves its edge by 5 px, beyond the 3 px inlier threshold
+    rotation_deg: float = 10.0
+    #: scale factor of the perturbed placements: the neighbouring scales of the search
+    #: (Config.scales are third octaves, 2^(1/3))
+    scale_step: float = 2.0 ** (1.0 / 3.0)
+    #: fewest low pixels shared by the warped high image and the low image; fewer: "cannot
+    #: tell" (nan). 256 = a 16x16 patch, the descriptor's window (GradientParams: 16 px)
+    min_overlap_px: int = 256
+    #: smallest grey-level std of either image over the overlap, grey levels: below, the region
+    #: is flat and correlation means nothing (nan). Small enough for a 12-bit image read as
+    #: 0-15 grey levels (textured regions: std ~1)
+    min_std: float = 1e-3
+    #: pixels of the warped image this close to its edge are left out (bilinear interpolation
+    #: there mixes in the zero border)
+    edge_px: int = 1
+    #: a footprint larger than this (sqrt of its area, low px) is checked on the low image shrunk
+    #: to it (cv2.INTER_AREA): 128 px leave 16k pixels to correlate, ample, and bound the cost
+    #: at small ratios (a 320x240 footprint at ratio 2 otherwise warps 9 x 77k pixels)
+    max_side_px: float = 128.0
+
+
+@dataclass(frozen=True)
+class PixelCheck:
+    """ZNCC of a hypothesis and of its perturbed placements; nan values mean "cannot tell"."""
+
+    ncc: float  #: ZNCC of the hypothesis over the overlap, in [-1, 1]
+    best_perturbed: float  #: the highest ZNCC of the perturbed placements
+    margin: float  #: ncc - best_perturbed (> 0: better than every nearby wrong placement)
+    z: float  #: (ncc - mean of perturbed) / std of perturbed (std floored at 0.01)
+    perturbed: Tuple[float, ...] = field(repr=False)  #: ZNCC of each perturbed placement
+    overlap_px: int = 0  #: low px shared by the hypothesis' warp and the low image
+    overlap_fraction: float = 0.0  #: overlap_px over the footprint's area
+    reason: str = ""  #: why ncc is nan ("" when it is not)
+
+    @property
+    def decided(self) -> bool:
+        """True when the check could measure the hypothesis and its neighbours."""
+        return math.isfinite(self.margin)
+
+
+def blurred_for_ratio(high: np.ndarray, ratio: float) -> Tuple[np.ndarray, int]:
+    """The high image (h, w) with the camera blur of ``ratio``, on a copy shrunk by ``k``.
+
+    Returns (small, k): ``small[y_s, x_s]`` is the high image blurred by
+    ``CAMERA_BLUR_PX * sqrt(ratio^2 - 1)`` high px sampled at ``x = k x_s + (k - 1) / 2``
+    (``cv2.INTER_AREA``'s centre-aligned box, variance ``(k^2 - 1) / 12`` high px^2, counted in
+    the blur). ``k = max(1, floor(ratio / 2))`` keeps two small pixels per low pixel.
+    """
+    img = np.asarray(high, np.float32)
+    r = max(float(ratio), 1.0)
+    k = max(1, int(r // 2))
+    h, w = img.shape
+    k = min(k, max(1, min(h, w) // 8))
+    if k > 1:
+        img = cv2.resize(img[: (h // k) * k, : (w // k) * k], (w // k, h // k),
+                         interpolation=cv2.INTER_AREA)
+    total = CAMERA_BLUR_PX * math.sqrt(max(r * r - 1.0, 0.0))
+    rest = math.sqrt(max(total * total - (k * k - 1) / 12.0, 0.0)) / k
+    if rest > 0.05:
+        img = cv2.GaussianBlur(img, (0, 0), rest, borderType=cv2.BORDER_REFLECT_101)
+    return img, k
+
+
+def _quad_area(q: np.ndarray) -> float:
+    """Area of a quadrilateral (4, 2) given in order (half the cross product of its diagonals)."""
+    d1, d2 = q[2] - q[0], q[3] - q[1]
+    return 0.5 * abs(float(d1[0] * d2[1] - d1[1] * d2[0]))
+
+
+def _small_to_high(k: int) -> np.ndarray:
+    """3x3 map from the shrunk copy's px to high px: x = k x_s + (k - 1) / 2."""
+    c = (k - 1) / 2.0
+    return np.array([[k, 0.0, c], [0.0, k, c], [0.0, 0.0, 1.0]])
+
+
+def zncc(a: np.ndarray, b: np.ndarray, min_std: float = PixelParams.min_std) -> float:
+    """Zero-mean normalised cross-correlation of two equal-length samples (nan when flat).
+
+    >>> x = np.arange(10.0)
+    >>> zncc(x, 3 * x + 7), zncc(x, -x), zncc(x, np.ones(10))
+    (1.0, -1.0, nan)
+    """
+    a = np.asarray(a, np.float64).ravel()
+    b = np.asarray(b, np.float64).ravel()
+    if a.size < 2:
+        return float("nan")
+    a = a - a.mean()
+    b = b - b.mean()
+    dot = lambda u, v: float(np.einsum("i,i->", u, v))  # noqa: E731 (no BLAS threads: small)
+    sa, sb = math.sqrt(dot(a, a) / a.size), math.sqrt(dot(b, b) / b.size)
+    if not (sa > min_std and sb > min_std):
+        return float("nan")
+    return float(round(dot(a, b) / (a.size * sa * sb), 12))
+
+
+def perturbations(t: np.ndarray, high_shape: Tuple[int, int],
+                  params: PixelParams = PixelParams()) -> Tuple[np.ndarray, ...]:
+    """The nearby wrong placements of ``t`` (each a 3x3 high px -> low px map).
+
+    Four shifts (+-x, +-y) by ``shift_fraction`` of the footprint's size, two turns by
+    ``+-rotation_deg`` and two scalings by ``scale_step^+-1`` about the footprint's centre.
+    """
+    t3 = as_matrix3(t)
+    h, w = high_shape[:2]
+    centre = apply(t3, [[(w - 1) / 2.0, (h - 1) / 2.0]])[0]
+    corners = footprint(t3, (h, w))
+    area = _quad_area(corners) if corners is not None else 0.0
+    step = params.shift_fraction * math.sqrt(max(area, 0.0))
+    to_c = np.array([[1.0, 0, -centre[0]], [0, 1.0, -centre[1]], [0, 0, 1.0]])
+    back = np.array([[1.0, 0, centre[0]], [0, 1.0, centre[1]], [0, 0, 1.0]])
+    moves = [similarity_matrix(1.0, 0.0, dx, dy) for dx, dy in
+             ((step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step))]
+    about = [similarity_matrix(1.0, a) for a in (params.rotation_deg, -params.rotation_deg)]
+    about += [similarity_matrix(f, 0.0) for f in (params.scale_step, 1.0 / params.scale_step)]
+    out = [as_matrix3(m) @ t3 for m in moves]
+    out += [back @ as_matrix3(m) @ to_c @ t3 for m in about]
+    return tuple(out)
+
+
+def _warp_into(small: np.ndarray, m3: np.ndarray, size: Tuple[int, int],
+               edge_px: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Warp ``small`` by the 3x3 map ``m3`` (small px -> box px) onto a box of ``size`` (w, h);
+    returns (image, valid mask)."""
+    ones = np.ones(small.shape, np.uint8)
+    if abs(m3[2, 0]) < 1e-15 and abs(m3[2, 1]) < 1e-15:
+        m = (m3 / m3[2, 2])[:2]
+        img = cv2.warpAffine(small, m, size, flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        mask = cv2.warpAffine(ones, m, size, flags=cv2.INTER_NEAREST,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    else:
+        img = cv2.warpPerspective(small, m3, size, flags=cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        mask = cv2.warpPerspective(ones, m3, size, flags=cv2.INTER_NEAREST,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    if edge_px > 0:
+        mask = cv2.erode(mask, np.ones((2 * edge_px + 1,) * 2, np.uint8),
+                         borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return img, mask.astype(bool)
+
+
+def _shrunk(image: np.ndarray, factor: float) -> Tuple[np.ndarray, np.ndarray]:
+    """``image`` shrunk by about ``factor`` (INTER_AREA) and the 3x3 map from its px to the
+    shrunk px (centre-aligned: x_s = (x + 0.5) / f - 0.5 with f the factor actually used)."""
+    h, w = image.shape
+    ow, oh = max(int(round(w / factor)), 1), max(int(round(h / factor)), 1)
+    fx, fy = w / ow, h / oh
+    out = cv2.resize(image, (ow, oh), interpolation=cv2.INTER_AREA)
+    m = np.array([[1.0 / fx, 0.0, 0.5 / fx - 0.5], [0.0, 1.0 / fy, 0.5 / fy - 0.5],
+                  [0.0, 0.0, 1.0]])
+    return out, m
+
+
+def _nan_check(reason: str, overlap: int = 0, fraction: float = 0.0) -> PixelCheck:
+    nan = float("nan")
+    return PixelCheck(nan, nan, nan, nan, (), overlap, fraction, reason)
+
+
+def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
+                params: PixelParams = PixelParams()) -> PixelCheck:
+    """How much better the hypothesis ``t`` lines the pixels up than nearby wrong placements.
+
+    Parameters
+    ----------
+    low : (H, W) array
+        The low-resolution image, grey levels.
+    high : (h, w) array
+        The high-resolution image, grey levels.
+    t : (2, 3) or (3, 3) array
+        Hypothesis, high px -> low px (similarity, affine or homography).
+    params : PixelParams
+
+    Returns
+    -------
+    PixelCheck
+        ``ncc`` of the hypothesis, ``best_perturbed`` and ``margin = ncc - best_perturbed``, a
+        z-score against the perturbed placements; nan with a ``reason`` when the overlap is
+        smaller than ``min_overlap_px``, flat, or the map has no footprint.
+
+    >>> rng = np.random.default_rng(0)
+    >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
+    >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
+    >>> t = np.array([[0.25, 0, 30 - 0.375], [0, 0.25, 20 - 0.375]])  # 4x, centre-aligned
+    >>> check = pixel_check(low, high, t)
+    >>> check.ncc > 0.9, check.margin > 0.5
+    (True, True)
+    """
+    low = np.asarray(low, np.float32)
+    high = np.asarray(high, np.float32)
+    if low.ndim != 2 or high.ndim != 2:
+        raise ValueError(f"expected 2-D grey images, got shapes {low.shape} and {high.shape}")
+    t3 = as_matrix3(np.asarray(t, np.float64))
+    corners = footprint(t3, high.shape)
+    if corners is None or not np.all(np.isfinite(t3)):
+        return _nan_check("the transform has no footprint")
+    area = _quad_area(corners)
+    if area < params.min_overlap_px:
+        return _nan_check(f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})")
+    ratio = similarity_parts(t3)[0]
+    if not (math.isfinite(ratio) and ratio > 0):
+        return _nan_check("the transform is singular")
+    q = min(1.0, params.max_side_px / math.sqrt(area))
+    if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
+        low, shrink = _shrunk(low, 1.0 / q)
+        t3 = shrink @ t3
+        ratio, corners, area = ratio / shrink[0, 0], footprint(t3, high.shape), area * shrink[0, 0] ** 2
+    others = perturbations(t3, high.shape, params)
+    # one box holding every placement's footprint, clipped to the low image
+    hh, ww = low.shape
+    pts = [corners] + [footprint(m, high.shape) for m in others]
+    pts = np.vstack([p for p in pts if p is not None])
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int), 0)
+    x1 = min(int(np.ceil(pts[:, 0].max())), ww - 1)
+    y1 = min(int(np.ceil(pts[:, 1].max())), hh - 1)
+    if x1 <= x0 or y1 <= y0:
+        return _nan_check("the footprint lies outside the low image")
+    box = low[y0:y1 + 1, x0:x1 + 1]
+    size = (x1 - x0 + 1, y1 - y0 + 1)
+    small, k = blurred_for_ratio(high, ratio)
+    shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
+    from_small = _small_to_high(k)
+
+    def score(m3: np.ndarray) -> Tuple[float, int]:
+        img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
+        n = int(mask.sum())
+        if n < params.min_overlap_px:
+            return float("nan"), n
+        return zncc(img[mask], box[mask], params.min_std), n
+
+    ncc, n = score(t3)
+    fraction = n / area
+    if n < params.min_overlap_px:
+        return _nan_check(f"{n} low px overlap (< {params.min_overlap_px})", n, fraction)
+    if not math.isfinite(ncc):
+        return _nan_check("flat: no grey-level variation over the overlap", n, fraction)
+    pert = np.array([score(m)[0] for m in others])
+    good = pert[np.isfinite(pert)]
+    if good.size == 0:
+        return PixelCheck(ncc, float("nan"), float("nan"), float("nan"), tuple(pert.tolist()),
+                          n, fraction, "no perturbed placement could be measured")
+    best = float(good.max())
+    z = (ncc - float(good.mean())) / max(float(good.std()), 0.01)
+    return PixelCheck(ncc=ncc, best_perturbed=best, margin=ncc - best, z=float(z),
+                      perturbed=tuple(float(v) for v in pert), overlap_px=n,
+                      overlap_fraction=float(fraction))

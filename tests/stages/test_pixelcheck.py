@@ -1,0 +1,108 @@
+"""The pixel check: the truth lines the pixels up clearly better than nearby wrong placements."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from scalematch.geometry import apply, as_matrix3, similarity_matrix, similarity_parts
+from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.stages.pixelcheck import PixelParams, perturbations, pixel_check, zncc
+
+
+@pytest.fixture(scope="module", params=[4.0, 8.0])
+def zoom(request, raccoon):
+    """Zoom pairs of data/raccoon.jpg at ratios 4 and 8 (grey-level change and noise)."""
+    return make_zoom_pair(raccoon, request.param, np.random.default_rng(3))
+
+
+def _elsewhere(pair, turn, at):
+    ratio, angle, _ = similarity_parts(pair.truth)
+    h, w = pair.high.shape
+    t = similarity_matrix(1 / ratio, angle + turn)
+    t[:, 2] = np.array(at) * pair.low.shape[::-1] - apply(t, [[(w - 1) / 2, (h - 1) / 2]])[0]
+    return t
+
+
+def test_truth_beats_its_perturbed_placements(zoom):
+    check = pixel_check(zoom.low, zoom.high, zoom.truth)
+    # measured on 21 pairs cut from ../shared photos (docs/FEWPOINTS.md): ncc >= 0.995 and
+    # margin >= 0.076; here (raccoon, ratio 4 / 8) ncc 1.00, margin 0.54 / 0.46
+    assert check.decided and check.reason == ""
+    assert check.ncc > 0.95
+    assert check.margin > 0.1
+    assert len(check.perturbed) == 8 and max(check.perturbed) == pytest.approx(
+        check.best_perturbed)
+    assert check.overlap_fraction > 0.9
+
+
+def test_wrong_placements_are_no_better_than_their_neighbours(zoom):
+    for turn, at in ((90.0, (0.3, 0.3)), (180.0, (0.7, 0.6)), (35.0, (0.25, 0.75))):
+        check = pixel_check(zoom.low, zoom.high, _elsewhere(zoom, turn, at))
+        # measured over 84 wrong and unrelated placements: margin at most 0.005
+        assert not check.margin > 0.05, (turn, at, check)
+
+
+def test_perturbations_move_the_footprint():
+    t = similarity_matrix(0.125, 30.0, 100.0, 80.0)
+    moved = perturbations(t, (480, 640))
+    assert len(moved) == 8
+    centre = apply(t, [[319.5, 239.5]])[0]
+    step = 0.25 * math.sqrt(80 * 60)  # a quarter of the footprint's size, low px
+    shifts = [np.linalg.norm(apply(m, [[319.5, 239.5]])[0] - centre) for m in moved]
+    assert shifts[:4] == pytest.approx([step] * 4)
+    assert shifts[4:] == pytest.approx([0.0] * 4, abs=1e-9)  # turns, scalings about the centre
+    ratios = [similarity_parts(m)[0] for m in moved[6:]]
+    assert ratios == pytest.approx([8 / 2 ** (1 / 3), 8 * 2 ** (1 / 3)])
+
+
+def test_partly_outside_footprint_is_measured_on_the_overlap(zoom):
+    t = as_matrix3(zoom.truth).copy()
+    fp_w = zoom.high.shape[1] / zoom.ratio
+    # move low so that the footprint hangs 40 % over its left edge
+    x_min = apply(t, [[0, 0], [zoom.high.shape[1] - 1, 0], [0, zoom.high.shape[0] - 1],
+                      [zoom.high.shape[1] - 1, zoom.high.shape[0] - 1]])[:, 0].min()
+    cut = int(math.ceil(x_min + 0.4 * fp_w))
+    t[0, 2] -= cut
+    check = pixel_check(zoom.low[:, cut:], zoom.high, t)
+    assert 0.3 < check.overlap_fraction < 0.8
+    assert check.ncc > 0.9 and check.margin > 0.05
+
+
+def test_tiny_footprint_cannot_tell(raccoon):
+    t = similarity_matrix(1 / 40.0, 0.0, 50.0, 50.0)  # 512x384 -> 13x10 low px
+    check = pixel_check(raccoon, raccoon[:384, :512], t)
+    assert not check.decided and math.isnan(check.ncc) and "footprint" in check.reason
+
+
+def test_outside_the_low_image_cannot_tell(zoom):
+    t = as_matrix3(zoom.truth).copy()
+    t[0, 2] += 5000
+    check = pixel_check(zoom.low, zoom.high, t)
+    assert not check.decided and check.reason
+
+
+def test_flat_images_cannot_tell_without_warnings():
+    low = np.full((200, 300), 90.0, np.float32)
+    high = np.full((240, 320), 120.0, np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check = pixel_check(low, high, similarity_matrix(0.25, 0.0, 60.0, 50.0))
+    assert not check.decided and "flat" in check.reason
+
+
+def test_homography_hypothesis(zoom):
+    check = pixel_check(zoom.low, zoom.high, as_matrix3(zoom.truth) * 3.0)  # same map, w = 3
+    assert check.ncc > 0.95 and check.margin > 0.1
+
+
+def test_zncc_is_invariant_to_gain_and_offset():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=500)
+    b = a + rng.normal(scale=0.5, size=500)
+    assert zncc(a, b) == pytest.approx(zncc(a, 0.2 * b - 40.0), abs=1e-9)
+    assert math.isnan(zncc(a, np.zeros(500)))
+    assert PixelParams().scale_step == pytest.approx(2 ** (1 / 3))
