@@ -87,6 +87,8 @@ class HarrisParams:
         for name in ("threshold", "nms_radius", "border"):
             in_range("harris", name, getattr(self, name), lo=0)
         in_range("harris", "max_points", self.max_points, lo=0, integer=True)
+        in_range("harris", "contrast_cap", self.contrast_cap, lo=0, lo_open=True, allow_inf=True)
+        in_range("harris", "min_points", self.min_points, lo=0, integer=True)
 
 
 @dataclass(frozen=True)
