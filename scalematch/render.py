@@ -41,6 +41,8 @@ MATCHES_HEIGHT = (360, 720)
 #: Inlier lines drawn at most (a seeded random subset beyond this, said in the caption).
 MAX_LINES = 300
 FONT = cv2.FONT_HERSHEY_SIMPLEX
+#: The files ``write_outputs`` writes into its folder.
+OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -107,19 +109,26 @@ def _wrap(text: str, scale: float, width: int) -> list:
     return out + [line]
 
 
-def summary_line(result: MatchResult) -> str:
-    """One line for captions: ratio, angle and inliers, or the reason there is no match."""
+def verdict(result: MatchResult) -> str:
+    """The one-line verdict of a match, for the command line and the captions alike.
+
+    Matched: the model, ratio, rotation, inliers and best scale (to the per-scale table's three
+    significant digits), a tilted view and a swapped order when so; the fundamental matrix has
+    no ratio. Not matched: the reason, and the best scale when there is one.
+    """
+    best = f"best scale {result.best_scale:.3g}" if np.isfinite(result.best_scale) else ""
     if not result.matched:
-        return f"no reliable match: {result.reason}" if result.reason else "no reliable match"
+        reason = result.reason or "the evidence is too weak"
+        return f"no reliable match: {reason}" + (f", {best}" if best else "")
     if not model_of(result.model).has_ratio:
-        return f"{result.model} matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
+        return f"matched ({result.model} matrix): {result.n_inliers} inliers, {best}"
     tilt = float(result.evidence.get("view_tilt", 1.0))
     view = (f", seen tilted by {tilt:g} at {result.evidence.get('view_longitude_deg', 0.0):g} deg"
             if tilt > 1.0 else "")
-    order = ", order swapped" if result.order == "swapped" else ""
-    return (f"{result.model}: ratio {result.resolution_ratio:.2f}, rotation "
-            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, "
-            f"best scale {result.best_scale:g}{view}{order}")
+    order = (", order swapped (the first image is the finer one)"
+             if result.order == "swapped" else "")
+    return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
+            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}")
 
 
 # --------------------------------------------------------------------------- pictures
@@ -147,7 +156,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
     low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
-    lines = [summary_line(result)]
+    lines = [verdict(result)]
     if result.matched and t is not None and model_of(result.model).has_ratio:
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
         warped, mask = _warp_high(high_grey, t, (ww, hh))
@@ -216,7 +225,7 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
     hh, hw = high_bgr.shape[:2]
     head = (f"left: low {lw}x{lh}   right: high {hw}x{hh}   "
             f"{result.n_inliers} inlier matches{note}")
-    return np.vstack([_band([head, summary_line(result)], canvas.shape[1]), canvas])
+    return np.vstack([_band([head, verdict(result)], canvas.shape[1]), canvas])
 
 
 def _band(lines: Sequence[str], width: int) -> np.ndarray:
@@ -281,8 +290,7 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
         low_path, high_path, low, high = high_path, low_path, high, low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {name: out / name for name in
-             ("overlay.png", "matches.png", "scales.png", "matches.csv")}
+    paths = {name: out / name for name in OUTPUT_FILES}
     ov = overlay(low, high, result)
     caption(ov, [f"low: {Path(low_path).name}   high: {Path(high_path).name}"], where="bottom")
     _write_png(paths["overlay.png"], ov)

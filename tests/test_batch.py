@@ -337,7 +337,7 @@ def test_batch_exit_0_when_no_pair_errored(images):
 
 def test_exit_3_is_documented():
     text = run("batch", "--help").output
-    assert "3 some pair" in " ".join(text.split())
+    assert "3 batch: some pair has an \"error\" line" in " ".join(text.split())
 
 
 def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
@@ -430,8 +430,21 @@ def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_pa
 
 def test_output_is_the_pairs_csv_itself(images):
     pairs = write(images / "p3.csv", "low,high\nlow.png,high.png\n")
-    assert_one_line_error(run("batch", pairs, "--output", pairs), "not a scalematch result")
+    assert_one_line_error(run("batch", pairs, "--output", pairs), "is an input")
     assert pairs.read_text() == "low,high\nlow.png,high.png\n"
+
+
+def test_output_is_an_image_of_a_pair_by_another_name(images, tmp_path):
+    """The same check as match's --json: an input under another spelling (or a hard link)."""
+    pairs = write(images / "p3b.csv", "low.png,high.png\n")
+    before = (images / "high.png").read_bytes()
+    last = assert_one_line_error(run("batch", pairs, "--output", images / "." / "high.png"),
+                                 "is an input")
+    assert "overwritten" in last
+    link = tmp_path / "linked.png"
+    os.link(images / "high.png", link)
+    assert_one_line_error(run("batch", pairs, "--output", link), "is an input")
+    assert (images / "high.png").read_bytes() == before
 
 
 def test_resume_with_other_options_is_refused_and_left_untouched(images, tmp_path):

@@ -181,7 +181,7 @@ def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
     result = run(*flat_pair, "-q")
     assert result.exit_code == 130, (result.exit_code, result.output)
     assert result.stderr.strip() == "interrupted"
-    assert "130 interrupted" in run("match", "--help").output
+    assert "130  interrupted" in run("match", "--help").output
 
 
 # --------------------------------------------------------------------------- no match: exit 1
