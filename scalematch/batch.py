@@ -37,6 +37,7 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
 
 from . import __version__
 from .config import Config
+from .errors import internal_error
 from .imageio import read_image, to_grey
 from .pipeline import match
 from .result import dumps, to_jsonable
@@ -365,14 +366,6 @@ def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
     return {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": False,
             "error": error, "error_kind": kind, "seconds": round(seconds, 3),
             "config": to_jsonable(config), "version": __version__}
-
-
-def internal_error(exc: BaseException) -> str:
-    """The one-line message of an unexpected error (as the command line prints it)."""
-    what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
-    if isinstance(exc, MemoryError):
-        what = f"out of memory ({what})"
-    return f"internal error, {what.splitlines()[0]}"
 
 
 def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:

@@ -25,6 +25,7 @@ import click
 import numpy as np
 
 from . import __version__
+from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, dumps
@@ -347,12 +348,7 @@ class ScalematchGroup(click.Group):
                 hint = ""
             else:
                 hint = " (-v shows the traceback)"
-            try:
-                from .batch import internal_error  # the words of a batch line's too
-                message = internal_error(exc)
-            except Exception:  # noqa: BLE001 (the import failed too: say what we have)
-                message = f"internal error, {type(exc).__name__}"
-            click.echo(f"Error: {message}{hint}", err=True)
+            click.echo(f"Error: {internal_error(exc)}{hint}", err=True)
             sys.exit(EXIT_INTERNAL_ERROR)
         sys.exit(rv if isinstance(rv, int) else 0)
 

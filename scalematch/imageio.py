@@ -343,8 +343,11 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
                 raise _too_many(p, head.size[0], head.size[1], max_pixels)
             if len(prefix) == size:
                 return prefix, head
-            if head.size is None and not cv2.haveImageReader(str(p)):
-                raise _not_decodable(p)  # no decoder knows its signature: no more bytes read
+            if head.size is None:  # no more bytes read unless they may hold the header
+                if not cv2.haveImageReader(str(p)):  # no decoder knows its signature
+                    raise _not_decodable(p)
+                if not header_may_follow(prefix):
+                    raise _corrupt(p)
             raw = bytearray(size)
             start = len(prefix)
             raw[:start] = prefix
@@ -356,6 +359,57 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
             raise ImageError(f"{p}: cannot read the file ({exc.strerror or exc}); check its "
                              "permissions") from None
     return raw, (head if head.size is not None else _head(p, raw))
+
+
+#: Signatures of formats whose header stands at the start of the file (PNG: the IHDR chunk; GIF:
+#: the logical screen; BMP: the info header; WebP: the first chunk): one Pillow cannot read from
+#: the first ``HEADER_BYTES`` is not in the file.
+_HEADER_FIRST = (b"GIF87a", b"GIF89a", b"BM", b"RIFF")
+_JPEG_SOI = b"\xff\xd8"
+#: JPEG markers of a frame header (SOF0..SOF15 but DHT 0xC4, JPG 0xC8, DAC 0xCC): the size.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def header_may_follow(prefix: bytes) -> bool:
+    """Whether a file whose header Pillow could not read from ``prefix`` (its first bytes) may
+    hold one further on, so that reading on is worth it.
+
+    No for a PNG without its IHDR chunk first, for GIF, BMP and WebP (their header comes first),
+    and for a JPEG whose segments before the frame header break off or end inside ``prefix``;
+    yes for a JPEG whose segments run on past ``prefix`` (large EXIF, ICC, XMP blocks) and for
+    any other format (a TIFF's directory may stand anywhere; formats Pillow does not know).
+
+    >>> header_may_follow(b"\\x89PNG\\r\\n\\x1a\\n" + bytes(100))
+    False
+    >>> header_may_follow(b"\\xff\\xd8\\xff\\xe1\\xff\\xfe" + bytes(100))  # APP1 of 65534 bytes
+    True
+    """
+    if prefix.startswith(_PNG_SIGNATURE):
+        return prefix[12:16] == b"IHDR"  # its size is there; a long text chunk may delay Pillow
+    if prefix.startswith(_HEADER_FIRST):
+        return False
+    if prefix.startswith(_JPEG_SOI):
+        pos = 2
+        while pos + 4 <= len(prefix):
+            if prefix[pos] != 0xFF:
+                return False  # not a marker: broken
+            marker = prefix[pos + 1]
+            if marker == 0xFF:  # a fill byte
+                pos += 1
+                continue
+            if marker in _JPEG_SOF or marker in (0xD9, 0xDA):
+                return False  # the frame header (or the end) is here, yet Pillow failed
+            length = int.from_bytes(prefix[pos + 2:pos + 4], "big")
+            if length < 2:
+                return False
+            pos += 2 + length
+        return True
+    return True
+
+
+def _corrupt(p: Path) -> ImageError:
+    return ImageError(f"{p}: cannot decode the image (the file looks truncated or corrupt); "
+                      "copy or download it again")
 
 
 def _not_decodable(p: Path) -> ImageError:
@@ -398,10 +452,7 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     finally:
         cv2.utils.logging.setLogLevel(level)
     if img is None:
-        if size is not None:
-            raise ImageError(f"{p}: cannot decode the image (the file looks truncated or "
-                             "corrupt); copy or download it again")
-        raise _not_decodable(p)
+        raise _corrupt(p) if size is not None else _not_decodable(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h > max_pixels:

@@ -8,6 +8,7 @@ import re
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -266,3 +267,87 @@ def test_a_working_size_too_small_names_the_option(tmp_path):
     assert result.exit_code == 2
     assert f"--working-size must be 0 (always full size) or at least {MIN_WORKING_SIDE_PX} px" \
         in result.output and "low_max_side" not in result.output
+
+
+# --------------------------------------------------------------------------- unexpected errors: 4
+
+def test_an_unexpected_error_exits_4_with_one_line_and_the_traceback_with_v(monkeypatch,
+                                                                             flat_pair):
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr("scalematch.cli._run_match", broken)
+    quiet = run(*flat_pair, "-q")
+    assert quiet.exit_code == 4, (quiet.exit_code, quiet.output)
+    assert quiet.stderr.strip().splitlines() == [
+        "Error: internal error, RuntimeError: a bug (-v shows the traceback)"]
+    loud = run(*flat_pair, "-v")
+    assert loud.exit_code == 4
+    assert "Traceback" in loud.stderr and "RuntimeError: a bug" in loud.stderr
+    assert loud.stderr.strip().splitlines()[-1] == "Error: internal error, RuntimeError: a bug"
+    help_text = run("match", "--help").output
+    assert "4  unexpected error" in help_text and "1  no reliable match" in help_text
+
+
+#: Address space of the command under test: Python, numpy and OpenCV start in it (a refused
+#: input takes about 60 MB, measured), a 12 MP match at full size (about 1.5 GB) does not fit.
+MATCH_LIMIT_AS_BYTES = 700 << 20
+
+
+def run_limited(*args: Any, timeout: float = 120):
+    """The command line in a subprocess with its address space limited by ``resource.setrlimit``
+    in the child (never on the machine)."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (MATCH_LIMIT_AS_BYTES, MATCH_LIMIT_AS_BYTES))
+
+    return subprocess.run([sys.executable, "-m", "scalematch.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, preexec_fn=limit)
+
+
+@pytest.fixture(scope="module")
+def big_pair(tmp_path_factory):
+    """A 4000x3000 textured image and its half: matched at full size, more than the limit."""
+    folder = tmp_path_factory.mktemp("big")
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur((rng.random((3000, 4000)) * 255).astype(np.uint8), (0, 0), 2)
+    cv2.imwrite(str(folder / "big.png"), img)
+    cv2.imwrite(str(folder / "half.png"), img[::2, ::2].copy())
+    return folder / "half.png", folder / "big.png"
+
+
+@needs_pipeline
+def test_out_of_memory_exits_4_not_1(big_pair):
+    quiet = run_limited(*big_pair, "--working-size", "0", "-q")
+    lines = quiet.stderr.strip().splitlines()
+    assert quiet.returncode == 4, (quiet.returncode, quiet.stderr)
+    assert len(lines) == 1 and lines[0].startswith("Error: internal error, out of memory")
+    assert lines[0].endswith("(-v shows the traceback)")
+    loud = run_limited(*big_pair, "--working-size", "0", "-v")
+    assert loud.returncode == 4 and "Traceback (most recent call last)" in loud.stderr
+
+
+# --------------------------------------------------------------------------- outputs vs inputs
+
+def test_json_never_overwrites_an_input(flat_pair):
+    low, high = flat_pair
+    before = low.read_bytes()
+    for target in (low, low.parent / "." / low.name):
+        last = assert_one_line_error(run(low, high, "--json", target), "is an input")
+        assert "--json" in last and "overwritten" in last
+    assert low.read_bytes() == before
+
+
+@pytest.mark.parametrize("name", ["overlay.png", "matches.csv"])
+def test_out_dir_never_overwrites_an_input(tmp_path, flat_pair, name):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    high = folder / name
+    high.write_bytes(flat_pair[1].read_bytes())
+    last = assert_one_line_error(run(flat_pair[0], high, "-o", folder), "is an input")
+    assert "--out-dir" in last and "choose another folder" in last
+    assert high.read_bytes() == flat_pair[1].read_bytes()
+    assert sorted(p.name for p in folder.iterdir()) == [name]  # nothing else written
