@@ -26,7 +26,7 @@ needs_pipeline = pytest.mark.skipif(not HAS_PIPELINE, reason="scalematch/pipelin
 
 #: Every key of the JSON contract (README.md, "## Output").
 JSON_KEYS = {"matched", "reason", "model", "order", "transform", "resolution_ratio", "rotation_deg",
-             "translation", "best_scale", "inliers", "matches", "scales", "seconds", "config",
+             "translation", "best_scale", "n_inliers", "inliers", "matches", "scales", "seconds", "config",
              "version", "low", "high"}
 SCALE_KEYS = {"s", "ratio", "points", "initial", "kept", "inliers", "outlier_pct"}
 
@@ -197,7 +197,7 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     data = json.loads(js.read_text())
     assert JSON_KEYS <= set(data)
     assert data["matched"] is False and data["reason"] and data["transform"] is None
-    assert data["inliers"] == 0 and data["matches"] == []
+    assert data["n_inliers"] == data["inliers"] == 0 and data["matches"] == []
     assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120}
     assert data["high"]["width"] == 240 and data["version"] == __version__
     assert data["config"]["model"] == "similarity"
