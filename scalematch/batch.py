@@ -24,6 +24,7 @@ import csv
 import json
 import multiprocessing
 import os
+import re
 import signal
 import sys
 import threading
@@ -36,6 +37,7 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
 
 from . import __version__
 from .config import Config
+from .errors import internal_error
 from .imageio import read_image, to_grey
 from .pipeline import match
 from .result import dumps, to_jsonable
@@ -65,6 +67,14 @@ LINE_START = b'{"'
 #: passing shortage of memory: the pairs are tried again, one at a time. A second break while the
 #: pair ran alone is its own; a third try would cost the batch another pool start for nothing.
 MAX_WORKER_DEATHS_PER_PAIR = 2
+#: ``error_kind`` of an error line: the pair's files or values (a ``ValueError``: missing file,
+#: bad image, too small) or an unexpected error (out of memory, a bug, a worker killed).
+INPUT, INTERNAL = "input", "internal"
+#: Schemes of a Dask scheduler address (distributed's comm backends; ``inproc`` for a cluster
+#: in this process) and the form of an address: scheme://host:port, or host:port (tcp).
+DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+DASK_ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+)"
+                          r":(?P<port>[0-9]{1,5})/?$")
 
 
 class BatchError(ValueError):
@@ -256,18 +266,23 @@ def scan_output(path: Path, config: Dict[str, Any]) -> Done:
     """
     if not path.is_file():
         return NOTHING_DONE
-    pairs, errors = set(), set()
-    complete = 0
     try:
         with open(path, "rb") as fh:
-            for line, key, error in _result_lines(fh, path, config):
-                if key is not None:
-                    pairs.add(key)
-                    if error:
-                        errors.add(key)
-                complete += len(line)
+            return _tally(_result_lines(fh, path, config))
     except OSError as exc:
         raise BatchError(f"cannot read {path}: {exc.strerror or exc}")
+
+
+def _tally(lines: Iterable[Tuple[bytes, Optional[Tuple[str, str]], bool]]) -> Done:
+    """What the lines of ``_result_lines`` hold: the pairs done, those errored, their length."""
+    pairs, errors = set(), set()
+    complete = 0
+    for line, key, error in lines:
+        if key is not None:
+            pairs.add(key)
+            if error:
+                errors.add(key)
+        complete += len(line)
     return Done(frozenset(pairs), frozenset(errors), complete)
 
 
@@ -293,23 +308,15 @@ def drop_error_lines(path: Path, keys: Collection[Tuple[str, str]],
     import tempfile
 
     target = Path(os.path.realpath(path))  # a symbolic link stays one
-    pairs, errors = set(), set()
-    complete = 0
     tmp = None
     try:
         with open(target, "rb") as src, tempfile.NamedTemporaryFile(
                 "wb", dir=target.parent, prefix=f".{target.name}.", suffix=".tmp",
                 delete=False) as dst:
             tmp = dst.name
-            for line, key, error in _result_lines(src, path, config):
-                if error and key in keys:
-                    continue
-                dst.write(line)
-                complete += len(line)
-                if key is not None:
-                    pairs.add(key)
-                    if error:
-                        errors.add(key)
+            kept = (item for item in _result_lines(src, path, config)
+                    if not (item[2] and item[1] in keys))
+            done = _tally(_written(dst, kept))  # streamed: a line at a time in memory
             dst.flush()
             os.fsync(dst.fileno())
             os.chmod(tmp, stat.S_IMODE(os.fstat(src.fileno()).st_mode))
@@ -325,7 +332,15 @@ def drop_error_lines(path: Path, keys: Collection[Tuple[str, str]],
                 os.unlink(tmp)
             except OSError:
                 pass
-    return Done(frozenset(pairs), frozenset(errors), complete)
+    return done
+
+
+def _written(fh: Any, lines: Iterable[Tuple[bytes, Any, bool]]
+             ) -> Iterator[Tuple[bytes, Any, bool]]:
+    """``lines`` (as ``_result_lines`` gives them), each written to ``fh`` as it passes."""
+    for item in lines:
+        fh.write(item[0])
+        yield item
 
 
 def _fsync_folder(folder: Path) -> None:
@@ -344,11 +359,13 @@ def _fsync_folder(folder: Path) -> None:
 
 # --------------------------------------------------------------------------- one pair
 
-def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0) -> Dict[str, Any]:
-    """The line of a pair that could not be matched (README.md, "## Output")."""
+def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
+               kind: str = INPUT) -> Dict[str, Any]:
+    """The line of a pair that could not be matched (README.md, "## Output"); ``kind`` is
+    ``INPUT`` or ``INTERNAL`` (whose message then starts "internal error")."""
     return {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": False,
-            "error": error, "seconds": round(seconds, 3), "config": to_jsonable(config),
-            "version": __version__}
+            "error": error, "error_kind": kind, "seconds": round(seconds, 3),
+            "config": to_jsonable(config), "version": __version__}
 
 
 def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
@@ -360,10 +377,10 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
         result = match(low, high, config)
         return result.to_dict(pair.low, pair.high, low.shape, high.shape)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
-        error = str(exc)
-    except Exception as exc:  # a bad pair must never stop the batch
-        error = f"{type(exc).__name__}: {exc}"
-    return error_line(pair, error, config, time.perf_counter() - t0)
+        error, kind = str(exc), INPUT
+    except Exception as exc:  # noqa: BLE001 (a pair must never stop the batch; MemoryError too)
+        error, kind = internal_error(exc), INTERNAL
+    return error_line(pair, error, config, time.perf_counter() - t0, kind)
 
 
 def after_worker_death(pair: Pair, deaths: int, config: Config,
@@ -372,17 +389,18 @@ def after_worker_death(pair: Pair, deaths: int, config: Config,
     ``deaths``-th pool break it was in flight at is not yet ``max_deaths``), else its error line."""
     if deaths < max_deaths:
         return None
-    return error_line(pair, f"its worker process died while matching it, {deaths} times (killed "
-                            f"by the system, e.g. out of memory); try the pair alone: scalematch "
-                            f"LOW HIGH", config)
+    return error_line(pair, f"internal error, its worker process died while matching it, "
+                            f"{deaths} times (killed by the system, e.g. out of memory); try the "
+                            f"pair alone: scalematch LOW HIGH", config, kind=INTERNAL)
 
 
 def _outcome(future: Any, pair: Pair, config: Config) -> Dict[str, Any]:
     """The line of a finished future; an error line when its worker failed (died, cancelled)."""
     try:
         return future.result()
-    except Exception as exc:
-        return error_line(pair, f"worker failed: {type(exc).__name__}: {exc}", config)
+    except Exception as exc:  # noqa: BLE001 (its worker failed, not its pair's files)
+        return error_line(pair, f"{internal_error(exc)} (its worker failed)", config,
+                          kind=INTERNAL)
 
 
 def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
@@ -545,8 +563,45 @@ def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int,
         pool.shutdown(wait=True)
 
 
+def check_scheduler_address(address: str) -> str:
+    """``address`` when it has the form of a Dask scheduler address, else ``BatchError`` saying
+    the form: scheme://host:port with a scheme of ``DASK_SCHEMES``, host:port (tcp), or an
+    ``inproc://`` address (a cluster in this process). Checked before connecting, so a malformed
+    address fails at once rather than after the connection's time-out.
+
+    >>> check_scheduler_address("tcp://127.0.0.1:8786")
+    'tcp://127.0.0.1:8786'
+    >>> check_scheduler_address("127.0.0.1")
+    Traceback (most recent call last):
+    ...
+    scalematch.batch.BatchError: --scheduler 127.0.0.1: no port; a Dask scheduler address is scheme://host:port, e.g. tcp://127.0.0.1:8786 (schemes: tcp, tls, ws, wss, ucx)
+    """
+    form = ("a Dask scheduler address is scheme://host:port, e.g. tcp://127.0.0.1:8786 "
+            f"(schemes: {', '.join(DASK_SCHEMES)})")
+    if address.startswith("inproc://") and len(address) > len("inproc://"):
+        return address
+    found = DASK_ADDRESS.match(address.strip())
+    scheme = found.group("scheme") if found else address.partition("://")[0].lower() \
+        if "://" in address else None
+    if scheme in ("http", "https"):
+        raise BatchError(f"--scheduler {address}: http is the dashboard's address, not the "
+                         f"scheduler's; {form}")
+    if found is None:
+        what = "no port" if ":" not in (address.partition("://")[2] or address) else \
+            "not an address"
+        raise BatchError(f"--scheduler {address}: {what}; {form}")
+    if scheme is not None and scheme not in DASK_SCHEMES:
+        raise BatchError(f"--scheduler {address}: unknown scheme {scheme!r}; {form}")
+    if not 1 <= int(found.group("port")) <= 65535:
+        raise BatchError(f"--scheduler {address}: port {found.group('port')} is not 1-65535; "
+                         f"{form}")
+    return address
+
+
 def connect(address: str, timeout: float = DASK_CONNECT_TIMEOUT_S) -> Any:
-    """A ``distributed.Client`` of the Dask scheduler at ``address`` (e.g. tcp://host:8786)."""
+    """A ``distributed.Client`` of the Dask scheduler at ``address`` (e.g. tcp://host:8786),
+    whose form is checked first (:func:`check_scheduler_address`)."""
+    check_scheduler_address(address)
     try:
         from distributed import Client
     except ImportError:

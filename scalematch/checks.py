@@ -60,7 +60,8 @@ def in_range(owner: str, name: str, value: Any, *, lo: Optional[float] = None,
         ok = ok and (hi is None or (v < hi if hi_open else v <= hi))
     if not ok:
         kind = "an integer" if integer else "a number"
-        must = kind if rule == "a finite number" else (f"{kind} {rule}" if integer else rule)
+        must = rule if rule == "a finite number" and not integer else (
+            kind if rule == "a finite number" else (f"{kind} {rule}" if integer else rule))
         raise ValueError(f"{_path(owner, name)} must be {must}, got {value!r}")
 
 

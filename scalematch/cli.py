@@ -3,8 +3,7 @@
 ``scalematch LOW HIGH [options]`` runs the ``match`` command (the group routes any first argument
 that is not a command name to it); ``scalematch batch pairs.csv`` matches many pairs, one JSON
 line each (the work itself is in :mod:`scalematch.batch`). ``bench``, ``repeatability`` and
-``covariance`` are registered when their modules are present. Exit codes: 0 matched, 1 no reliable
-match, 2 bad input or usage (one line, ``Error: ...``), 3 a batch pair errored, 130 interrupted.
+``covariance`` are registered when their modules are present. Exit codes: ``EXIT_CODES``.
 """
 
 from __future__ import annotations
@@ -13,23 +12,48 @@ import dataclasses
 import importlib
 import importlib.machinery
 import importlib.util
-import math
+import os
+import re
 import sys
+import traceback
 from pathlib import Path
-from typing import Any, Callable, Dict, FrozenSet, Iterator, List, Optional, Sequence, Tuple
+from typing import (Any, Callable, Dict, FrozenSet, Iterable, Iterator, List, Optional, Sequence,
+                    Tuple)
 
 import click
 import numpy as np
 
 from . import __version__
+from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
 from .result import MatchResult, dumps
-from .stages.estimator import model_of
 
-#: Exit codes (documented in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
+#: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
+#: 4 is not 1: a script must not read a crash (out of memory, a bug) as "no reliable match".
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS = 0, 1, 2, 3
+EXIT_INTERNAL_ERROR = 4
 EXIT_INTERRUPTED = 130
+#: What each exit code means, for every command (--help and README.md show this table).
+EXIT_CODES = (
+    (EXIT_MATCHED, "matched; batch: every pair has its line, none an error"),
+    (EXIT_NO_MATCH, "no reliable match"),
+    (EXIT_BAD_INPUT, "bad input or usage (image, path, CSV, output file, option value)"),
+    (EXIT_PAIR_ERRORS, "batch: some pair has an \"error\" line (this run's or an earlier one's)"),
+    (EXIT_INTERNAL_ERROR, "unexpected error (out of memory, a bug), not an answer; -v: traceback"),
+    (EXIT_INTERRUPTED, "interrupted (Ctrl-C)"),
+)
+
+
+def exit_code_table(codes: Iterable[int] = tuple(c for c, _ in EXIT_CODES)) -> str:
+    """The exit codes ``codes`` and their meaning, one a line, for a command's help.
+
+    >>> print(exit_code_table((1, 130)))
+      1  no reliable match
+    130  interrupted (Ctrl-C)
+    """
+    wanted = set(codes)
+    return "\n".join(f"{code:>3}  {text}" for code, text in EXIT_CODES if code in wanted)
 
 #: Subcommands that live in other modules: name -> (module, attribute, line of the group's help).
 #: Loaded on first use and left out (not listed, "No such command") when the module is absent
@@ -44,38 +68,23 @@ LAZY_COMMANDS = {
                    "Re-estimate the jet covariance Lambda from your own..."),
 }
 
-class FiniteFloatRange(click.FloatRange):
-    """A float in a range that also refuses nan and inf (``FloatRange`` lets nan through)."""
-
-    def convert(self, value: Any, param: Optional[click.Parameter],
-                ctx: Optional[click.Context]) -> Any:
-        rv = super().convert(value, param, ctx)
-        if not math.isfinite(rv):
-            self.fail(f"{rv} is not a finite number.", param, ctx)
-        return rv
-
-    def _describe_range(self) -> str:  # click's help text of the range: "x<=None" unbounded
-        if self.min is None and self.max is None:
-            return "finite"
-        return super()._describe_range()
-
-
-#: Named threshold options: (option, Config path, type with the values that mean something,
-#: help). An option is offered only when its path exists in ``Config()``; any other field can be
-#: set with ``--set PATH=VALUE`` (values given so for these paths are checked against the type).
+#: Named threshold options: (option, Config paths, type, help). An option is offered only when
+#: its path exists in ``Config()``; any other field can be set with ``--set PATH=VALUE``. The
+#: values that mean something are checked by the parameters themselves (``scalematch.checks``),
+#: so an option, ``--set`` and the library refuse a value with the same message.
 THRESHOLD_OPTIONS = (
-    ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), FiniteFloatRange(min=0),
+    ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), click.FLOAT,
      "Cornerness threshold of the scale-adapted Harris detector (both images), "
-     "(grey level/px)^4."),
-    ("--ratio-test", ("matcher.ratio",), FiniteFloatRange(min=0, max=1, min_open=True),
-     "Nearest / second-nearest descriptor distance ratio to keep a candidate match."),
-    ("--ransac-threshold", ("ransac.threshold_px",), FiniteFloatRange(min=0, min_open=True),
-     "RANSAC inlier distance, low-resolution px."),
-    ("--ransac-iterations", ("ransac.max_iters",), click.IntRange(min=1),
-     "RANSAC iterations at most."),
-    ("--min-inliers", ("decision.min_inliers",), click.IntRange(min=0),
-     "Fewest inliers for a match to count as reliable."),
-    ("--max-log-nfa", ("decision.max_log_nfa",), FiniteFloatRange(),
+     "(grey level/px)^4, >= 0."),
+    ("--ratio-test", ("matcher.ratio",), click.FLOAT,
+     "Nearest / second-nearest descriptor distance ratio to keep a candidate match, in (0, 1]."),
+    ("--ransac-threshold", ("ransac.threshold_px",), click.FLOAT,
+     "RANSAC inlier distance, low-resolution px, > 0."),
+    ("--ransac-iterations", ("ransac.max_iters",), click.INT,
+     "RANSAC iterations at most, >= 1."),
+    ("--min-inliers", ("decision.min_inliers",), click.INT,
+     "Fewest inliers for a match to count as reliable, >= 0."),
+    ("--max-log-nfa", ("decision.max_log_nfa",), click.FLOAT,
      "Largest log10 number of false alarms for a match to count as reliable (lower: stricter)."),
 )
 
@@ -116,10 +125,7 @@ def parse_scales(text: str) -> Tuple[float, ...]:
             raise ValueError(f"cannot read scales {text!r} at {item!r}; {forms}") from None
     if not out:
         raise ValueError(f"no scales in {text!r}; {forms}")
-    if min(out) < 1.0:
-        raise ValueError(f"scales must be >= 1 (the high-resolution image is never enlarged), "
-                         f"got {min(out):g}")
-    return tuple(sorted(set(out)))
+    return tuple(sorted(set(out)))  # Config checks that each is >= 1
 
 
 def _has_path(obj: Any, path: str) -> bool:
@@ -197,30 +203,13 @@ def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: O
     return config
 
 
-# --------------------------------------------------------------------------- JSON contract
-
-def result_json(result: MatchResult, low_path: str, high_path: str,
-                low_shape: Tuple[int, ...], high_shape: Tuple[int, ...]) -> Dict[str, Any]:
-    """The JSON object of one match: :meth:`MatchResult.to_dict` (kept for existing callers)."""
-    return result.to_dict(low_path, high_path, low_shape, high_shape)
-
-
 # --------------------------------------------------------------------------- human output
 
 def summary(result: MatchResult) -> str:
-    """The one-line verdict on stderr."""
-    secs = f"{result.seconds:.1f} s"
-    if result.matched:
-        if not model_of(result.model).has_ratio:
-            return (f"matched ({result.model}): {result.n_inliers} inliers at scale "
-                    f"{result.best_scale:g}, {secs}")
-        swapped = ", order swapped (the first image is the finer one)" \
-            if result.order == "swapped" else ""
-        return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
-                f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers at scale "
-                f"{result.best_scale:g}{swapped}, {secs}")
-    best = f", best scale {result.best_scale:g}" if np.isfinite(result.best_scale) else ""
-    return f"no reliable match: {result.reason or 'the evidence is too weak'}{best}, {secs}"
+    """The one-line verdict on stderr: :func:`render.verdict` (the captions' too) and the time."""
+    from .render import verdict
+
+    return f"{verdict(result)}, {result.seconds:.1f} s"
 
 
 def scale_table(result: MatchResult) -> str:
@@ -277,6 +266,29 @@ def check_out_file(path: Path, option: str) -> None:
         raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
 
 
+def _file_id(path: Any) -> Any:
+    """What identifies the file ``path`` names: (device, inode) when it exists (so a hard link or
+    another spelling is the same file), else its absolute path with links resolved."""
+    try:
+        st = os.stat(path)
+        return (st.st_dev, st.st_ino)
+    except (OSError, ValueError):
+        return os.path.realpath(path)
+
+
+def check_not_an_input(path: Path, inputs: Iterable[Any], option: str,
+                       instead: str = "file") -> None:
+    """Refuse (exit 2) to write ``path`` when it is one of ``inputs`` under any name: an output
+    never overwrites an input (``--json v.png``, ``-o DIR`` holding an input named overlay.png,
+    ``batch --output`` naming the CSV or an image)."""
+    target = _file_id(path)
+    for source in inputs:
+        if _file_id(source) == target:
+            same = "" if str(source) == str(path) else f" (the same file as {source})"
+            raise InputError(f"{option} {path} is an input{same}: it would be overwritten; "
+                             f"choose another {instead}")
+
+
 def write_text(path: Path, text: str, option: str) -> None:
     try:
         path.write_text(text)
@@ -310,6 +322,15 @@ class ScalematchGroup(click.Group):
         except click.Abort:  # Ctrl-C (click turns KeyboardInterrupt into Abort)
             click.echo("interrupted", err=True)
             sys.exit(EXIT_INTERRUPTED)
+        except Exception as exc:  # noqa: BLE001 (anything else is ours: exit 4, never 1)
+            given = sys.argv[1:] if args is None else list(args)
+            if "-v" in given or "--verbose" in given:
+                traceback.print_exc(file=sys.stderr)
+                hint = ""
+            else:
+                hint = " (-v shows the traceback)"
+            click.echo(f"Error: {internal_error(exc)}{hint}", err=True)
+            sys.exit(EXIT_INTERNAL_ERROR)
         sys.exit(rv if isinstance(rv, int) else 0)
 
     def _known(self) -> set:
@@ -360,9 +381,27 @@ def _module_exists(name: str) -> bool:
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
+def exit_codes_in_help(*codes: int) -> Callable[[Callable], Callable]:
+    """A decorator putting the table of ``codes`` (all when none) in place of the line
+    ``{exit_codes}`` of a command's docstring (put it under the click decorators)."""
+    def decorate(f: Callable) -> Callable:
+        lines = []
+        for line in (f.__doc__ or "").split("\n"):
+            if line.strip() == "{exit_codes}":
+                indent = line[:len(line) - len(line.lstrip())]
+                table = exit_code_table(codes or tuple(c for c, _ in EXIT_CODES))
+                lines += [indent + row for row in table.split("\n")]
+            else:
+                lines.append(line)
+        f.__doc__ = "\n".join(lines)
+        return f
+    return decorate
+
+
 @click.group(cls=ScalematchGroup, context_settings=CONTEXT)
 @click.version_option(__version__, "--version", prog_name="scalematch",
                       message="%(prog)s %(version)s")
+@exit_codes_in_help()
 def cli() -> None:
     """Match a low-resolution image against a high-resolution image of the same scene with
     unknown zoom (2x-10x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
@@ -377,8 +416,8 @@ def cli() -> None:
       scalematch batch pairs.csv --output results.jsonl --jobs 4
 
     \b
-    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage, 3 a batch pair errored,
-    130 interrupted.
+    Exit codes:
+    {exit_codes}
     """
 
 
@@ -455,13 +494,6 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                                          high_max_side=working or None)
     except ValueError as exc:
         raise InputError(str(exc))
-    for _, paths, typ, _ in THRESHOLD_OPTIONS:  # a --set value for a named threshold
-        for p in paths:
-            if _has_path(config, p):
-                try:
-                    typ.convert(_get(config, p), None, None)
-                except click.BadParameter as exc:
-                    raise InputError(f"{p} = {_get(config, p)}: {exc.message}")
     return config
 
 
@@ -492,7 +524,10 @@ def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar on stderr.")
 @click.option("-v", "--verbose", is_flag=True,
-              help="Also print the per-scale table, the timings and the files written.")
+              help="Also print the per-scale table, the timings and the files written (and the "
+                   "traceback of an unexpected error).")
+@exit_codes_in_help(EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_INTERNAL_ERROR,
+                    EXIT_INTERRUPTED)
 def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optional[str],
                   quiet: bool, verbose: bool, max_pixels: int, **kwargs: Any) -> None:
     """Match LOW (low-resolution image) against HIGH (high-resolution image).
@@ -508,12 +543,22 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
       scalematch low.png high.png --ransac-threshold 2 --set harris.threshold=50
 
     \b
-    Exit codes: 0 matched, 1 no reliable match, 2 bad input or usage, 130 interrupted.
+    Exit codes:
+    {exit_codes}
     """
+    from .render import OUTPUT_FILES
+
     config = _config_from(kwargs)
+    # the outputs are checked before the match, not after a minute's work, and before the
+    # inputs are read: an output never overwrites an input
+    if out_dir is not None:
+        for name in OUTPUT_FILES:
+            check_not_an_input(out_dir / name, (low, high), "--out-dir", "folder")
+    if json_path and json_path != "-":
+        check_not_an_input(Path(json_path), (low, high), "--json")
     low_img = _load(low, max_pixels)
     high_img = _load(high, max_pixels)
-    if out_dir is not None:  # checked before the match, not after a minute's work
+    if out_dir is not None:
         check_out_dir(out_dir)
     if json_path and json_path != "-":
         check_out_file(Path(json_path), "--json")
@@ -597,8 +642,14 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
                    "local processes; needs pip install 'scalematch[dask]'.")
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar and no summary on stderr.")
+@click.option("-v", "--verbose", is_flag=True,
+              help="The traceback of an unexpected error of the batch itself (a pair's is in its "
+                   "line).")
+@exit_codes_in_help(EXIT_MATCHED, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS, EXIT_INTERNAL_ERROR,
+                    EXIT_INTERRUPTED)
 def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, jobs: int,
-                  scheduler: Optional[str], quiet: bool, max_pixels: int, **kwargs: Any) -> None:
+                  scheduler: Optional[str], quiet: bool, verbose: bool, max_pixels: int,
+                  **kwargs: Any) -> None:
     """Match every pair of PAIRS.csv, one JSON line per pair.
 
     PAIRS.csv has two columns low,high (no header), or a header row naming the columns low and
@@ -606,9 +657,11 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     from the CSV's folder; a repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
-    gets a line with "error" and the batch goes on. When a worker process is killed by the
-    system (out of memory), the workers are started again and the pairs in flight tried again,
-    one at a time; a pair whose worker died twice gets an error line.
+    gets a line with "error" and the batch goes on; the line's "error_kind" is "input" (the
+    pair's files or values) or "internal" (an unexpected error: out of memory, a bug). When a
+    worker process is killed by the system (out of memory), the workers are started again and
+    the pairs in flight tried again, one at a time; a pair whose worker died twice gets an
+    internal error line.
 
     Resuming: with --output, running the same command again after an interruption (Ctrl-C,
     kill, power cut) skips the pairs already in the file (delete a line to redo its pair), error
@@ -624,8 +677,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
       scalematch batch pairs.csv --output results.jsonl --scheduler tcp://host:8786
 
     \b
-    Exit codes: 0 every pair has its line, none an error; 2 bad CSV, output file or usage;
-    3 some pair has an "error" line (this run or an earlier one resumed); 130 interrupted.
+    Exit codes (4 before 3 when a pair of this run had an internal error):
+    {exit_codes}
     """
     from . import batch
 
@@ -639,10 +692,16 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     config = _config_from(kwargs)
     done = batch.NOTHING_DONE
     retried: FrozenSet[Tuple[str, str]] = frozenset()  # pairs whose error line is removed
+    client = None
     try:
+        if scheduler is not None:  # its form first: a malformed address fails at once
+            batch.check_scheduler_address(scheduler)
         rows = batch.read_pairs(pairs_csv)
         pairs = batch.unique_pairs(rows, pairs_csv.resolve().parent)
         if output is not None:
+            check_not_an_input(output, [pairs_csv] + [f for p in pairs
+                                                      for f in (p.low_file, p.high_file)],
+                               "--output")
             check_out_file(output, "--output")
             done = batch.scan_output(output, batch.config_json(config))
         client = batch.connect(scheduler) if scheduler is not None else None
@@ -654,6 +713,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
         elif output is not None:
             batch.cut_torn_line(output, done)
     except batch.BatchError as exc:
+        if client is not None:
+            client.close()
         raise InputError(str(exc))
     todo = [p for p in pairs if p.key not in done.pairs]
     skipped = len(pairs) - len(todo)
@@ -668,6 +729,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
                    f"{output})", err=True)
 
     counts = {"matched": 0, "no match": 0, "error": 0}
+    internal = 0  # of the errors: unexpected ones (error_kind "internal")
     out_fh = open(output, "a") if output is not None else sys.stdout
     bar = click.progressbar(length=len(todo), label="matching pairs", file=sys.stderr,
                             show_pos=True) if _show_progress(quiet) else None
@@ -679,6 +741,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
             out_fh.write(dumps(line) + "\n")
             out_fh.flush()
             counts["error" if "error" in line else "matched" if line["matched"] else "no match"] += 1
+            internal += line.get("error_kind") == batch.INTERNAL
             if bar is not None:
                 bar.update(1)
     except KeyboardInterrupt:
@@ -697,7 +760,10 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     if not quiet:
         before = f" ({skipped} done before, {errors_before} of them errors)" if skipped else ""
         click.echo(f"{len(todo)} pairs: {counts['matched']} matched, {counts['no match']} no "
-                   f"reliable match, {counts['error']} errors{before}", err=True)
+                   f"reliable match, {counts['error']} errors"
+                   f"{f' ({internal} internal)' if internal else ''}{before}", err=True)
+    if internal:
+        sys.exit(EXIT_INTERNAL_ERROR)
     if counts["error"] or errors_before:
         sys.exit(EXIT_PAIR_ERRORS)
 

@@ -5,7 +5,11 @@ Colour is turned to grey with ITU-R BT.601 luma (0.299 R + 0.587 G + 0.114 B, cv
 the alpha channel of RGBA images is ignored. Errors are ``ImageError`` with a one-line message
 that says what is wrong and what to do.
 
-Safety: image files are untrusted input. Their header is read by Pillow (``Image.open`` reads
+Safety: image files are untrusted input, read within bounds (:func:`read_bytes`): only a regular
+file is opened (a device such as /dev/zero, a named pipe, a socket is refused before a byte is
+read), a file larger than an image within ``max_pixels`` can be (:func:`max_file_bytes`) is
+refused from its size, and the header comes from the first ``HEADER_BYTES``. Their header is
+read by Pillow (``Image.open`` reads
 the header only) and the pixel count checked against ``max_pixels`` *before* the image is
 decoded, so a decompression bomb is refused without allocating it; formats Pillow does not know
 are checked right after OpenCV decodes them. OpenCV decodes the pixels.
@@ -19,9 +23,11 @@ from __future__ import annotations
 
 import io
 import math
+import os
+import stat
 import warnings
 from pathlib import Path
-from typing import NamedTuple, Optional, Tuple
+from typing import Any, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -233,32 +239,203 @@ def _too_many(p: Path, w: int, h: int, max_pixels: int) -> ImageError:
 
 # --------------------------------------------------------------------------- reading
 
+#: Bytes read first, to find the header: Pillow finds a JPEG's size at its SOF marker, after the
+#: APPn segments (EXIF, ICC profile, XMP: each at most 64 KiB, several of them in a camera's file);
+#: 1 MiB holds them in the files we have seen. When Pillow cannot read the header from this
+#: prefix, the rest is read (within ``max_file_bytes``) only if OpenCV knows the file's signature.
+HEADER_BYTES = 1 << 20
+#: Most bytes one pixel can take in a file OpenCV decodes: four samples of 8 bytes (a 64-bit
+#: float RGBA TIFF, uncompressed), the widest layout its readers return.
+MAX_BYTES_PER_PIXEL = 32
+#: Bytes of a file that are not pixels, at most: metadata (EXIF, ICC profiles, XMP, an embedded
+#: preview, as large as a few MB in camera files) and format overhead, with room to spare.
+MAX_METADATA_BYTES = 64 << 20
+
+
+def max_file_bytes(max_pixels: int) -> int:
+    """The largest file an image of at most ``max_pixels`` pixels can plausibly be, in bytes:
+    every pixel stored uncompressed at the widest layout (``MAX_BYTES_PER_PIXEL``) plus
+    ``MAX_METADATA_BYTES``. Larger files are refused before they are read (a multi-page TIFF
+    whose pages add up to more too: OpenCV reads only its first page).
+
+    >>> max_file_bytes(100_000_000) / 1e9   # the default --max-pixels
+    3.267108864
+    """
+    return int(max_pixels) * MAX_BYTES_PER_PIXEL + MAX_METADATA_BYTES
+
+
+def _open_regular(p: Path) -> Tuple[int, int]:
+    """(file descriptor, size in bytes) of the regular file ``p``, opened for reading.
+
+    Opened without blocking (a named pipe without a writer would wait for ever), then checked
+    with ``fstat`` on the descriptor itself, so what is checked is what is read: a directory,
+    a device (/dev/zero, /dev/urandom), a pipe or a socket is refused before any byte is read.
+    """
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except FileNotFoundError:
+        raise ImageError(f"{p}: no such file; check the path") from None
+    except IsADirectoryError:
+        raise ImageError(f"{p}: is a directory, not an image; give an image file") from None
+    except OSError as exc:
+        raise ImageError(f"{p}: cannot read the file ({exc.strerror or exc}); check its "
+                         "permissions") from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise ImageError(f"{p}: is a directory, not an image; give an image file")
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a named pipe" if stat.S_ISFIFO(st.st_mode) else
+                    "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                    "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+            raise ImageError(f"{p}: is {kind}, not an image file; give an image file")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, int(st.st_size)
+
+
+def _read_into(fh: Any, view: memoryview) -> int:
+    """Fill ``view`` from the open file ``fh``; the bytes read (fewer only at the end of the file)."""
+    got = 0
+    while got < len(view):
+        k = fh.readinto(view[got:])
+        if not k:
+            break
+        got += k
+    return got
+
+
+def _head(p: Path, data: Any) -> Header:
+    try:
+        return header(data)
+    except ImageError as exc:
+        raise ImageError(f"{p}: {exc}") from None
+
+
+def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[bytearray, Header]:
+    """The bytes and the header of the image file ``path``, read within bounds.
+
+    In this order, each step refusing (``ImageError``) before the next reads more: a regular
+    file (not a directory, device, pipe or socket: :func:`_open_regular`); not empty; not
+    larger than :func:`max_file_bytes` of ``max_pixels``; the header, read from the first
+    ``HEADER_BYTES``, within ``max_pixels``; a file whose header Pillow does not know there is
+    read on only when OpenCV knows its signature (``cv2.haveImageReader``). Memory: the prefix,
+    then the file once.
+    """
+    p = Path(path)
+    fd, size = _open_regular(p)
+    with os.fdopen(fd, "rb", buffering=0) as fh:
+        if size == 0:
+            raise ImageError(f"{p}: file is empty; give a PNG, JPEG, TIFF or other image file")
+        limit = max_file_bytes(max_pixels) if max_pixels else 0
+        if limit and size > limit:
+            raise ImageError(
+                f"{p}: file is {size / 1e6:.0f} MB, larger than an image within the limit of "
+                f"{max_pixels / 1e6:g} MP can be ({limit / 1e6:.0f} MB: {MAX_BYTES_PER_PIXEL} "
+                f"bytes a pixel uncompressed, plus metadata); give an image file, or raise "
+                f"--max-pixels (max_pixels= in Python)")
+        try:
+            prefix = bytearray(min(size, HEADER_BYTES))
+            del prefix[_read_into(fh, memoryview(prefix)):]
+            head = _head(p, prefix)
+            if head.size is not None and not _size_ok(head, max_pixels):
+                raise _too_many(p, head.size[0], head.size[1], max_pixels)
+            if len(prefix) == size:
+                return prefix, head
+            if head.size is None:  # no more bytes read unless they may hold the header
+                if not cv2.haveImageReader(str(p)):  # no decoder knows its signature
+                    raise _not_decodable(p)
+                if not header_may_follow(prefix):
+                    raise _corrupt(p)
+            raw = bytearray(size)
+            start = len(prefix)
+            raw[:start] = prefix
+            del prefix
+            with memoryview(raw) as view:
+                got = start + _read_into(fh, view[start:])
+            del raw[got:]  # the file shrank as it was read: what there was
+        except OSError as exc:
+            raise ImageError(f"{p}: cannot read the file ({exc.strerror or exc}); check its "
+                             "permissions") from None
+    return raw, (head if head.size is not None else _head(p, raw))
+
+
+#: Signatures of formats whose header stands at the start of the file (PNG: the IHDR chunk; GIF:
+#: the logical screen; BMP: the info header; WebP: the first chunk): one Pillow cannot read from
+#: the first ``HEADER_BYTES`` is not in the file.
+_HEADER_FIRST = (b"GIF87a", b"GIF89a", b"BM", b"RIFF")
+_JPEG_SOI = b"\xff\xd8"
+#: JPEG markers of a frame header (SOF0..SOF15 but DHT 0xC4, JPG 0xC8, DAC 0xCC): the size.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def header_may_follow(prefix: bytes) -> bool:
+    """Whether a file whose header Pillow could not read from ``prefix`` (its first bytes) may
+    hold one further on, so that reading on is worth it.
+
+    No for a PNG without its IHDR chunk first, for GIF, BMP and WebP (their header comes first),
+    and for a JPEG whose segments before the frame header break off or end inside ``prefix``;
+    yes for a JPEG whose segments run on past ``prefix`` (large EXIF, ICC, XMP blocks) and for
+    any other format (a TIFF's directory may stand anywhere; formats Pillow does not know).
+
+    >>> header_may_follow(b"\\x89PNG\\r\\n\\x1a\\n" + bytes(100))
+    False
+    >>> header_may_follow(b"\\xff\\xd8\\xff\\xe1\\xff\\xfe" + bytes(100))  # APP1 of 65534 bytes
+    True
+    """
+    if prefix.startswith(_PNG_SIGNATURE):
+        return prefix[12:16] == b"IHDR"  # its size is there; a long text chunk may delay Pillow
+    if prefix.startswith(_HEADER_FIRST):
+        return False
+    if prefix.startswith(_JPEG_SOI):
+        pos = 2
+        while pos + 4 <= len(prefix):
+            if prefix[pos] != 0xFF:
+                return False  # not a marker: broken
+            marker = prefix[pos + 1]
+            if marker == 0xFF:  # a fill byte
+                pos += 1
+                continue
+            if marker in _JPEG_SOF or marker in (0xD9, 0xDA):
+                return False  # the frame header (or the end) is here, yet Pillow failed
+            length = int.from_bytes(prefix[pos + 2:pos + 4], "big")
+            if length < 2:
+                return False
+            pos += 2 + length
+        return True
+    return True
+
+
+def _corrupt(p: Path) -> ImageError:
+    return ImageError(f"{p}: cannot decode the image (the file looks truncated or corrupt); "
+                      "copy or download it again")
+
+
+def _not_decodable(p: Path) -> ImageError:
+    return ImageError(f"{p}: not an image OpenCV can decode; give a PNG, JPEG, TIFF, BMP or "
+                      "WebP file")
+
+
+def _size_ok(head: Header, max_pixels: int) -> bool:
+    size = head.size
+    return size is None or not max_pixels or size[0] * size[1] <= max_pixels
+
+
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
                min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
 
     Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
-    an empty, truncated or non-image file, an image above ``max_pixels`` pixels (checked from the
-    header before decoding where the format allows) or with a side below ``min_side`` px.
+    a device or pipe, an empty, truncated or non-image file, a file larger than an image within
+    ``max_pixels`` can be, an image above ``max_pixels`` pixels (checked from the header before
+    decoding where the format allows) or with a side below ``min_side`` px. The file is read
+    within bounds (:func:`read_bytes`).
     """
     p = Path(path)
-    if not p.exists():
-        raise ImageError(f"{p}: no such file; check the path")
-    if p.is_dir():
-        raise ImageError(f"{p}: is a directory, not an image; give an image file")
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise ImageError(f"{p}: cannot read the file ({exc.strerror or exc}); check its permissions")
-    if not raw:
-        raise ImageError(f"{p}: file is empty; give a PNG, JPEG, TIFF or other image file")
-
-    try:
-        head = header(raw)
-    except ImageError as exc:
-        raise ImageError(f"{p}: {exc}") from None
+    raw, head = read_bytes(p, max_pixels)
     size = head.size
-    if size is not None and max_pixels and size[0] * size[1] > max_pixels:
+    if not _size_ok(head, max_pixels):
         raise _too_many(p, size[0], size[1], max_pixels)
     if head.scan >= 0 and raw.rfind(b"\xff\xd9") < head.scan:
         raise ImageError(f"{p}: JPEG file is truncated (no end-of-image marker); "
@@ -275,11 +452,7 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     finally:
         cv2.utils.logging.setLogLevel(level)
     if img is None:
-        if size is not None:
-            raise ImageError(f"{p}: cannot decode the image (the file looks truncated or "
-                             "corrupt); copy or download it again")
-        raise ImageError(f"{p}: not an image OpenCV can decode; give a PNG, JPEG, TIFF, BMP or "
-                         "WebP file")
+        raise _corrupt(p) if size is not None else _not_decodable(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h > max_pixels:

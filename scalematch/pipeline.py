@@ -37,7 +37,7 @@ from .stages.refit import pooled_refit, refit_in_high, richer_model
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
 from .stages.views import View, keep_inside, views_of
-from .working import WorkImages, at_working_size, in_original
+from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
 
@@ -382,7 +382,8 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening,
     attempts: List[Attempt] = []
     for p in chosen:
         outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
-        verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg, searches=searches)
+        verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg, searches=searches,
+                         shown_scale=shown_scale(work, step.direction))
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict))
         if overwhelming(attempts[-1], config):
             break  # no other view of this step can do better

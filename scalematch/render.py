@@ -41,6 +41,16 @@ MATCHES_HEIGHT = (360, 720)
 #: Inlier lines drawn at most (a seeded random subset beyond this, said in the caption).
 MAX_LINES = 300
 FONT = cv2.FONT_HERSHEY_SIMPLEX
+#: Caption text scale per pixel of the picture's width: text about 2 % of the width tall
+#: (a 4608 px overlay: about 80 px, 18 px when viewed whole at 1000 px; a 900 px one: 0.8, about
+#: 17 px), so a caption reads the same at any size once the picture fills the screen.
+TEXT_SCALE_PER_PX = 1.0 / 1150
+#: Smallest caption text scale (below it HERSHEY text is illegible at 1:1).
+MIN_TEXT_SCALE = 0.35
+#: Footprint outline thickness per pixel of the picture's shorter side (at least 2 px).
+OUTLINE_PER_PX = 1.0 / 300
+#: The files ``write_outputs`` writes into its folder.
+OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -74,32 +84,44 @@ def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
     return warped, mask
 
 
+def text_style(width: int) -> Tuple[float, int, int]:
+    """(font scale, stroke thickness px, margin px) of caption text on a picture ``width`` px
+    wide: scaled with the width (``TEXT_SCALE_PER_PX``), never below ``MIN_TEXT_SCALE``.
+
+    >>> text_style(900), text_style(4608)
+    ((0.782608695652174, 1, 6), (4.006956521739131, 5, 24))
+    """
+    scale = max(width * TEXT_SCALE_PER_PX, MIN_TEXT_SCALE)
+    return scale, max(1, int(round(scale * 1.2))), max(6, int(round(6 * scale)))
+
+
 def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.ndarray:
-    """Draw ``lines`` of white text on a translucent dark strip inside ``image`` (in place)."""
+    """Draw ``lines`` of white text on a translucent dark strip inside ``image`` (in place),
+    the text scaled with the picture (:func:`text_style`), wrapped at its width."""
     h, w = image.shape[:2]
     lines = [s for s in lines if s]
     if not lines:
         return image
-    scale = float(np.clip(w / 900.0, 0.35, 0.8))
-    lines = [part for s in lines for part in _wrap(s, scale, w - 12)]
-    (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
-    step = th + base + 6
-    strip = min(step * len(lines) + 6, h)
+    scale, thick, margin = text_style(w)
+    lines = [part for s in lines for part in _wrap(s, scale, thick, w - 2 * margin)]
+    (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
+    step = th + base + margin
+    strip = min(step * len(lines) + margin, h)
     y0 = 0 if where == "top" else h - strip
     region = image[y0:y0 + strip]
     region[:] = (region * 0.35).astype(np.uint8)
     for i, s in enumerate(lines):
-        cv2.putText(image, s, (6, y0 + 4 + th + i * step), FONT, scale, (255, 255, 255), 1,
-                    cv2.LINE_AA)
+        cv2.putText(image, s, (margin, y0 + margin // 2 + th + i * step), FONT, scale,
+                    (255, 255, 255), thick, cv2.LINE_AA)
     return image
 
 
-def _wrap(text: str, scale: float, width: int) -> list:
+def _wrap(text: str, scale: float, thick: int, width: int) -> list:
     """``text`` broken at spaces into lines no wider than ``width`` px (a long word stays whole)."""
     out, line = [], ""
     for word in text.split(" "):
         trial = f"{line} {word}" if line else word
-        if line and cv2.getTextSize(trial, FONT, scale, 1)[0][0] > width:
+        if line and cv2.getTextSize(trial, FONT, scale, thick)[0][0] > width:
             out.append(line)
             line = word
         else:
@@ -107,19 +129,26 @@ def _wrap(text: str, scale: float, width: int) -> list:
     return out + [line]
 
 
-def summary_line(result: MatchResult) -> str:
-    """One line for captions: ratio, angle and inliers, or the reason there is no match."""
+def verdict(result: MatchResult) -> str:
+    """The one-line verdict of a match, for the command line and the captions alike.
+
+    Matched: the model, ratio, rotation, inliers and best scale (to the per-scale table's three
+    significant digits), a tilted view and a swapped order when so; the fundamental matrix has
+    no ratio. Not matched: the reason, and the best scale when there is one.
+    """
+    best = f"best scale {result.best_scale:.3g}" if np.isfinite(result.best_scale) else ""
     if not result.matched:
-        return f"no reliable match: {result.reason}" if result.reason else "no reliable match"
+        reason = result.reason or "the evidence is too weak"
+        return f"no reliable match: {reason}" + (f", {best}" if best else "")
     if not model_of(result.model).has_ratio:
-        return f"{result.model} matrix, {result.n_inliers} inliers, best scale {result.best_scale:g}"
+        return f"matched ({result.model} matrix): {result.n_inliers} inliers, {best}"
     tilt = float(result.evidence.view_tilt)
     view = (f", seen tilted by {tilt:g} at {result.evidence.view_longitude_deg:g} deg"
             if tilt > 1.0 else "")
-    order = ", order swapped" if result.order == "swapped" else ""
-    return (f"{result.model}: ratio {result.resolution_ratio:.2f}, rotation "
-            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, "
-            f"best scale {result.best_scale:g}{view}{order}")
+    order = (", order swapped (the first image is the finer one)"
+             if result.order == "swapped" else "")
+    return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
+            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}")
 
 
 # --------------------------------------------------------------------------- pictures
@@ -147,7 +176,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
     low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
-    lines = [summary_line(result)]
+    lines = [verdict(result)]
     if result.matched and t is not None and model_of(result.model).has_ratio:
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
         warped, mask = _warp_high(high_grey, t, (ww, hh))
@@ -158,17 +187,53 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
         out[inside, 1] = warped[inside]  # G: high, warped
         out[inside, 2] = low_grey[inside]  # R: low
         corners = footprint(t, high.shape)
+        clipped = False
         if corners is not None:
-            pts = np.round((corners + 0.0) * 16).astype(np.int32).reshape(-1, 1, 2)
-            cv2.polylines(out, [pts], True, OUTLINE, 2, cv2.LINE_AA, shift=4)
+            thick = max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
+            inset = thick / 2.0  # the whole stroke inside the picture
+            shown = clip_polygon(np.asarray(corners, np.float64),
+                                 (inset - 0.5, inset - 0.5, ww - 0.5 - inset, hh - 0.5 - inset))
+            clipped = not np.allclose(shown.shape, np.asarray(corners).shape) or \
+                not np.allclose(shown, corners)
+            if len(shown) >= 2:
+                pts = np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2)
+                cv2.polylines(out, [pts], True, OUTLINE, thick, cv2.LINE_AA, shift=4)
         lines.append("magenta = low, green = high warped (grey where they agree); "
-                     "outline = high footprint")
+                     "outline = high footprint" + (" (cut at the picture's edge, where it "
+                                                   "runs beyond)" if clipped else ""))
     elif result.matched and result.inliers.size:
         for x, y in result.inliers[:, 2:4]:
             cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
                        cv2.LINE_AA, shift=4)
         lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
     return caption(out, lines)
+
+
+def clip_polygon(points: np.ndarray, box: Tuple[float, float, float, float]) -> np.ndarray:
+    """The polygon ``points`` (N, 2) cut to the rectangle ``box`` (x0, y0, x1, y1)
+    (Sutherland-Hodgman): where it runs beyond the box, its outline follows the box's edge,
+    so a footprint larger than the picture still shows. (M, 2); empty when none of it is inside.
+
+    >>> clip_polygon(np.array([[-5., -5], [15, -5], [15, 15], [-5, 15]]), (0, 0, 10, 10)).tolist()
+    [[0.0, 10.0], [0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]
+    """
+    out = [np.asarray(p, np.float64) for p in points]
+    x0, y0, x1, y1 = box
+    edges = ((0, x0, 1), (0, x1, -1), (1, y0, 1), (1, y1, -1))  # axis, bound, inward sign
+    for axis, bound, sign in edges:
+        src, out = out, []
+        for i, cur in enumerate(src):
+            prev = src[i - 1]
+            cur_in = sign * (cur[axis] - bound) >= 0
+            prev_in = sign * (prev[axis] - bound) >= 0
+            if cur_in != prev_in:
+                f = (bound - prev[axis]) / (cur[axis] - prev[axis])
+                out.append(prev + f * (cur - prev))
+            if cur_in:
+                out.append(cur)
+        if not out:
+            break
+    return np.array(out, np.float64).reshape(-1, 2)
 
 
 def _fit_height(img: np.ndarray, height: int) -> Tuple[np.ndarray, float]:
@@ -216,15 +281,15 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
     hh, hw = high_bgr.shape[:2]
     head = (f"left: low {lw}x{lh}   right: high {hw}x{hh}   "
             f"{result.n_inliers} inlier matches{note}")
-    return np.vstack([_band([head, summary_line(result)], canvas.shape[1]), canvas])
+    return np.vstack([_band([head, verdict(result)], canvas.shape[1]), canvas])
 
 
 def _band(lines: Sequence[str], width: int) -> np.ndarray:
     """A dark strip ``width`` px wide holding ``lines`` of caption (to stack above a picture)."""
-    scale = float(np.clip(width / 900.0, 0.35, 0.8))
-    lines = [part for s in lines for part in _wrap(s, scale, width - 12)]
-    (_, th), base = cv2.getTextSize("Ag", FONT, scale, 1)
-    band = np.full(((th + base + 6) * len(lines) + 8, width, 3), 40, np.uint8)
+    scale, thick, margin = text_style(width)
+    lines = [part for s in lines for part in _wrap(s, scale, thick, width - 2 * margin)]
+    (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
+    band = np.full(((th + base + margin) * len(lines) + 2 * margin, width, 3), 40, np.uint8)
     return caption(band, lines)
 
 
@@ -281,8 +346,7 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
         low_path, high_path, low, high = high_path, low_path, high, low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {name: out / name for name in
-             ("overlay.png", "matches.png", "scales.png", "matches.csv")}
+    paths = {name: out / name for name in OUTPUT_FILES}
     ov = overlay(low, high, result)
     caption(ov, [f"low: {Path(low_path).name}   high: {Path(high_path).name}"], where="bottom")
     _write_png(paths["overlay.png"], ov)

@@ -182,7 +182,8 @@ class MatchResult:
             "rotation_deg": to_jsonable(float(self.rotation_deg)),
             "translation": to_jsonable(list(self.translation)),
             "best_scale": to_jsonable(float(self.best_scale)),
-            "inliers": self.n_inliers,
+            "n_inliers": self.n_inliers,
+            "inliers": self.n_inliers,  # the count under its old name, until version 1.0
             "matches": to_jsonable(np.round(np.asarray(self.inliers, np.float64).reshape(-1, 4), 3)),
             "scales": [to_jsonable(row) for row in self.scales],
             "seconds": round(self.seconds, 3),

@@ -57,6 +57,12 @@ class WorkImages:
     scales: Dict[Direction, Tuple[float, ...]] = field(repr=False)  #: each direction's scales
 
 
+def shown_scale(work: "WorkImages", direction: Direction) -> float:
+    """Factor from a direction's working scales to the scales of the images given: a row's scale
+    is finer px per coarser px, so original = working * f_finer / f_coarser."""
+    return work.f_high / work.f_low if direction is Direction.GIVEN else work.f_low / work.f_high
+
+
 def at_working_size(low: np.ndarray, high: np.ndarray, config) -> WorkImages:
     """``low`` and ``high`` (checked float32 grey levels) at their working sizes.
 
@@ -123,9 +129,7 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
     f_low, f_high = work.f_low, work.f_high
     if f_low == 1.0 and f_high == 1.0:
         return result
-    # a row's scale is finer px per coarser px of its search: original = working * f_fine / f_coarse
-    search_given = result.evidence.search_order == Direction.GIVEN
-    g = f_high / f_low if search_given else f_low / f_high
+    g = shown_scale(work, result.evidence.search_order)
     rows = tuple(replace(r, s=r.s * g, ratio=r.ratio * g) for r in result.scales)
     evidence = replace(result.evidence, low_working_factor=f_low, high_working_factor=f_high)
     out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config,

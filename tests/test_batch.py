@@ -337,7 +337,7 @@ def test_batch_exit_0_when_no_pair_errored(images):
 
 def test_exit_3_is_documented():
     text = run("batch", "--help").output
-    assert "3 some pair" in " ".join(text.split())
+    assert "3 batch: some pair has an \"error\" line" in " ".join(text.split())
 
 
 def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
@@ -430,8 +430,21 @@ def test_output_holding_other_lines_is_refused_and_left_untouched(images, tmp_pa
 
 def test_output_is_the_pairs_csv_itself(images):
     pairs = write(images / "p3.csv", "low,high\nlow.png,high.png\n")
-    assert_one_line_error(run("batch", pairs, "--output", pairs), "not a scalematch result")
+    assert_one_line_error(run("batch", pairs, "--output", pairs), "is an input")
     assert pairs.read_text() == "low,high\nlow.png,high.png\n"
+
+
+def test_output_is_an_image_of_a_pair_by_another_name(images, tmp_path):
+    """The same check as match's --json: an input under another spelling (or a hard link)."""
+    pairs = write(images / "p3b.csv", "low.png,high.png\n")
+    before = (images / "high.png").read_bytes()
+    last = assert_one_line_error(run("batch", pairs, "--output", images / "." / "high.png"),
+                                 "is an input")
+    assert "overwritten" in last
+    link = tmp_path / "linked.png"
+    os.link(images / "high.png", link)
+    assert_one_line_error(run("batch", pairs, "--output", link), "is an input")
+    assert (images / "high.png").read_bytes() == before
 
 
 def test_resume_with_other_options_is_refused_and_left_untouched(images, tmp_path):
@@ -685,3 +698,57 @@ def test_dask_local_cluster_same_lines_resume_and_progress(images, tmp_path):
     expected = {(x["low"]["path"], x["high"]["path"]): _comparable(x)
                 for x in lines_of_text(local.stdout)}
     assert by_key == expected  # the same JSON lines as the local run
+
+
+# --------------------------------------------------------------------------- unexpected errors
+
+def test_an_unexpected_error_is_an_internal_line_the_batch_goes_on_and_exits_4(images,
+                                                                               monkeypatch):
+    """A MemoryError in one pair (raised here: under a real memory limit, see test_cli.py's
+    test_out_of_memory_exits_4_not_1) gives that pair an internal error line; the next pair is
+    matched; the batch exits 4, not 3 (bad input) nor 1."""
+    import scalematch.batch as batch_module
+
+    real = batch_module.match
+    calls = []
+
+    def first_runs_out(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise MemoryError("Unable to allocate 1.00 GiB")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(batch_module, "match", first_runs_out)
+    pairs = write(images / "p_internal.csv", "noise_low.png,noise_high.png\nlow.png,missing.png\n"
+                                             "low.png,high.png\n")
+    result = run("batch", pairs)
+    assert result.exit_code == 4, (result.exit_code, result.stderr)
+    lines = lines_of_text(result.stdout)
+    assert [x.get("error_kind") for x in lines] == ["internal", "input", None]
+    assert lines[0]["error"] == "internal error, out of memory (MemoryError: Unable to allocate " \
+                                "1.00 GiB)"
+    assert lines[2]["matched"] is True
+    assert "3 pairs: 1 matched, 0 no reliable match, 2 errors (1 internal)" in result.stderr
+
+
+@pytest.mark.parametrize("address, needle", [
+    ("notaurl", "no port"), ("127.0.0.1", "no port"), ("tcp://127.0.0.1", "no port"),
+    ("http://127.0.0.1:8787", "dashboard"), ("foo://host:8786", "unknown scheme"),
+    ("tcp://host:99999", "1-65535")])
+def test_a_malformed_scheduler_address_fails_at_once(images, address, needle):
+    pairs = write(images / "p_dask.csv", "low.png,high.png\n")
+    last = assert_one_line_error(run("batch", pairs, "--scheduler", address), needle)
+    assert "tcp://127.0.0.1:8786" in last  # the form, by example
+
+
+def test_a_malformed_scheduler_address_in_a_real_process_is_one_line(images):
+    """In a process of its own (where distributed's Client.__del__ would print at exit): one
+    line, exit 2, well within the connection time-out (10 s)."""
+    pairs = write(images / "p_dask.csv", "low.png,high.png\n")
+    t0 = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "scalematch.cli", "batch", str(pairs),
+                           "--scheduler", "notaurl"], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "Exception ignored" not in done.stderr
+    assert time.monotonic() - t0 < 5  # generous; measured 0.5 s

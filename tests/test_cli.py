@@ -8,6 +8,7 @@ import re
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -25,7 +26,7 @@ needs_pipeline = pytest.mark.skipif(not HAS_PIPELINE, reason="scalematch/pipelin
 
 #: Every key of the JSON contract (README.md, "## Output").
 JSON_KEYS = {"matched", "reason", "model", "order", "transform", "resolution_ratio", "rotation_deg",
-             "translation", "best_scale", "inliers", "matches", "scales", "seconds", "config",
+             "translation", "best_scale", "n_inliers", "inliers", "matches", "scales", "seconds", "config",
              "version", "low", "high"}
 SCALE_KEYS = {"s", "ratio", "points", "initial", "kept", "inliers", "outlier_pct"}
 
@@ -84,7 +85,7 @@ def test_parse_scales():
     assert parse_scales("2-4:0.5") == (2.0, 2.5, 3.0, 3.5, 4.0)
     assert parse_scales("1,2,3.5") == (1.0, 2.0, 3.5)
     assert parse_scales("1-3, 8") == (1.0, 2.0, 3.0, 8.0)
-    for bad in ("8-1", "a-b", "0.5-2", "", "1-4:0", "2:3"):
+    for bad in ("8-1", "a-b", "", "1-4:0", "2:3"):  # "0.5-2" parses; Config refuses 0.5
         with pytest.raises(ValueError):
             parse_scales(bad)
 
@@ -154,11 +155,16 @@ def test_unknown_option_is_a_usage_error(flat_pair):
 
 
 #: Option values that mean nothing: (option, value, what the message names).
-MEANINGLESS = [("--ransac-threshold", "-1", "x>0"), ("--ransac-threshold", "0", "x>0"),
-               ("--ransac-threshold", "nan", "finite"), ("--ratio-test", "1.5", "0<x<=1"),
-               ("--ratio-test", "0", "0<x<=1"), ("--ransac-iterations", "0", "x>=1"),
-               ("--harris-threshold", "-5", "x>=0"), ("--min-inliers", "-1", "x>=0"),
-               ("--max-log-nfa", "inf", "finite"),
+#: The message is the library's (scalematch.checks), the same for an option and for --set.
+MEANINGLESS = [("--ransac-threshold", "-1", "ransac.threshold_px must be > 0"),
+               ("--ransac-threshold", "0", "ransac.threshold_px must be > 0"),
+               ("--ransac-threshold", "nan", "ransac.threshold_px must be > 0, got nan"),
+               ("--ratio-test", "1.5", "matcher.ratio must be in (0, 1]"),
+               ("--ratio-test", "0", "matcher.ratio must be in (0, 1]"),
+               ("--ransac-iterations", "0", "ransac.max_iters must be an integer >= 1"),
+               ("--harris-threshold", "-5", "harris.threshold must be >= 0"),
+               ("--min-inliers", "-1", "decision.min_inliers must be an integer >= 0"),
+               ("--max-log-nfa", "inf", "decision.max_log_nfa must be a finite number"),
                ("--set", "ransac.threshold_px=-1", "ransac.threshold_px"),
                ("--set", "matcher.ratio=2", "matcher.ratio")]
 
@@ -181,7 +187,7 @@ def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
     result = run(*flat_pair, "-q")
     assert result.exit_code == 130, (result.exit_code, result.output)
     assert result.stderr.strip() == "interrupted"
-    assert "130 interrupted" in run("match", "--help").output
+    assert "130  interrupted" in run("match", "--help").output
 
 
 # --------------------------------------------------------------------------- no match: exit 1
@@ -196,7 +202,7 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     data = json.loads(js.read_text())
     assert JSON_KEYS <= set(data)
     assert data["matched"] is False and data["reason"] and data["transform"] is None
-    assert data["inliers"] == 0 and data["matches"] == []
+    assert data["n_inliers"] == data["inliers"] == 0 and data["matches"] == []
     assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120}
     assert data["high"]["width"] == 240 and data["version"] == __version__
     assert data["config"]["model"] == "similarity"
@@ -266,3 +272,87 @@ def test_a_working_size_too_small_names_the_option(tmp_path):
     assert result.exit_code == 2
     assert f"--working-size must be 0 (always full size) or at least {MIN_WORKING_SIDE_PX} px" \
         in result.output and "low_max_side" not in result.output
+
+
+# --------------------------------------------------------------------------- unexpected errors: 4
+
+def test_an_unexpected_error_exits_4_with_one_line_and_the_traceback_with_v(monkeypatch,
+                                                                             flat_pair):
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr("scalematch.cli._run_match", broken)
+    quiet = run(*flat_pair, "-q")
+    assert quiet.exit_code == 4, (quiet.exit_code, quiet.output)
+    assert quiet.stderr.strip().splitlines() == [
+        "Error: internal error, RuntimeError: a bug (-v shows the traceback)"]
+    loud = run(*flat_pair, "-v")
+    assert loud.exit_code == 4
+    assert "Traceback" in loud.stderr and "RuntimeError: a bug" in loud.stderr
+    assert loud.stderr.strip().splitlines()[-1] == "Error: internal error, RuntimeError: a bug"
+    help_text = run("match", "--help").output
+    assert "4  unexpected error" in help_text and "1  no reliable match" in help_text
+
+
+#: Address space of the command under test: Python, numpy and OpenCV start in it (a refused
+#: input takes about 60 MB, measured), a 12 MP match at full size (about 1.5 GB) does not fit.
+MATCH_LIMIT_AS_BYTES = 700 << 20
+
+
+def run_limited(*args: Any, timeout: float = 120):
+    """The command line in a subprocess with its address space limited by ``resource.setrlimit``
+    in the child (never on the machine)."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (MATCH_LIMIT_AS_BYTES, MATCH_LIMIT_AS_BYTES))
+
+    return subprocess.run([sys.executable, "-m", "scalematch.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, preexec_fn=limit)
+
+
+@pytest.fixture(scope="module")
+def big_pair(tmp_path_factory):
+    """A 4000x3000 textured image and its half: matched at full size, more than the limit."""
+    folder = tmp_path_factory.mktemp("big")
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur((rng.random((3000, 4000)) * 255).astype(np.uint8), (0, 0), 2)
+    cv2.imwrite(str(folder / "big.png"), img)
+    cv2.imwrite(str(folder / "half.png"), img[::2, ::2].copy())
+    return folder / "half.png", folder / "big.png"
+
+
+@needs_pipeline
+def test_out_of_memory_exits_4_not_1(big_pair):
+    quiet = run_limited(*big_pair, "--working-size", "0", "-q")
+    lines = quiet.stderr.strip().splitlines()
+    assert quiet.returncode == 4, (quiet.returncode, quiet.stderr)
+    assert len(lines) == 1 and lines[0].startswith("Error: internal error, out of memory")
+    assert lines[0].endswith("(-v shows the traceback)")
+    loud = run_limited(*big_pair, "--working-size", "0", "-v")
+    assert loud.returncode == 4 and "Traceback (most recent call last)" in loud.stderr
+
+
+# --------------------------------------------------------------------------- outputs vs inputs
+
+def test_json_never_overwrites_an_input(flat_pair):
+    low, high = flat_pair
+    before = low.read_bytes()
+    for target in (low, low.parent / "." / low.name):
+        last = assert_one_line_error(run(low, high, "--json", target), "is an input")
+        assert "--json" in last and "overwritten" in last
+    assert low.read_bytes() == before
+
+
+@pytest.mark.parametrize("name", ["overlay.png", "matches.csv"])
+def test_out_dir_never_overwrites_an_input(tmp_path, flat_pair, name):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    high = folder / name
+    high.write_bytes(flat_pair[1].read_bytes())
+    last = assert_one_line_error(run(flat_pair[0], high, "-o", folder), "is an input")
+    assert "--out-dir" in last and "choose another folder" in last
+    assert high.read_bytes() == flat_pair[1].read_bytes()
+    assert sorted(p.name for p in folder.iterdir()) == [name]  # nothing else written

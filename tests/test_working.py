@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -154,3 +156,20 @@ def test_the_given_order_keeps_the_high_image_at_full_size(raccoon):
 def test_high_max_side_is_checked():
     with pytest.raises(ValueError, match="high_max_side"):
         Config(high_max_side=10)
+
+
+def test_the_reason_names_a_scale_of_the_table_at_working_size(raccoon):
+    """Issue 17: the reason said "at scale 2.37176" (working pixels) next to a table in the
+    images' own scales. It names the scale the table shows, to its 3 digits."""
+    import re
+
+    low = raccoon[:600, :800]
+    noise = np.random.default_rng(3).uniform(0, 255, (600, 800)).astype(np.float32)
+    high = cv2.GaussianBlur(noise, (0, 0), 3.0) * 4.0  # a texture the raccoon does not hold
+    result = match(low, high, Config(low_max_side=300, high_max_side=500,
+                                     views=replace(Config().views, enabled=False)))
+    assert not result.matched
+    found = re.findall(r"scale (\d+(?:\.\d+)?)", result.reason)
+    assert found, result.reason
+    shown = {f"{row.s:.3g}" for row in result.scales}
+    assert all(s in shown for s in found), (found, shown)

@@ -50,6 +50,7 @@ from .datasets import boat_pairs, find_shared, list_photos, scene_of
 from .evaluation import SUCCESS_PX, is_success, reprojection_error, similarity_floor
 from ..geometry import similarity_parts
 from ..imageio import read_grey
+from ..result import to_jsonable
 from .synthetic import ZoomPair, pairs_from_photos, unrelated_indices, zoom_pair_from_crop
 
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
@@ -709,23 +710,11 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
     }
     summary_path = out / "summary.json"
     with open(summary_path, "w") as f:
-        json.dump(_jsonable({"settings": settings, "per_ratio": [asdict(s) for s in per_ratio],
+        json.dump(to_jsonable({"settings": settings, "per_ratio": [asdict(s) for s in per_ratio],
                              "per_method": [asdict(s) for s in per_method]}), f, indent=1)
     return BenchReport(per_ratio=per_ratio, per_method=per_method, rows=tuple(rows),
                        settings=settings, skipped=tuple(skipped), csv_path=csv_path,
                        plot_path=plot_path, summary_path=summary_path, table=table)
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (float, np.floating)):
-        return None if not math.isfinite(float(obj)) else float(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
 
 
 def _load_average() -> Optional[float]:

@@ -138,11 +138,15 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
     return min(p, 1.0)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1) -> Decision:
+def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
+           shown_scale: float = 1.0) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
     ``searches`` is the number of whole searches made so far, this one included (each order
     and each simulated view is one): it multiplies the number of tests of the a-contrario count.
+    ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
+    (the working size shrinks them, :mod:`scalematch.working`) in the reason's text, so it
+    names the scales of the per-scale table.
     """
     params: DecisionParams = config.decision
     model = config.model
@@ -164,7 +168,8 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
     if not plausible:
         best = max(with_t, key=lambda o: o.row.inliers)
         return Decision(False, f"no scale found a transform consistent with it (the best, at scale "
-                        f"{best.row.s:g}, implies a ratio of {best.row.ratio:.3g})",
+                        f"{best.row.s * shown_scale:.3g}, implies a ratio of "
+                        f"{best.row.ratio * shown_scale:.3g})",
                         best.row.s, None, np.zeros((0, 4)), evidence)
     best = min(plausible, key=lambda o: (-o.row.inliers, closeness(o), o.row.s))
     est = best.estimate
@@ -186,10 +191,12 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence)
 
     if k < params.min_inliers:
-        return no(f"too few inliers: {k} at scale {best.row.s:g} (at least {params.min_inliers} "
+        return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
+                  f"{params.min_inliers} "
                   "needed)")
     if lnfa > params.max_log_nfa:
-        return no(f"the best transform ({k} inliers of {n} candidates at scale {best.row.s:g}) "
+        return no(f"the best transform ({k} inliers of {n} candidates at scale "
+                  f"{best.row.s * shown_scale:.3g}) "
                   f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, evidence)
@@ -212,5 +219,6 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1)
             agreeing += 1
     evidence = replace(evidence, agreeing_scales=agreeing)
     if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone:
-        return no(f"no other scale agrees with the best one (scale {best.row.s:g}, {k} inliers)")
+        return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
+                  f"{k} inliers)")
     return Decision(True, "", best.row.s, t, pairs, evidence)

@@ -1,0 +1,24 @@
+"""The words of an unexpected error, the same on the command line and in a batch line.
+
+Imported by ``cli`` and ``batch`` when they start (nothing to import when memory has run out).
+"""
+
+from __future__ import annotations
+
+
+def internal_error(exc: BaseException) -> str:
+    """One line for an unexpected error: "internal error, " and what it was; "out of memory"
+    for a ``MemoryError`` or OpenCV's "Insufficient memory".
+
+    >>> internal_error(MemoryError())
+    'internal error, out of memory (MemoryError)'
+    >>> internal_error(RuntimeError("a bug\\non two lines"))
+    'internal error, RuntimeError: a bug on two lines'
+    """
+    kind = type(exc).__name__
+    kind = f"{type(exc).__module__}.{kind}" if type(exc).__module__ == "cv2" else kind
+    text = " ".join(str(exc).split())  # OpenCV's messages span lines
+    what = f"{kind}: {text}" if text else kind
+    if isinstance(exc, MemoryError) or "Insufficient memory" in text:
+        what = f"out of memory ({what})"
+    return f"internal error, {what}"
