@@ -13,6 +13,7 @@ whether the evidence is enough; the winner is refit in the finer image's pixels
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
@@ -26,9 +27,9 @@ from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
 from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, overwhelming, probe_best,
                      search_plan, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import decide
+from .stages.decision import Look, decide, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
-from .stages.detector import MIN_SIDE_PX, Keypoints, detect_on_level
+from .stages.detector import MIN_SIDE_PX, Contrast, Keypoints, detect_on_level, image_contrast
 from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
@@ -36,10 +37,16 @@ from .stages.probe import probe_scores, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, keep_inside, views_of
+from .stages.views import View, keep_inside, tilt_view
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
+
+#: OpenBLAS allocates its work buffers at its first matrix product, and when that allocation
+#: fails (a process near its memory limit) it ends the process with exit code 1 from native code,
+#: which reads as "no reliable match" (issue 17). One small product at import takes them while
+#: memory is there; later products reuse them.
+_BLAS_WARM_UP = np.ones((128, 128), np.float32) @ np.ones((128, 128), np.float32)
 
 #: Largest view of the high image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
@@ -94,21 +101,24 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     coarser: Dict[Direction, LowFeatures] = {}
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
+    timings: Dict[str, float] = {}
     stopped = "plan done"
     for step in plan:
         if skips(step, attempts):
             meter.tick(step.cost)
             continue
-        found, record = run_step(step, work, config, whitening, coarser, meter,
-                                 searches=sum(r.views for r in records))
+        found, record, seconds = run_step(step, work, config, whitening, coarser, meter,
+                                          searches=sum(r.views for r in records))
         attempts += found
         records.append(record)
+        timings[record.name] = seconds
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
     meter.finish()
+    timings["total"] = time.perf_counter() - t0
     result = build_result(attempts, tuple(records), plan, stopped, config,
-                          cov.source if cov is not None else "", time.perf_counter() - t0)
+                          cov.source if cov is not None else "", timings)
     return in_original(result, work, config)
 
 
@@ -117,11 +127,13 @@ class Meter:
 
     def __init__(self, progress: Optional[Callable[[int, int], None]], total: int) -> None:
         self.progress, self.total, self.done = progress, total, 0
+        self._lock = threading.Lock()  # views are detected on threads
 
     def tick(self, units: int = 1) -> None:
-        self.done = min(self.done + units, self.total)
-        if self.progress is not None:
-            self.progress(self.done, self.total)
+        with self._lock:
+            self.done = done = min(self.done + units, self.total)
+            if self.progress is not None:
+                self.progress(done, self.total)
 
     def finish(self) -> None:
         if self.done < self.total:
@@ -171,7 +183,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
                    inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,
                    rotation_deg=angle)
-    return ScaleOutcome(row, best, best_src, best_dst, initial)
+    return ScaleOutcome(row, best, best_src, best_dst, initial, high)
 
 
 def _part(kp: Keypoints, rows: slice) -> Keypoints:
@@ -264,13 +276,15 @@ class Detected(NamedTuple):
 
 def detect_view(view: View, config: Config, whitening,
                 step: Callable[[], None] = lambda: None,
-                known: Optional[LowFeatures] = None) -> Tuple[Tuple[Detected, ...], bool]:
+                known: Optional[LowFeatures] = None,
+                contrast: Optional[Contrast] = None) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``step()`` is called once per scale detected. The levels of a view of at most
     ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
     described as the coarser one (the other direction), whose points give this view's s = 1
-    points when it is the image itself (:func:`shares_first_level`).
+    points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
+    image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
@@ -285,7 +299,8 @@ def detect_view(view: View, config: Config, whitening,
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
         else:
-            kp = _inside(view, detect_on_level(level, config.harris), config.views.edge_margin_px)
+            kp = _inside(view, detect_on_level(level, config.harris, contrast),
+                         config.views.edge_margin_px)
             part = _part(kp, slice(config.probe.points)) if probing else kp
             detected.append(Detected(kp, _describe(level, part, config, whitening),
                                      level if keep else None))
@@ -354,26 +369,37 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
 
 def run_step(step: Step, work: WorkImages, config: Config, whitening,
              coarser: Dict[Direction, "LowFeatures"], meter: Meter,
-             searches: int) -> Tuple[List[Attempt], StepRecord]:
-    """Run one step of the plan: probe its views, match the promising ones in full, decide.
+             searches: int) -> Tuple[List[Attempt], StepRecord, float]:
+    """Run one step of the plan: probe its views, match the promising ones in full, decide;
+    (attempts, record, seconds).
 
     ``coarser`` caches each direction's coarser image, described once; ``searches`` counts
     the views probed by earlier steps (the a-contrario test counts them all).
     """
+    t0 = time.perf_counter()
     cfg = replace(config, scales=step.scales)
     lo_img, hi_img = step.direction.coarser_finer(work.low, work.high)
     start = meter.done
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     known = coarser.get(step.direction.other)
-    for view in views_of(hi_img, step.views, config.views):
-        if step.direction in coarser:
-            detected = detect_view(view, cfg, whitening, meter.tick, known)
-        else:  # the coarser image is described while the first view is detected
-            coarser[step.direction], detected = thread_map(lambda job: job(), [
-                lambda: describe_low(lo_img, cfg, whitening),
-                lambda: detect_view(view, cfg, whitening, meter.tick, known)])
+    # the detector adapts to the finer image's contrast (measured once, on the image itself)
+    contrast = image_contrast(hi_img) if cfg.harris.adaptive else None
+
+    def probe(key) -> Probed:
+        view = tilt_view(hi_img, *key, config.views)
+        return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known, contrast),
+                          coarser[step.direction], cfg)
+
+    keys = list(step.views)
+    if step.direction not in coarser:  # described while the first view is detected
+        view = tilt_view(hi_img, *keys[0], config.views)
+        coarser[step.direction], detected = thread_map(lambda job: job(), [
+            lambda: describe_low(lo_img, cfg, whitening),
+            lambda: detect_view(view, cfg, whitening, meter.tick, known, contrast)])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
+        keys = keys[1:]
+    probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     searches += len(probed)
     chosen = sorted(probed, key=lambda p: -p.score)
     if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
@@ -382,20 +408,26 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening,
     attempts: List[Attempt] = []
     for p in chosen:
         outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
+        low_feats = coarser[step.direction]
+
+        def look(t, outcome, view=p.view) -> Look:
+            return look_again(t, outcome.described, low_feats.described, view.image,
+                              low_feats.image, cfg)
+
         verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg, searches=searches,
-                         shown_scale=shown_scale(work, step.direction))
+                         shown_scale=shown_scale(work, step.direction), look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict))
         if overwhelming(attempts[-1], config):
             break  # no other view of this step can do better
     meter.tick(start + step.cost - meter.done)  # the views the probe left out
     record = StepRecord(step.direction, step.view_pass, len(probed), len(attempts),
                         probe_best([p.score for p in probed]), any(a.matched for a in attempts))
-    return attempts, record
+    return attempts, record, time.perf_counter() - t0
 
 
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
-                 seconds: float) -> MatchResult:
+                 timings: Dict[str, float]) -> MatchResult:
     """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
@@ -410,7 +442,7 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                        probe_best=probe_best([r.probe_best for r in records]),
                        steps_run=len(records), steps_planned=len(plan), stopped=stopped)
     common = dict(model=config.model, best_scale=shown.verdict.best_scale,
-                  scales=tuple(o.row for o in shown.outcomes), timings={"total": seconds},
+                  scales=tuple(o.row for o in shown.outcomes), timings=timings,
                   config=config, evidence=evidence, search=records,
                   covariance_used=covariance_used)
     if winner is None:

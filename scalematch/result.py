@@ -58,6 +58,12 @@ class Evidence:
     footprint_area_px: float = math.nan  #: area of the high image's footprint, low px^2
     footprint_inside: float = math.nan  #: fraction of the footprint inside the low image
     agreeing_scales: int = 0  #: other scales whose transform agrees with the winner's
+    #: the second look (``stages.decision.look_again``), for a best transform of 3+ inliers:
+    grown_inliers: int = 0  #: distinct inliers after guided growth
+    grown_chance: float = math.nan  #: guided matches to expect by chance
+    pixel_ncc: float = math.nan  #: ZNCC of the pixels under the grown map
+    pixel_margin: float = math.nan  #: how much better than the nearby wrong placements
+    pixel_z: float = math.nan  #: the same in standard deviations of the nearby placements
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)
@@ -81,6 +87,11 @@ class StepRecord:
     full: int  #: views matched in full (the probe's choice)
     probe_best: float  #: the best probe score among its views
     matched: bool  #: a reliable match was found in this step
+
+    @property
+    def name(self) -> str:
+        """``given pass 0``: the key of the step's time in ``MatchResult.timings``."""
+        return f"{self.direction} pass {self.view_pass}"
 
 
 @dataclass(frozen=True)

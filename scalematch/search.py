@@ -19,6 +19,7 @@ import numpy as np
 
 from .result import Direction, ScaleRow
 from .stages.decision import Decision
+from .stages.descriptors import Described
 from .stages.estimator import Estimate, model_of
 from .stages.views import View, view_plan
 
@@ -80,6 +81,8 @@ class ScaleOutcome:
     src: np.ndarray = field(repr=False)  #: (K, 2) finer px of the candidates given to the estimator
     dst: np.ndarray = field(repr=False)  #: (K, 2) coarser px
     candidates: int  #: initial candidate matches
+    #: every described point of the finer image at this scale (for the second look), or None
+    described: Optional[Described] = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)

@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 from ..checks import in_range
 from ..geometry import apply, footprint, grid
 from ..result import Evidence
+from .descriptors import Described
 from .estimator import model_of
 
 
@@ -64,6 +65,18 @@ class DecisionParams:
     #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
+    #: a best transform with at least this many distinct inliers gets a second look (guided
+    #: growth and the pixel check, :func:`look_again`), recorded in the evidence
+    look_min_inliers: int = 3
+    #: the second look may accept a transform with fewer than ``min_inliers`` (issue 18: the
+    #: right answer at ratio 8-10 had 5 inliers at log10 NFA -10 to -13), down to this many ...
+    few_min_inliers: int = 4
+    #: ... when its log10 NFA is at most this, its growth reaches ``few_min_grown`` distinct
+    #: inliers and its pixel check beats every nearby wrong placement by ``few_min_margin``
+    #: (ZNCC); see docs/FEWPOINTS.md for the distributions these were set from
+    few_max_log_nfa: float = -6.0
+    few_min_grown: int = 10
+    few_min_margin: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -74,6 +87,10 @@ class DecisionParams:
         in_range("decision", "min_inside", self.min_inside, lo=0, hi=1)
         in_range("decision", "agreement_px", self.agreement_px, lo=0, lo_open=True)
         in_range("decision", "min_area_px", self.min_area_px, lo=0)
+        for name in ("look_min_inliers", "few_min_inliers", "few_min_grown"):
+            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+        in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
+        in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
 
 
 @dataclass(frozen=True)
@@ -138,15 +155,49 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
     return min(p, 1.0)
 
 
+@dataclass(frozen=True)
+class Look:
+    """A second look at a hypothesis: guided growth, then the pixel check of the grown map."""
+
+    transform: np.ndarray = field(repr=False)  #: the grown transform (high px -> low px)
+    inliers: np.ndarray = field(repr=False)  #: (N, 4) its distinct inliers
+    chance: float  #: guided matches to expect by chance around the predictions
+    ncc: float  #: ZNCC of the pixels under the grown map (nan: cannot tell)
+    margin: float  #: ncc minus the best of the nearby wrong placements (nan: cannot tell)
+    z: float  #: ncc against the nearby placements' mean, in their standard deviations
+
+
+def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.ndarray,
+               low_image: np.ndarray, config) -> Look:
+    """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
+    the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
+
+    ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
+    coarser image's points; the images at the search's working size.
+    """
+    from .guided import GuidedParams, grow
+    from .pixelcheck import pixel_check
+
+    oriented = config.mode == "default"
+    growth = grow(t, high, low, config.model, GuidedParams(use_orientation=oriented),
+                  config.ransac)
+    grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
+    check = pixel_check(low_image, high_image, grown)
+    return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
+
+
 def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
-           shown_scale: float = 1.0) -> Decision:
+           shown_scale: float = 1.0,
+           look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
     ``searches`` is the number of whole searches made so far, this one included (each order
     and each simulated view is one): it multiplies the number of tests of the a-contrario count.
     ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
     (the working size shrinks them, :mod:`scalematch.working`) in the reason's text, so it
-    names the scales of the per-scale table.
+    names the scales of the per-scale table. ``look(t, outcome)``, when given, takes the second
+    look (:func:`look_again`) at a best transform of at least ``look_min_inliers`` inliers: its
+    figures go in the evidence, and it may accept a transform of ``few_min_inliers`` or more.
     """
     params: DecisionParams = config.decision
     model = config.model
@@ -190,10 +241,22 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     def no(reason: str) -> Decision:
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence)
 
-    if k < params.min_inliers:
-        return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
-                  f"{params.min_inliers} "
-                  "needed)")
+    second = look(t, best) if look is not None and spec.has_ratio and \
+        k >= params.look_min_inliers else None
+    if second is not None:
+        evidence = replace(evidence, grown_inliers=len(second.inliers),
+                           grown_chance=second.chance, pixel_ncc=second.ncc,
+                           pixel_margin=second.margin, pixel_z=second.z)
+    few = k < params.min_inliers
+    if few:
+        confirmed = second is not None and k >= params.few_min_inliers and \
+            lnfa <= params.few_max_log_nfa and len(second.inliers) >= params.few_min_grown and \
+            second.margin >= params.few_min_margin  # nan: cannot tell, so no
+        if not confirmed:
+            return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
+                      f"{params.min_inliers} needed, or {params.few_min_inliers} that grow to "
+                      f"{params.few_min_grown} and pass the pixel check)")
+        t, pairs = second.transform, second.inliers
     if lnfa > params.max_log_nfa:
         return no(f"the best transform ({k} inliers of {n} candidates at scale "
                   f"{best.row.s * shown_scale:.3g}) "
@@ -218,7 +281,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
         if mean_transfer_gap(o.estimate.transform, t, high_shape) <= params.agreement_px:
             agreeing += 1
     evidence = replace(evidence, agreeing_scales=agreeing)
-    if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone:
+    if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone and not few:
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
                   f"{k} inliers)")
     return Decision(True, "", best.row.s, t, pairs, evidence)

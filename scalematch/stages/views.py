@@ -150,10 +150,3 @@ def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:
 def to_high(view: View, xy: np.ndarray) -> np.ndarray:
     """View px (N, 2) -> high-image px (N, 2)."""
     return apply(invert(view.to_view), xy)
-
-
-def views_of(high: np.ndarray, pairs: Sequence[Tuple[float, float]],
-             params: ViewParams = ViewParams()):
-    """The views of ``high`` for (tilt, longitude) pairs, made one at a time (a generator)."""
-    for t, phi in pairs:
-        yield tilt_view(high, t, phi, params)

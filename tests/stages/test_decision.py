@@ -45,3 +45,64 @@ def test_a_mirror_transform_is_folded_and_a_turn_is_not():
     assert _folded(np.array([[-0.5, 0.0, 10.0], [0.0, 0.5, 3.0]]))  # x mirrored
     assert not _folded(np.array([[0.0, -0.5, 10.0], [0.5, 0.0, 3.0]]))  # turned by 90 deg
     assert _folded(np.array([[0.5, 0.0, 1.0], [0.0, -0.5, 2.0], [0.0, 0.0, 1.0]]))
+
+
+# --------------------------------------------------------------- issue 18: the second look
+
+def _outcomes(k: int, n: int, s: float = 8.0):
+    """One scale whose similarity (ratio s) has k inliers among n candidates, and its
+    neighbour with nothing: what a footprint 80 low px wide leaves at ratio 8."""
+    from scalematch.result import ScaleRow
+    from scalematch.search import ScaleOutcome
+    from scalematch.stages.estimator import Estimate
+
+    t = similarity_matrix(1.0 / s, 30.0, 400.0, 300.0)
+    rng = np.random.default_rng(0)
+    src = rng.uniform(0, 640, (n, 2))
+    dst = src @ t[:, :2].T + t[:, 2]
+    dst[k:] += rng.uniform(20, 200, (n - k, 2))  # the others are far off
+    inl = np.arange(n) < k
+    est = Estimate("similarity", t, inl, np.where(inl, 0.5, 50.0))
+    row = ScaleRow(s=s, ratio=s, points=40, initial=n, kept=n, inliers=k, outlier_pct=0.0)
+    empty = ScaleRow(s=s * 1.26, ratio=math.nan, points=20, initial=0, kept=0, inliers=0,
+                     outlier_pct=100.0)
+    return t, (ScaleOutcome(row, est, src, dst, n),
+               ScaleOutcome(empty, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
+
+
+def _look(grown: int, margin: float):
+    from scalematch.stages.decision import Look
+
+    def look(t, outcome):
+        pairs = np.hstack([outcome.src[:1].repeat(grown, 0), outcome.dst[:1].repeat(grown, 0)])
+        return Look(t, pairs, 0.5, 0.99, margin, 5.0)
+    return look
+
+
+def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good_one():
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+
+    t, outcomes = _outcomes(k=5, n=8)
+    config = Config()
+    plain = decide(outcomes, (768, 1024), (480, 640), config)
+    assert not plain.matched and "too few inliers: 5" in plain.reason
+    good = decide(outcomes, (768, 1024), (480, 640), config, look=_look(grown=25, margin=0.3))
+    assert good.matched and good.evidence.grown_inliers == 25
+    assert good.evidence.pixel_margin == 0.3 and good.inliers.shape == (25, 4)
+
+
+def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis():
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+
+    _, outcomes = _outcomes(k=5, n=8)
+    config = Config()
+    for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan")),
+                 _look(grown=5, margin=0.5)):
+        verdict = decide(outcomes, (768, 1024), (480, 640), config, look=look)
+        assert not verdict.matched and "pass the pixel check" in verdict.reason
+    # three inliers are never enough, whatever the look says (the evidence is recorded)
+    _, three = _outcomes(k=3, n=8)
+    verdict = decide(three, (768, 1024), (480, 640), config, look=_look(grown=40, margin=0.6))
+    assert not verdict.matched and verdict.evidence.grown_inliers == 40
