@@ -59,8 +59,8 @@ class Config:
 
     >>> from dataclasses import replace
     >>> config = Config(seed=1)
-    >>> len(config.scales), config.scales[:4], config.harris.sigma_tilde
-    (12, (1.0, 1.26, 1.587, 2.0), 2.0)
+    >>> len(config.scales), config.scales[:4], config.scales[-1], config.harris.sigma_tilde
+    (13, (1.0, 1.26, 1.587, 2.0), 16.0, 2.0)
     >>> replace(config, harris=replace(config.harris, threshold=50.0)).harris.threshold
     50.0
     >>> Config(model="shear")
@@ -71,11 +71,17 @@ class Config:
 
     mode: str = "default"  #: "default" or "paper" (see MODES)
     model: str = "similarity"  #: similarity | affine | homography | fundamental
-    #: scales s of the high-resolution image to try: 1 to 12.7 by third octaves (12 scales;
-    #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 10 need scales past 8; a
-    #: scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves (15 scales)
+    #: scales s of the high-resolution image to try: 1 to 16 by third octaves (13 scales;
+    #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 16 (issue 18) need scales
+    #: past 8; a scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves
     #: measured 1 more success in 38 at ratio 10 for 12 % more time (docs/ABLATION.md).
-    scales: Tuple[float, ...] = geometric_scales(1.0, 12.7, 3)
+    #: A scale at which the finer image would span fewer than ``min_footprint_px`` coarser px
+    #: is not searched (the search's reach follows the image sizes).
+    scales: Tuple[float, ...] = geometric_scales(1.0, 16.0, 3)
+    #: smallest footprint searched, coarser px along the finer image's longer side: a scale s
+    #: is searched when that side / s is at least this (issue 18: "the largest ratio whose
+    #: footprint is still about 32 low pixels wide"; the descriptor window is 16 px)
+    min_footprint_px: float = 32.0
     seed: int = 0  #: the one seed for all randomness (RANSAC)
     harris: HarrisParams = field(default_factory=HarrisParams)  #: the high image, every scale
     #: the low image, at s = 1 only: the same detector; more points allowed, since the high
@@ -121,6 +127,7 @@ class Config:
             raise ValueError("scales must hold at least one scale (>= 1)")
         for s in self.scales:  # the high-resolution image is never enlarged
             in_range("", "scales", s, lo=1)
+        in_range("", "min_footprint_px", self.min_footprint_px, lo=0)
 
     @staticmethod
     def paper(**changes) -> "Config":
@@ -155,7 +162,7 @@ def _paper() -> Config:
 PRESETS: Dict[str, Callable[[], Config]] = {
     "default": Config,
     "paper": _paper,
-    # the paper's pipeline on the default's scales (1-12.7, third octaves)
+    # the paper's pipeline on the default's scales (1-16, third octaves)
     "paper-finer-scales": lambda: replace(_paper(), scales=Config().scales),
     # the default's descriptors and constraints on the paper's scales 1-8, every scale run
     "default-paper-scales": lambda: Config(scales=PAPER_SCALES, probe=ProbeParams(enabled=False)),

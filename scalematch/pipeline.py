@@ -96,7 +96,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config)
     cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
     whitening = cov.whitening() if cov is not None else None
-    plan = search_plan(config, work.scales)
+    plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
+                                             for d in Direction})
     meter = Meter(progress, sum(step.cost for step in plan))
     coarser: Dict[Direction, LowFeatures] = {}
     attempts: List[Attempt] = []

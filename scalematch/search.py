@@ -50,11 +50,27 @@ class Step:
         return (len(self.views) + min(self.full_searches, len(self.views))) * len(self.scales)
 
 
-def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]]) -> Tuple[Step, ...]:
+def within_reach(scales: Sequence[float], finer_side: Optional[float],
+                 min_footprint_px: float) -> Tuple[float, ...]:
+    """The scales at which the finer image (longer side ``finer_side`` px) still spans at least
+    ``min_footprint_px`` coarser px (all of them when ``finer_side`` is None).
+
+    >>> within_reach((1.0, 8.0, 16.0, 32.0), 640, 32.0)
+    (1.0, 8.0, 16.0)
+    """
+    if finer_side is None:
+        return tuple(scales)
+    return tuple(s for s in scales if finer_side / s >= min_footprint_px * (1 - 1e-9))
+
+
+def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
+                finer_sides: Optional[Mapping[Direction, float]] = None) -> Tuple[Step, ...]:
     """The steps of the search, in the order they run.
 
     ``scales[d]``: the scales of direction ``d`` (at working size a direction may have none,
-    :func:`scalematch.working.direction_scales`). Pass 0 is the finer image itself; the passes
+    :func:`scalematch.working.direction_scales`); ``finer_sides[d]``: the longer side of that
+    direction's finer image, px, which bounds its scales (:func:`within_reach`, with
+    ``config.min_footprint_px``). Pass 0 is the finer image itself; the passes
     of views (``config.views``) follow, for models with a ratio (a fundamental matrix has no
     view to refit). With ``config.order == "auto"`` each pass runs the given direction first.
 
@@ -64,7 +80,10 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]]) -> Tuple[
     [('given', 0, 1), ('swapped', 0, 1), ('given', 1, 5), ('swapped', 1, 5), ('given', 2, 10), ('swapped', 2, 10)]
     """
     order = (Direction.GIVEN, Direction.SWAPPED) if config.order == "auto" else (Direction.GIVEN,)
-    directions = [d for d in order if scales.get(d)]
+    sides = finer_sides or {}
+    scales = {d: within_reach(scales.get(d, ()), sides.get(d), config.min_footprint_px)
+              for d in order}
+    directions = [d for d in order if scales[d]]
     passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
                         if model_of(config.model).has_ratio else [])
     return tuple(Step(d, k, views, tuple(scales[d]),

@@ -229,7 +229,9 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     assert np.asarray(data["transform"]).shape == (2, 3)
     assert data["inliers"] == len(data["matches"]) >= 20
     assert all(len(m) == 4 for m in data["matches"])
-    assert len(data["scales"]) == len(data["config"]["scales"])
+    # the table: every configured scale at which the 480 px high image spans 32+ low px
+    reach = [s for s in data["config"]["scales"] if 480 / s >= data["config"]["min_footprint_px"]]
+    assert [row["s"] for row in data["scales"]] == reach
     assert SCALE_KEYS <= set(data["scales"][0])
     assert data["best_scale"] in [row["s"] for row in data["scales"]]
     assert data["seconds"] > 0

@@ -51,6 +51,9 @@ def zoom_warp(image: np.ndarray, ratio: float, angle_deg: float,
 
 #: Size (width, height) of the high-resolution crop, px (EVALUATION.md step 1: "about 640x480").
 HIGH_SIZE = (640, 480)
+#: (width, height) of the high crop at ratios beyond 10 (issue 18: "ratios 12 and 16, high
+#: 960x720, footprint 60 to 80 low pixels"): a 640x480 crop at ratio 16 covers 40x30 low px
+HIGH_SIZE_BEYOND_10 = (960, 720)
 #: Largest low-resolution image (width, height), px (EVALUATION.md step 2: a finite sensor).
 LOW_MAX = (1024, 768)
 #: Candidate crop positions; the most textured is kept (EVALUATION.md step 1).
@@ -334,8 +337,17 @@ def pair_rng(seed: int, source: str, ratio: float) -> np.random.Generator:
     return np.random.default_rng([int(seed), key, int(round(float(ratio) * 1000))])
 
 
+def high_size_for(ratio: float) -> Tuple[int, int]:
+    """The high crop's size at ``ratio``: ``HIGH_SIZE``, and ``HIGH_SIZE_BEYOND_10`` past 10.
+
+    >>> high_size_for(10), high_size_for(16)
+    ((640, 480), (960, 720))
+    """
+    return HIGH_SIZE if ratio <= 10 else HIGH_SIZE_BEYOND_10
+
+
 def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float], seed: int = 0,
-                      high_size: Tuple[int, int] = HIGH_SIZE,
+                      high_size: Optional[Tuple[int, int]] = None,
                       low_max: Tuple[int, int] = LOW_MAX) -> Iterator[ZoomPair]:
     """Zoom pairs from photo files: for each path in the order given, each ratio in order.
 
@@ -355,8 +367,8 @@ def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float]
         p = Path(path)
         photo = read_grey(p)
         for r in ratios:
-            yield make_zoom_pair(photo, r, pair_rng(seed, p.name, r), high_size, low_max,
-                                 source=p.name)
+            yield make_zoom_pair(photo, r, pair_rng(seed, p.name, r),
+                                 high_size or high_size_for(r), low_max, source=p.name)
 
 
 # --------------------------------------------------------------------------------------------
