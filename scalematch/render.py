@@ -153,7 +153,8 @@ def verdict(result: MatchResult) -> str:
 
 # --------------------------------------------------------------------------- pictures
 
-def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarray:
+def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
+            footer: Sequence[str] = ()) -> np.ndarray:
     """The high image warped onto the low one, false-colour blended, footprint outlined.
 
     Parameters
@@ -166,6 +167,9 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
         When matched with a 2x3 or 3x3 transform: warp, blend and outline. For the fundamental
         matrix (no point-to-point map) the inliers are drawn on ``low``. When not matched,
         ``low`` with a "no reliable match: reason" caption.
+    footer : sequence of str
+        Lines of a caption at the bottom (``write_outputs``: the files' names). The outline is
+        drawn over both captions, so the strips never hide it.
 
     Returns
     -------
@@ -207,6 +211,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
                        cv2.LINE_AA, shift=4)
         lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
     caption(out, lines)
+    caption(out, footer, where="bottom")
     if outline is not None:  # after the caption: its dark strip must not hide the outline
         cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
     return out
@@ -350,8 +355,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
-    ov = overlay(low, high, result)
-    caption(ov, [f"low: {Path(low_path).name}   high: {Path(high_path).name}"], where="bottom")
+    ov = overlay(low, high, result,
+                 footer=[f"low: {Path(low_path).name}   high: {Path(high_path).name}"])
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, result))
     _write_png(paths["scales.png"], scale_plot(result))
