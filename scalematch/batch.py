@@ -452,9 +452,17 @@ def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
 # --------------------------------------------------------------------------- runners
 
 def run_serial(pairs: Iterable[Pair], config: Config, max_pixels: int) -> Iterator[Dict[str, Any]]:
-    """The lines of ``pairs``, matched one after the other in this process."""
-    for pair in pairs:
-        yield match_pair(pair, config, max_pixels)
+    """The lines of ``pairs``, matched one after the other in this process, until a pair has an
+    internal error (out of memory): the pairs left then go to a worker process (``run_pool``,
+    one worker), as this one may not have its memory back (under a memory limit the next pair
+    failed too, and the process then crashed in native code)."""
+    todo = iter(pairs)
+    for pair in todo:
+        line = match_pair(pair, config, max_pixels)
+        yield line
+        if line.get("error_kind") == INTERNAL:
+            yield from run_pool(todo, config, max_pixels, 1)
+            return
 
 
 def _watch_parent(parent_pid: int) -> None:

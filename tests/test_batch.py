@@ -308,6 +308,22 @@ def test_a_worker_out_of_memory_is_replaced_before_it_takes_another_pair(images,
     assert all(x["matched"] and "error" not in x for x in lines[1:])
 
 
+def test_without_workers_the_pairs_after_an_out_of_memory_go_to_a_fresh_process(images, tmp_path,
+                                                                               monkeypatch):
+    """--jobs 1 matches in the main process; after one pair's MemoryError there the pairs left
+    go to a worker process (this one may not have its memory back): they are matched."""
+    names = ["oom.png"] + [f"l{k}.png" for k in range(3)]
+    pairs = _linked_pairs(images, tmp_path / "serial", names)
+    monkeypatch.setattr(batch, "match_pair", match_or_fail)
+    monkeypatch.setattr(sys.modules[__name__], "_OUT_OF_MEMORY", False)  # this process's
+    result = run("batch", pairs)
+    assert result.exit_code == 4, (result.exit_code, result.stderr)
+    lines = lines_of_text(result.stdout)
+    assert [x["low"]["path"] for x in lines] == names
+    assert lines[0]["error_kind"] == "internal"
+    assert all(x["matched"] and "error" not in x for x in lines[1:])
+
+
 def test_a_worker_that_exits_1_is_an_internal_error_never_no_match(images, tmp_path, monkeypatch):
     """A worker ending with exit code 1 (OpenBLAS out of memory, from native code) is a death:
     its pair is tried again alone, nothing beside it, then gets an internal error line naming
