@@ -3,8 +3,8 @@ anything but results, or results of other options; a torn line cut; error lines 
 their pairs), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
 die with the main process (kill -9), resume after it, a worker killed mid-run (the pool started
 again, its pairs retried, a pair that kills its worker given up), a worker replaced after an
-internal error (out of memory), no semaphore left to the resource tracker after kill -9, Ctrl-C, and the Dask backend on
-a LocalCluster on loopback."""
+internal error (out of memory), no semaphore left to the resource tracker after kill -9, Ctrl-C,
+and the Dask backend on a LocalCluster on loopback."""
 
 from __future__ import annotations
 
