@@ -9,8 +9,10 @@ result lines, or results made with another configuration), ``drop_error_lines`` 
 step), ``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
 ``run_pool`` and ``run_dask``: each yields the lines in the order pairs finish and keeps at most
 a few pairs per worker in flight, so the main process stays the same size however many pairs
-there are (docs/BATCH.md). ``run_pool`` starts a new pool when a worker process is killed (out of
-memory) and tries the pairs in flight again; ``after_worker_death`` says when to give one up.
+there are (docs/BATCH.md). ``run_pool``'s workers are processes of its own, one pair each at a
+time: a worker killed (out of memory) is replaced and its pair tried again
+(``after_worker_death`` says when to give one up), and a worker that had an internal error is
+replaced before it takes another pair.
 
 Errors here are ``BatchError`` (a ``ValueError``) with a one-line message; the command line turns
 them into exit code 2.
@@ -18,18 +20,17 @@ them into exit code 2.
 
 from __future__ import annotations
 
-import concurrent.futures
 import ctypes
 import csv
 import json
 import multiprocessing
+import multiprocessing.connection
 import os
 import re
 import signal
 import sys
 import threading
 import time
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
@@ -61,12 +62,15 @@ DASK_CONNECT_TIMEOUT_S = 10.0
 DASK_RECHECK_S = 5.0
 #: The start of every line ``dumps`` writes: a last line torn by an interruption starts so too.
 LINE_START = b'{"'
-#: Pool breaks (a worker process killed by the system: out of memory, SIGKILL, a crash in native
-#: code) a pair may be in flight at before it gets an error line instead of another try. One
-#: worker's death fails every pair in flight, so the first break may be another pair's doing or a
-#: passing shortage of memory: the pairs are tried again, one at a time. A second break while the
-#: pair ran alone is its own; a third try would cost the batch another pool start for nothing.
+#: Deaths of a pair's worker process (killed by the system: out of memory, SIGKILL; a crash or
+#: an exit in native code) before the pair gets an error line instead of another try. The
+#: out-of-memory killer ends the largest process, not the one that asked last, so the first
+#: death may be another pair's doing or a passing shortage of memory: the pair is tried again
+#: alone. A second death while it ran alone is its own; a third try would cost another worker
+#: start for nothing.
 MAX_WORKER_DEATHS_PER_PAIR = 2
+#: How long a worker that was told to end (or has ended) is waited for before it is killed, s.
+WORKER_EXIT_WAIT_S = 5.0
 #: ``error_kind`` of an error line: the pair's files or values (a ``ValueError``: missing file,
 #: bad image, too small) or an unexpected error (out of memory, a bug, a worker killed).
 INPUT, INTERNAL = "input", "internal"
@@ -384,14 +388,18 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
 
 
 def after_worker_death(pair: Pair, deaths: int, config: Config,
-                       max_deaths: int = MAX_WORKER_DEATHS_PER_PAIR) -> Optional[Dict[str, Any]]:
-    """What becomes of ``pair`` when its worker process died: None to submit it again (the
-    ``deaths``-th pool break it was in flight at is not yet ``max_deaths``), else its error line."""
+                       max_deaths: int = MAX_WORKER_DEATHS_PER_PAIR,
+                       how: str = "") -> Optional[Dict[str, Any]]:
+    """What becomes of ``pair`` when its worker process died: None to submit it again (its
+    ``deaths``-th death is not yet ``max_deaths``), else its internal error line; ``how`` is how
+    the worker ended the last time ("killed by SIGKILL", "exit code 1")."""
     if deaths < max_deaths:
         return None
+    last = f", the last one {how}" if how else ""
     return error_line(pair, f"internal error, its worker process died while matching it, "
-                            f"{deaths} times (killed by the system, e.g. out of memory); try the "
-                            f"pair alone: scalematch LOW HIGH", config, kind=INTERNAL)
+                            f"{deaths} times{last} (killed by the system, e.g. out of memory, or "
+                            f"a crash); try the pair alone: scalematch LOW HIGH", config,
+                      kind=INTERNAL)
 
 
 def _outcome(future: Any, pair: Pair, config: Config) -> Dict[str, Any]:
@@ -444,9 +452,17 @@ def bounded(pairs: Iterable[Pair], submit: Callable[[Pair], Hashable],
 # --------------------------------------------------------------------------- runners
 
 def run_serial(pairs: Iterable[Pair], config: Config, max_pixels: int) -> Iterator[Dict[str, Any]]:
-    """The lines of ``pairs``, matched one after the other in this process."""
-    for pair in pairs:
-        yield match_pair(pair, config, max_pixels)
+    """The lines of ``pairs``, matched one after the other in this process, until a pair has an
+    internal error (out of memory): the pairs left then go to a worker process (``run_pool``,
+    one worker), as this one may not have its memory back (under a memory limit the next pair
+    failed too, and the process then crashed in native code)."""
+    todo = iter(pairs)
+    for pair in todo:
+        line = match_pair(pair, config, max_pixels)
+        yield line
+        if line.get("error_kind") == INTERNAL:
+            yield from run_pool(todo, config, max_pixels, 1)
+            return
 
 
 def _watch_parent(parent_pid: int) -> None:
@@ -475,7 +491,7 @@ def die_with_parent(parent_pid: int) -> None:
 
 def _init_worker(parent_pid: int) -> None:
     """Worker set-up: die with the main process; one OpenCV thread (the processes are the
-    parallelism); Ctrl-C is left to the main process, which stops the pool."""
+    parallelism); Ctrl-C is left to the main process, which stops the workers."""
     import cv2
 
     die_with_parent(parent_pid)
@@ -483,84 +499,151 @@ def _init_worker(parent_pid: int) -> None:
     cv2.setNumThreads(1)
 
 
-def _start_pool(jobs: int) -> concurrent.futures.ProcessPoolExecutor:
-    """A pool of ``jobs`` worker processes (started as pairs are submitted) that die with this
-    process."""
-    ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
-    return concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
-                                                  initargs=(os.getpid(),))
-
-
-def _lost(future: Any) -> bool:
-    """Whether ``future`` failed because its pool broke (a worker process died), not its pair."""
-    return not future.cancelled() and isinstance(future.exception(), BrokenProcessPool)
-
-
-def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int,
-             jobs: int) -> Iterator[Dict[str, Any]]:
-    """The lines of ``pairs``, matched by ``jobs`` worker processes, in the order they finish.
-
-    Workers die with this process (``die_with_parent``). When one is killed by the system (out
-    of memory, SIGKILL, a crash) the pool breaks and fails every pair in flight: a new pool is
-    started and those pairs are submitted again, one at a time, no new pair beside them; a pair
-    in flight at MAX_WORKER_DEATHS_PER_PAIR breaks gets an error line (``after_worker_death``).
-    When the iteration stops early (Ctrl-C, or the consumer closes it) the workers are
-    terminated at once; the pairs they held get no line, so a resumed batch redoes them.
-    """
-    pool = _start_pool(jobs)
-    generation = 0  # pools started before the current one
-    born: Dict[Any, int] = {}  # unfinished future -> generation of the pool it went to
-    deaths: Dict[Tuple[str, str], int] = {}  # pair -> pool breaks it was in flight at
-    retrying: Set[Tuple[str, str]] = set()  # lost at a break, not yet finished: run alone
-
-    def restart() -> None:
-        nonlocal pool, generation
-        old = pool
-        pool, generation = _start_pool(jobs), generation + 1
-        old.shutdown(wait=True)  # its workers are gone and it has failed every future it held,
-        for future, born_in in born.items():  # but for one submitted as it broke (CPython
-            if born_in < generation and not future.done():  # 3.11 races so): it would hang
-                future.set_exception(BrokenProcessPool("submitted as the pool broke"))
-
-    def submit(pair: Pair) -> Any:
+def _worker_main(conn: Any, parent_pid: int, task: Callable[..., Dict[str, Any]]) -> None:
+    """A worker process: ``task(pair, config, max_pixels)`` for each (pair, config, max_pixels)
+    received on ``conn``, its line sent back, until None or the main process closes the pipe.
+    After a line with an internal error (out of memory) it ends: memory a ``MemoryError`` left
+    taken, or a library left in a bad state, must not fail the next pair, which a fresh process
+    takes."""
+    _init_worker(parent_pid)
+    while True:
         try:
-            future = pool.submit(match_pair, pair, config, max_pixels)
-        except BrokenProcessPool:  # broke since the last wait
-            restart()
-            future = pool.submit(match_pair, pair, config, max_pixels)
-        born[future] = generation
-        return future
+            job = conn.recv()
+        except EOFError:
+            return
+        if job is None:
+            return
+        line = task(*job)
+        conn.send(line)
+        if line.get("error_kind") == INTERNAL:
+            return
 
-    def outcome(future: Any, pair: Pair) -> Optional[Dict[str, Any]]:
-        born_in = born.pop(future)
-        if not _lost(future):
+
+class _Worker:
+    """A worker process of ``run_pool`` and the main process's end of its pipe. Hashable by
+    identity: it stands for the pair it holds as a future would."""
+
+    def __init__(self, task: Callable[..., Dict[str, Any]]) -> None:
+        ctx = multiprocessing.get_context("spawn")  # no fork after OpenCV threads start
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(target=_worker_main, args=(child, os.getpid(), task),
+                                   name="scalematch-worker", daemon=True)
+        self.process.start()
+        child.close()  # the worker's end: EOF here when the worker ends
+
+    def line(self) -> Optional[Dict[str, Any]]:
+        """The line the worker sent, or None when it ended without one (killed, crashed)."""
+        try:
+            if self.conn.poll():  # what it sent before it ended is still in the pipe
+                return self.conn.recv()
+        except (EOFError, OSError):
+            pass
+        return None
+
+    def exit_code(self, timeout: float = WORKER_EXIT_WAIT_S) -> Optional[int]:
+        """The worker's exit code (negative: the signal that killed it), once it ends; it is
+        killed when it has not ended within ``timeout`` seconds."""
+        self.process.join(timeout)
+        if self.process.exitcode is None:
+            self.process.kill()
+            self.process.join()
+        return self.process.exitcode
+
+    def close(self, stop_now: bool = False) -> None:
+        """End the worker: at once (``stop_now``: SIGTERM, mid-pair), else after its pair."""
+        if stop_now:
+            self.process.terminate()
+        else:
+            try:
+                self.conn.send(None)
+            except OSError:  # it is gone already
+                pass
+        self.exit_code()
+        self.conn.close()
+
+
+def _how_it_ended(code: Optional[int]) -> str:
+    """An exit code in words: "exit code 1", "killed by SIGKILL"."""
+    if code is not None and code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
+
+
+def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int, jobs: int,
+             task: Optional[Callable[..., Dict[str, Any]]] = None) -> Iterator[Dict[str, Any]]:
+    """The lines of ``pairs``, matched by ``jobs`` worker processes, in the order they finish;
+    ``task`` is what a worker runs for a pair (``match_pair``, a picklable stand-in in tests).
+
+    Each worker is a process of its own with a pipe to this one, and holds one pair at a time,
+    so what becomes of a pair is known from its own worker. A worker that had an internal error
+    (out of memory) ends after its line and a fresh one takes the next pair. A worker that ends
+    without a line (killed by the system for memory, SIGKILL, a crash or an ``exit`` in native
+    code, whatever its exit code) is replaced and its pair tried again alone, no other pair
+    beside it; a pair whose worker died MAX_WORKER_DEATHS_PER_PAIR times gets an internal error
+    line (``after_worker_death``), never a "no match". Workers die with this process
+    (``die_with_parent``); when the iteration stops early (Ctrl-C, or the consumer closes it)
+    they are terminated at once and the pairs they held get no line, so a resumed batch redoes
+    them. No ``multiprocessing`` queue or lock is made: nothing of the batch is left for the
+    resource tracker to clean up (and warn about) after ``kill -9``.
+    """
+    task = match_pair if task is None else task
+    idle: List[_Worker] = []  # started, holding no pair
+    deaths: Dict[Tuple[str, str], int] = {}  # pair -> times its worker died while matching it
+    retrying: Set[Tuple[str, str]] = set()  # its worker died, not yet finished: run alone
+    busy: Set[_Worker] = set()
+
+    def submit(pair: Pair) -> _Worker:
+        while True:
+            worker = idle.pop() if idle else _Worker(task)
+            try:
+                worker.conn.send((pair, config, max_pixels))
+                break
+            except OSError:  # it ended while idle (killed): another one
+                worker.close(stop_now=True)
+        busy.add(worker)
+        return worker
+
+    def wait_first(workers: List[_Worker]) -> List[_Worker]:
+        ready = set(multiprocessing.connection.wait(
+            [w.conn for w in workers] + [w.process.sentinel for w in workers]))
+        return [w for w in workers if w.conn in ready or w.process.sentinel in ready]
+
+    def outcome(worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
+        busy.discard(worker)
+        line = worker.line()
+        if line is not None:
             retrying.discard(pair.key)
-            return _outcome(future, pair, config)
-        if born_in == generation:
-            restart()
+            if line.get("error_kind") == INTERNAL:
+                worker.close()  # it ends by itself: a fresh one takes the next pair
+            else:
+                idle.append(worker)
+            return line
+        code = worker.exit_code()
+        worker.close(stop_now=True)
         deaths[pair.key] = deaths.get(pair.key, 0) + 1
-        line = after_worker_death(pair, deaths[pair.key], config)
+        line = after_worker_death(pair, deaths[pair.key], config, how=_how_it_ended(code))
         if line is None:
             retrying.add(pair.key)
         else:
             retrying.discard(pair.key)
         return line
 
-    def stop(_: List[Any]) -> None:
-        procs = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in procs:
-            proc.terminate()
+    def stop(workers: List[_Worker]) -> None:
+        for worker in workers:
+            busy.discard(worker)
+            worker.close(stop_now=True)
 
     try:
-        yield from bounded(
-            pairs, submit=submit,
-            wait_first=lambda fs: concurrent.futures.wait(
-                fs, return_when=concurrent.futures.FIRST_COMPLETED).done,
-            outcome=outcome,
-            limit=lambda: 1 if retrying else IN_FLIGHT_PER_WORKER * jobs, stop=stop)
+        yield from bounded(pairs, submit=submit, wait_first=wait_first, outcome=outcome,
+                           limit=lambda: 1 if retrying else jobs, stop=stop)
     finally:
-        pool.shutdown(wait=True)
+        for worker in list(busy):
+            worker.close(stop_now=True)
+        for worker in idle:
+            worker.close()
 
 
 def check_scheduler_address(address: str) -> str:

@@ -422,6 +422,16 @@ def _size_ok(head: Header, max_pixels: int) -> bool:
     return size is None or not max_pixels or size[0] * size[1] <= max_pixels
 
 
+def _room_for(p: Path, size: Tuple[int, int]) -> None:
+    """``MemoryError`` when there is no room for the image of ``size`` (w, h) as decoded (3
+    bytes a pixel): a decode that failed for want of memory (OpenCV returns no image) must not
+    be reported as a corrupt file."""
+    try:
+        np.empty((size[1], size[0], 3), np.uint8).fill(0)  # touched: the pages are taken
+    except MemoryError as exc:
+        raise MemoryError(f"{p}: no memory to decode the {size[0]}x{size[1]} image") from exc
+
+
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
                min_side: int = MIN_SIDE_PX) -> np.ndarray:
     """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
@@ -447,12 +457,17 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
         img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags)
-    except cv2.error:
+    except cv2.error as exc:
+        if "Insufficient memory" in str(exc):
+            raise MemoryError(f"{p}: no memory to decode the image") from exc
         img = None
     finally:
         cv2.utils.logging.setLogLevel(level)
     if img is None:
-        raise _corrupt(p) if size is not None else _not_decodable(p)
+        if size is None:
+            raise _not_decodable(p)
+        _room_for(p, size)  # out of memory is not a corrupt file
+        raise _corrupt(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h > max_pixels:

@@ -153,7 +153,8 @@ def verdict(result: MatchResult) -> str:
 
 # --------------------------------------------------------------------------- pictures
 
-def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarray:
+def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
+            footer: Sequence[str] = ()) -> np.ndarray:
     """The high image warped onto the low one, false-colour blended, footprint outlined.
 
     Parameters
@@ -166,6 +167,9 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
         When matched with a 2x3 or 3x3 transform: warp, blend and outline. For the fundamental
         matrix (no point-to-point map) the inliers are drawn on ``low``. When not matched,
         ``low`` with a "no reliable match: reason" caption.
+    footer : sequence of str
+        Lines of a caption at the bottom (``write_outputs``: the files' names). The outline is
+        drawn over both captions, so the strips never hide it.
 
     Returns
     -------
@@ -177,6 +181,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
     lines = [verdict(result)]
+    outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
     if result.matched and t is not None and model_of(result.model).has_ratio:
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
         warped, mask = _warp_high(high_grey, t, (ww, hh))
@@ -196,8 +201,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
             clipped = not np.allclose(shown.shape, np.asarray(corners).shape) or \
                 not np.allclose(shown, corners)
             if len(shown) >= 2:
-                pts = np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2)
-                cv2.polylines(out, [pts], True, OUTLINE, thick, cv2.LINE_AA, shift=4)
+                outline = np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2), thick
         lines.append("magenta = low, green = high warped (grey where they agree); "
                      "outline = high footprint" + (" (cut at the picture's edge, where it "
                                                    "runs beyond)" if clipped else ""))
@@ -206,7 +210,11 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult) -> np.ndarra
             cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
                        cv2.LINE_AA, shift=4)
         lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
-    return caption(out, lines)
+    caption(out, lines)
+    caption(out, footer, where="bottom")
+    if outline is not None:  # after the caption: its dark strip must not hide the outline
+        cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
+    return out
 
 
 def clip_polygon(points: np.ndarray, box: Tuple[float, float, float, float]) -> np.ndarray:
@@ -347,8 +355,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
-    ov = overlay(low, high, result)
-    caption(ov, [f"low: {Path(low_path).name}   high: {Path(high_path).name}"], where="bottom")
+    ov = overlay(low, high, result,
+                 footer=[f"low: {Path(low_path).name}   high: {Path(high_path).name}"])
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, result))
     _write_png(paths["scales.png"], scale_plot(result))

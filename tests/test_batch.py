@@ -2,8 +2,9 @@
 anything but results, or results of other options; a torn line cut; error lines removed to retry
 their pairs), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
 die with the main process (kill -9), resume after it, a worker killed mid-run (the pool started
-again, its pairs retried, a pair that kills its worker given up), Ctrl-C, and the Dask backend on
-a LocalCluster on loopback."""
+again, its pairs retried, a pair that kills its worker given up), a worker replaced after an
+internal error (out of memory), no semaphore left to the resource tracker after kill -9, Ctrl-C,
+and the Dask backend on a LocalCluster on loopback."""
 
 from __future__ import annotations
 
@@ -17,7 +18,6 @@ import subprocess
 import sys
 import threading
 import time
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import cv2
@@ -25,10 +25,12 @@ import numpy as np
 import pytest
 
 from scalematch import batch
+from scalematch.batch import match_pair as real_match_pair  # the worker's own
 from scalematch.batch import (NOTHING_DONE, BatchError, Pair, after_worker_death, bounded,
                               config_changes, config_json, cut_torn_line, drop_error_lines,
                               read_pairs, scan_output, unique_pairs)
 from scalematch.config import Config
+from scalematch.imageio import DEFAULT_MAX_PIXELS
 from scalematch.result import dumps
 from scalematch.lab.synthetic import make_zoom_pair
 from test_cli import JSON_KEYS, assert_one_line_error, run
@@ -240,79 +242,110 @@ def test_after_worker_death_tries_again_then_writes_a_resumable_error_line(tmp_p
     assert scan_output(out, config_json(Config())).errors == {pair.key}
 
 
-class FakePool:
-    """A process pool as ``run_pool`` uses one, without processes. Submitting a pair whose low
-    path is in ``poison`` breaks the pool, as its worker dying would: every unfinished future of
-    the pool fails with BrokenProcessPool (but those of pairs in ``orphans``, left pending as one
-    submitted while a pool of CPython 3.11 breaks can be) and the pool refuses new work. Any
-    other pair's line comes DELAY_S after it was submitted, unless the pool broke first."""
-
-    DELAY_S = 0.2  # long against the microseconds between two submits of run_pool's loop
-
-    def __init__(self, poison, orphans, log, every_future):
-        self.poison, self.orphans = poison, orphans
-        self.log = log  # (pool, pair, unfinished futures of every pool) at each submit
-        self.every_future = every_future  # of every pool
-        self.futures, self.broken, self.shut = [], False, False
-
-    def submit(self, fn, pair, *args):
-        if self.broken:
-            raise BrokenProcessPool("the pool is not usable anymore")
-        self.log.append((self, pair, sum(not f.done() for f in self.every_future)))
-        future = concurrent.futures.Future()
-        self.futures.append((future, pair))
-        self.every_future.append(future)
-        if pair.low in self.poison:
-            self.broken = True
-            for f, p in self.futures:
-                if p.low not in self.orphans:
-                    _settle(f.set_exception, BrokenProcessPool("a worker died"))
-        elif pair.low not in self.orphans:
-            line = {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": True}
-            timer = threading.Timer(self.DELAY_S, _settle, (future.set_result, line))
-            timer.daemon = True
-            timer.start()
-        return future
-
-    def shutdown(self, wait=True, cancel_futures=False):
-        self.shut = True
+#: Set in a worker process once a pair ran it out of memory: every later pair there fails too,
+#: as when the memory a MemoryError left taken is not given back (seen under RLIMIT_AS).
+_OUT_OF_MEMORY = False
 
 
-def _settle(setter, value):
+def _log(pair: Pair, what: str) -> None:
+    """A line "low-name what" appended to log.txt beside the pair's low image (one write of a
+    few bytes with O_APPEND: whole lines however many workers write)."""
+    low = Path(pair.low_file)
+    with open(low.parent / "log.txt", "a") as fh:
+        fh.write(f"{low.name} {what}\n")
+
+
+def match_or_fail(pair: Pair, config: Config, max_pixels: int):
+    """``match_pair`` as a worker runs it, but the pair whose low image is named oom*.png raises
+    MemoryError in ``match`` and leaves its process out of memory (every later match there
+    raises too), and the pair whose low image is named exit1*.png ends its process with exit
+    code 1, as OpenBLAS does from native code when it cannot allocate its buffers. Picklable by
+    reference: ``run_pool`` hands it to worker processes, which import this module."""
+    global _OUT_OF_MEMORY
+
+    def match(low, high, cfg):
+        global _OUT_OF_MEMORY
+        if _OUT_OF_MEMORY or Path(pair.low).name.startswith("oom"):
+            _OUT_OF_MEMORY = True
+            raise MemoryError("Unable to allocate 1.00 GiB")
+        return real_match(low, high, cfg)
+
+    _log(pair, "start")
+    if Path(pair.low).name.startswith("exit1"):
+        _log(pair, "exits")
+        os._exit(1)
+    real_match = batch.match
+    batch.match = match
     try:
-        setter(value)
-    except concurrent.futures.InvalidStateError:  # settled already (the pool broke first)
-        pass
+        return real_match_pair(pair, config, max_pixels)
+    finally:
+        batch.match = real_match
+        _log(pair, "end")
 
 
-@pytest.mark.parametrize("orphans", [set(), {"l1"}])
-def test_run_pool_starts_a_new_pool_and_gives_up_on_a_pair_that_kills_its_worker(monkeypatch,
-                                                                                orphans):
-    pairs = [Pair(f"l{k}", f"h{k}", "", "") for k in range(8)]
-    pools, log, every_future, lines = [], [], [], []
+def _linked_pairs(images: Path, folder: Path, names) -> Path:
+    """A pairs CSV in ``folder`` of the tiny pair under the low names ``names`` (hard links)."""
+    folder.mkdir(exist_ok=True)
+    for name in names:
+        os.link(images / "low.png", folder / name)
+    return write(folder / "pairs.csv", "".join(f"{name},{images / 'high.png'}\n"
+                                               for name in names))
 
-    def start_pool(jobs):
-        pools.append(FakePool({"l2"}, orphans if not pools else set(), log, every_future))
-        return pools[-1]
 
-    monkeypatch.setattr(batch, "_start_pool", start_pool)
-    runner = threading.Thread(target=lambda: lines.extend(batch.run_pool(pairs, Config(), 0, 2)),
-                              daemon=True)  # 2 workers: 4 pairs in flight at most
-    runner.start()
-    runner.join(timeout=30)
-    assert not runner.is_alive(), "run_pool hangs"
-    assert sorted(x["low"]["path"] for x in lines) == [p.low for p in pairs]  # one line each
-    errors = {x["low"]["path"]: x["error"] for x in lines if "error" in x}
-    assert list(errors) == ["l2"] and "died while matching it, 2 times" in errors["l2"]
-    # l0..l2 were in flight at the first break (l2 broke the pool as it was submitted, l3 met
-    # the broken pool and went to a second one): l0..l2 tried again, one at a time, nothing
-    # beside them; l2 broke the second pool alone; l4..l7 went to a third
-    submits = [(pools.index(pool), pair.low) for pool, pair, _ in log]
-    assert submits == [(0, "l0"), (0, "l1"), (0, "l2"), (1, "l3"), (1, "l0"), (1, "l1"),
-                       (1, "l2"), (2, "l4"), (2, "l5"), (2, "l6"), (2, "l7")]
-    unfinished = [n for _, _, n in log]  # other pairs in flight as each was submitted
-    assert unfinished[4:7] == [0, 0, 0] and max(unfinished) <= 3
-    assert len(pools) == 3 and all(p.shut for p in pools)
+def test_a_worker_out_of_memory_is_replaced_before_it_takes_another_pair(images, tmp_path):
+    """One pair's MemoryError in a worker process is that pair's internal error line; the worker
+    ends and a fresh process takes the next pair, so the pairs after it are matched. One worker,
+    so that with the pool of before (the same process takes the next pair) every later pair
+    would fail."""
+    names = ["oom.png"] + [f"l{k}.png" for k in range(3)]
+    pairs = unique_pairs(read_pairs(_linked_pairs(images, tmp_path / "oom", names)),
+                         tmp_path / "oom")
+    lines = list(batch.run_pool(pairs, Config(), DEFAULT_MAX_PIXELS, 1, task=match_or_fail))
+    assert [x["low"]["path"] for x in lines] == names  # one line each, in turn
+    assert lines[0]["error_kind"] == "internal"
+    assert lines[0]["error"] == ("internal error, out of memory (MemoryError: Unable to allocate "
+                                 "1.00 GiB)")
+    assert all(x["matched"] and "error" not in x for x in lines[1:])
+
+
+def test_without_workers_the_pairs_after_an_out_of_memory_go_to_a_fresh_process(images, tmp_path,
+                                                                               monkeypatch):
+    """--jobs 1 matches in the main process; after one pair's MemoryError there the pairs left
+    go to a worker process (this one may not have its memory back): they are matched."""
+    names = ["oom.png"] + [f"l{k}.png" for k in range(3)]
+    pairs = _linked_pairs(images, tmp_path / "serial", names)
+    monkeypatch.setattr(batch, "match_pair", match_or_fail)
+    monkeypatch.setattr(sys.modules[__name__], "_OUT_OF_MEMORY", False)  # this process's
+    result = run("batch", pairs)
+    assert result.exit_code == 4, (result.exit_code, result.stderr)
+    lines = lines_of_text(result.stdout)
+    assert [x["low"]["path"] for x in lines] == names
+    assert lines[0]["error_kind"] == "internal"
+    assert all(x["matched"] and "error" not in x for x in lines[1:])
+
+
+def test_a_worker_that_exits_1_is_an_internal_error_never_no_match(images, tmp_path, monkeypatch):
+    """A worker ending with exit code 1 (OpenBLAS out of memory, from native code) is a death:
+    its pair is tried again alone, nothing beside it, then gets an internal error line naming
+    the exit code; the other pairs are matched; the batch exits 4, not 1 nor 3."""
+    names = ["l0.png", "exit1.png"] + [f"l{k}.png" for k in range(1, 5)]
+    folder = tmp_path / "exit1"
+    pairs = _linked_pairs(images, folder, names)
+    monkeypatch.setattr(batch, "match_pair", match_or_fail)
+    result = run("batch", pairs, "-j", "2")
+    assert result.exit_code == 4, (result.exit_code, result.stderr)
+    lines = {x["low"]["path"]: x for x in lines_of_text(result.stdout)}
+    assert sorted(lines) == sorted(names)
+    assert lines["exit1.png"]["error_kind"] == "internal" and not lines["exit1.png"]["matched"]
+    assert ("its worker process died while matching it, 2 times, the last one exit code 1"
+            in lines["exit1.png"]["error"])
+    assert all(lines[n]["matched"] for n in names if n != "exit1.png")
+    # the second try ran alone: every other pair started had ended, none started beside it
+    log = (folder / "log.txt").read_text().splitlines()
+    second = [i for i, x in enumerate(log) if x == "exit1.png start"][1]
+    assert log[second + 1] == "exit1.png exits"
+    before = [x for x in log[:second] if not x.startswith("exit1.png")]
+    assert sum(x.endswith(" start") for x in before) == sum(x.endswith(" end") for x in before)
 
 
 # --------------------------------------------------------------------------- the command
@@ -557,6 +590,10 @@ def test_a_worker_whose_parent_is_gone_exits_at_once():
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_kill_9_leaves_no_worker_alive_and_resume_loses_nothing(images, tmp_path):
+    """Also: nothing on stderr after the kill, nor from the resumed run. The process pool of
+    before made semaphores (its queues' locks) that multiprocessing's resource tracker, which
+    outlives the main process, removed after kill -9 with "UserWarning: resource_tracker: There
+    appear to be 5 leaked semaphore objects to clean up at shutdown"."""
     n = 24  # distinct pairs (hard links of the tiny pair): ~1 s of work for 2 workers
     for k in range(n):
         os.link(images / "low.png", tmp_path / f"l{k}.png")
@@ -565,14 +602,15 @@ def test_kill_9_leaves_no_worker_alive_and_resume_loses_nothing(images, tmp_path
     out = tmp_path / "r.jsonl"
     cmd = [sys.executable, "-m", "scalematch.cli", "batch", str(pairs), "--output", str(out),
            "--jobs", "2", "-q"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
         while _complete_lines(out) < 1 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.01)
         workers = _children(proc.pid)
         proc.send_signal(signal.SIGKILL)
-        proc.wait()
+        # stderr ends when the last process holding it (workers, resource tracker) has ended
+        _, stderr = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -583,10 +621,12 @@ def test_kill_9_leaves_no_worker_alive_and_resume_loses_nothing(images, tmp_path
     while any(_alive(w) for w in workers) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not [w for w in workers if _alive(w)], "a worker outlived the main process"
+    assert stderr == "", stderr  # no "leaked semaphore objects"
 
-    result = run("batch", pairs, "--output", out, "-j", "2")
-    assert result.exit_code == 0, result.output
-    assert f"resuming: {done_at_kill} of {n}" in result.stderr
+    resumed = subprocess.run(cmd[:-1], capture_output=True, text=True, timeout=120)
+    assert resumed.returncode == 0, resumed.stderr
+    assert "leaked" not in resumed.stderr and "Warning" not in resumed.stderr, resumed.stderr
+    assert f"resuming: {done_at_kill} of {n}" in resumed.stderr
     lines = lines_of(out)  # every line whole (a torn one was cut)
     assert keys_of(lines) == sorted((f"l{k}.png", f"h{k}.png") for k in range(n))  # once each
     assert all(x["matched"] for x in lines)

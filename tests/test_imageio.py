@@ -340,3 +340,37 @@ def test_hostile_paths_are_refused_before_they_are_read(tmp_path, bgr):
     assert len(errors) == len(rows) - 1
     assert all(x["error_kind"] == "input" for x in errors)
     assert {x["low"]["path"] for x in errors} == {r.split(",")[0] for r in rows} - {str(good)}
+
+
+def test_a_decode_out_of_memory_is_a_memory_error_not_a_corrupt_file(tmp_path, monkeypatch):
+    """With no memory left to decode (OpenCV then returns no image, or raises "Insufficient
+    memory"), read_image raises MemoryError (an internal error: exit 4, batch error_kind
+    internal), not ImageError "truncated or corrupt" (exit 2), which would blame a good file.
+    Seen in a batch under RLIMIT_AS: a 4000x2250 JPEG that another worker decoded was called
+    corrupt."""
+    import subprocess
+    import sys
+
+    big = tmp_path / "big.png"
+    cv2.imwrite(str(big), np.zeros((4000, 6000, 3), np.uint8))  # 72 MB decoded, 200 kB stored
+    # the limit set once the modules are in: 40 MB more than the process holds, too little
+    code = ("import resource, sys\n"
+            "from scalematch.imageio import read_image\n"
+            "vm = int(open('/proc/self/statm').read().split()[0]) * resource.getpagesize()\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (vm + (40 << 20), vm + (40 << 20)))\n"
+            "try:\n"
+            "    read_image(sys.argv[1])\n"
+            "except MemoryError as exc:\n"
+            "    print('MemoryError', exc)\n")
+    done = subprocess.run([sys.executable, "-c", code, str(big)], capture_output=True,
+                          text=True, timeout=60)
+    assert done.stdout.startswith(f"MemoryError {big}: no memory to decode"), (done.stdout,
+                                                                              done.stderr)
+    # OpenCV's own words for it
+    def insufficient(*args):
+        raise cv2.error("OpenCV(5.0.0) alloc.cpp:73: error: (-4:Insufficient memory) Failed to "
+                        "allocate 72000000 bytes in function 'OutOfMemoryError'")
+
+    monkeypatch.setattr(cv2, "imdecode", insufficient)
+    with pytest.raises(MemoryError, match="no memory to decode"):
+        read_image(big)

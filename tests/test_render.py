@@ -132,3 +132,31 @@ def test_write_outputs(tmp_path, pair):
     paths = write_outputs(tmp_path / "none", "low.png", "high.png", low, high,
                           make_result(None, matched=False))
     assert paths["matches.csv"].read_text().strip() == "x_high,y_high,x_low,y_low"
+
+
+def test_overlay_outlines_the_border_when_high_covers_all_of_low(raccoon):
+    """high (the whole photo) covers more than the whole low image (a 400x300 crop of it,
+    shrunk by 2): the footprint runs beyond the picture on every side, so its outline follows
+    the picture's edges, all the way round, over the caption strips too (drawn before them, the
+    strips' dimming hid the outline's top and bottom parts)."""
+    x0, y0, f = 300, 200, 2.0
+    low = cv2.resize(raccoon[y0:y0 + 300, x0:x0 + 400], (200, 150), interpolation=cv2.INTER_AREA)
+    # high px -> low px, centre convention: x_low = (x_high + 0.5 - x0) / f - 0.5
+    t = np.array([[1 / f, 0, (0.5 - x0) / f - 0.5], [0, 1 / f, (0.5 - y0) / f - 0.5]])
+    corners = footprint(t, raccoon.shape)
+    assert corners[:, 0].min() < 0 and corners[:, 0].max() > 200  # beyond every side
+    assert corners[:, 1].min() < 0 and corners[:, 1].max() > 150
+    out = overlay(low, raccoon, make_result(t, high_shape=raccoon.shape),
+                  footer=["low: low.png   high: high.png"])  # as write_outputs draws it
+    mask = outline_mask(out)
+    edge = 3  # px from the border the outline (2 px thick, inside the picture) is looked for
+    sides = {"left": mask[:, :edge].any(axis=1), "right": mask[:, -edge:].any(axis=1),
+             "top": mask[:edge].any(axis=0), "bottom": mask[-edge:].any(axis=0)}
+    for side, hit in sides.items():
+        assert hit.mean() > 0.97, (side, hit.mean())  # all along (round corners aside)
+    # the caption strips are there (dark behind their text), under the outline's top and
+    # bottom parts
+    assert out[edge + 2:20, edge + 2:-edge - 2].mean() < 0.6 * low[edge + 2:20].mean()
+    assert out[-20:-edge - 2, edge + 2:-edge - 2].mean() < 0.6 * low[-20:-edge - 2].mean()
+    # inside, away from the border, no outline: the footprint's edges are all outside
+    assert not mask[2 * edge:-2 * edge, 2 * edge:-2 * edge].any()
