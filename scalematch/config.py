@@ -83,10 +83,14 @@ class Config:
     #: footprint is still about 32 low pixels wide"; the descriptor window is 16 px)
     min_footprint_px: float = 32.0
     seed: int = 0  #: the one seed for all randomness (RANSAC)
-    harris: HarrisParams = field(default_factory=HarrisParams)  #: the high image, every scale
-    #: the low image, at s = 1 only: the same detector; more points allowed, since the high
-    #: image's footprint may be a small part of it
-    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
+    #: the finer image, every scale. The threshold follows the image's contrast (issue 18: a
+    #: 12-bit image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the
+    #: absolute threshold); capped at 1, so it is only ever lowered (stages/detector.py)
+    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=True))
+    #: the coarser image, at s = 1 only: the same detector; more points allowed, since the
+    #: finer image's footprint may be a small part of it
+    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(
+        max_points=12000, contrast_relative=True))
     gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
     jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
     #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
 from scalematch.pipeline import distinct_pairs
+from scalematch.stages.detector import HarrisParams
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
 
@@ -336,3 +339,51 @@ def test_a_mild_tilt_is_answered_with_an_affine_map_not_a_poor_similarity(raccoo
 def test_plain_zoom_pairs_keep_the_similarity(raccoon, ratio, seed):
     result = match(*(lambda p: (p.low, p.high))(_pair(raccoon, ratio, seed)))
     assert result.matched and result.model == "similarity"
+
+
+# ------------------------------------------------------------- issue 18: few points
+
+def _smooth_photo():
+    """A smooth curved facade: wide soft stripes and blobs, 1 grey level of noise."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent / "stages"))
+    from test_detector import _smooth_scene
+
+    return _smooth_scene((1536, 2048), seed=2)
+
+
+def test_a_smooth_scene_is_solved_by_the_point_budget():
+    """The absolute threshold finds no point at s <= 2 and too few beyond; a budget of the
+    strongest maxima above the image's noise floor finds the truth (ratio 3)."""
+    pair = make_zoom_pair(_smooth_photo(), 3.0, np.random.default_rng(3))
+    plain = match(pair.low, pair.high, Config())
+    assert not plain.matched
+    budget = Config()
+    budget = replace(budget, harris=replace(budget.harris, min_points=100),
+                     harris_low=replace(budget.harris_low, min_points=400))
+    r = match(pair.low, pair.high, budget)
+    assert r.matched and _error(r, pair) < 3.0 and abs(r.resolution_ratio - 3.0) < 0.05
+
+
+@pytest.mark.parametrize("name", ["12-bit in 16-bit PNGs", "32 grey levels"])
+def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
+    """Issue 18: a 12-bit image stored as 0-4095 in a 16-bit PNG is read as 0-16 grey levels,
+    and 32 grey levels as 0-31: the threshold follows the image's contrast, so they match."""
+    import cv2
+
+    from scalematch.imageio import read_grey
+
+    pair = _pair(raccoon, 4.0, 6)
+    if name.startswith("12"):
+        for which, img in (("low", pair.low), ("high", pair.high)):
+            cv2.imwrite(str(tmp_path / f"{which}.png"),
+                        np.rint(np.clip(img, 0, 255) * 4095.0 / 255.0).astype(np.uint16))
+        low, high = read_grey(tmp_path / "low.png"), read_grey(tmp_path / "high.png")
+        assert low.max() < 16.0
+    else:
+        low, high = np.floor(np.clip(pair.low, 0, 255) / 8), np.floor(np.clip(pair.high, 0, 255) / 8)
+    absolute = replace(Config(), harris=HarrisParams(), harris_low=HarrisParams(max_points=12000))
+    assert not match(low, high, absolute).matched  # the absolute threshold sees nothing
+    r = match(low, high)
+    assert r.matched and _error(r, pair) < 3.0
