@@ -27,7 +27,7 @@ from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
 from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, overwhelming, probe_best,
                      search_plan, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Look, decide, look_again
+from .stages.decision import Look, ambiguous, decide, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
 from .stages.detector import MIN_SIDE_PX, Contrast, Keypoints, detect_on_level, image_contrast
 from .stages.estimator import estimate, model_of
@@ -119,7 +119,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     meter.finish()
     timings["total"] = time.perf_counter() - t0
     result = build_result(attempts, tuple(records), plan, stopped, config,
-                          cov.source if cov is not None else "", timings)
+                          cov.source if cov is not None else "", timings, work)
     return in_original(result, work, config)
 
 
@@ -428,11 +428,13 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening,
 
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
-                 timings: Dict[str, float]) -> MatchResult:
+                 timings: Dict[str, float], work: WorkImages) -> MatchResult:
     """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
     shows the first search made (the finer image itself, in the given order), with its reason.
+    The refit transform faces the uniqueness check (:func:`stages.decision.ambiguous`): a
+    repeated structure is refused there.
     """
     winner = strongest(attempts)
     shown = winner or attempts[0]
@@ -454,6 +456,11 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     fit = richer_model(fit, winner.view, best, config)
     t, inliers, model = pooled_refit(fit, winner.view, winner.outcomes, config)
     has_ratio = model_of(model).has_ratio
+    if has_ratio:
+        coarse, fine = winner.step.direction.coarser_finer(work.low, work.high)
+        common["evidence"], reason = ambiguous(coarse, fine, t, evidence, config.decision)
+        if reason:
+            return MatchResult(matched=False, reason=reason, **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = similarity_parts(t) if has_ratio else (math.nan, math.nan,

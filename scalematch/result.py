@@ -64,6 +64,10 @@ class Evidence:
     pixel_ncc: float = math.nan  #: ZNCC of the pixels under the grown map
     pixel_margin: float = math.nan  #: how much better than the nearby wrong placements
     pixel_z: float = math.nan  #: the same in standard deviations of the nearby placements
+    #: a transform about to be accepted, against every other placement (``uniqueness``):
+    unique_claimed: float = math.nan  #: ZNCC of the finer image at the claimed placement
+    unique_elsewhere: float = math.nan  #: the best ZNCC anywhere half a footprint away
+    unique_ratio: float = math.nan  #: misfit elsewhere over misfit at the claim
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

@@ -387,3 +387,4 @@ def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
     assert not match(low, high, absolute).matched  # the absolute threshold sees nothing
     r = match(low, high)
     assert r.matched and _error(r, pair) < 3.0
+

@@ -77,6 +77,15 @@ class DecisionParams:
     few_max_log_nfa: float = -6.0
     few_min_grown: int = 10
     few_min_margin: float = 0.1
+    #: a transform about to be accepted must place the finer image better than anywhere else in
+    #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
+    #: times the claimed one's (``stages.pixelcheck.uniqueness``). A repeated structure (the
+    #: windows of a facade) is matched by many points wherever a copy of it stands. Measured
+    #: (docs/NULLS.md): the 12 claims of the hardest nulls (two halves of one photo; 6 to 13
+    #: inliers, log10 NFA down to -38) 0.48 to 1.1; 152 true zoom pairs 3.75 to 898 (median
+    #: 148); Oxford pairs 4.8 to 12.6; tilted pairs 10.7 and more. 2 sits between 1.1 and 3.75.
+    #: nan (the finer image covers the coarser one: no room elsewhere) passes.
+    min_unique_ratio: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -91,6 +100,7 @@ class DecisionParams:
             in_range("decision", name, getattr(self, name), lo=0, integer=True)
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
         in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
+        in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
 
 
 @dataclass(frozen=True)
@@ -198,6 +208,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     names the scales of the per-scale table. ``look(t, outcome)``, when given, takes the second
     look (:func:`look_again`) at a best transform of at least ``look_min_inliers`` inliers: its
     figures go in the evidence, and it may accept a transform of ``few_min_inliers`` or more.
+    The accepted transform faces one more test once refit (:func:`ambiguous`).
     """
     params: DecisionParams = config.decision
     model = config.model
@@ -285,3 +296,26 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
                   f"{k} inliers)")
     return Decision(True, "", best.row.s, t, pairs, evidence)
+
+
+def ambiguous(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
+              params: DecisionParams):
+    """(evidence, reason): the uniqueness of a match's final transform ``t`` (finer px ->
+    coarser px, refit), and why it is refused ("" when it is not).
+
+    A repeated structure is matched by many points wherever a copy of it stands; the pixels
+    tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio`` times
+    better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`). Measured
+    on the final transform: a similarity found before the refit may hold on part of the image
+    only (a tilted view, a mild tilt), which the pixels would count against it.
+    """
+    from .pixelcheck import uniqueness
+
+    u = uniqueness(coarser, finer, t)
+    evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
+                       unique_ratio=u.ratio)
+    if not u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
+        return evidence, ""
+    return evidence, (f"ambiguous: the high image fits elsewhere in the low image nearly as "
+                      f"well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at the transform "
+                      f"found): a repeated structure?")

@@ -291,3 +291,88 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     return PixelCheck(ncc=ncc, best_perturbed=best, margin=ncc - best, z=float(z),
                       perturbed=tuple(float(v) for v in pert), overlap_px=n,
                       overlap_fraction=float(fraction))
+
+
+# --------------------------------------------------------------------------- uniqueness
+
+#: Radius, as a fraction of the template's shorter side, around the claimed placement inside
+#: which a correlation peak counts as the same placement (half a footprint: a copy of the
+#: structure elsewhere is at least that far away, or it would overlap the claim)
+UNIQUE_EXCLUSION = 0.5
+
+
+#: Smallest misfit 1 - ZNCC used as a divisor (a perfect fit would divide by zero)
+MISFIT_FLOOR = 1e-6
+
+
+@dataclass(frozen=True)
+class Uniqueness:
+    """How much better the claimed placement fits than the best placement elsewhere."""
+
+    claimed: float  #: ZNCC of the placed high image at the claimed position
+    elsewhere: float  #: the best ZNCC of the same warped image at any position half a footprint away
+    #: misfit elsewhere over misfit at the claim, ``(1 - elsewhere) / (1 - claimed)``: how many
+    #: times better the claimed placement fits (nan: cannot tell, e.g. no room elsewhere). A
+    #: ratio, not a difference: on a smooth scene every placement correlates 0.99, yet the
+    #: true one has ten times less misfit
+    ratio: float
+
+
+def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
+               params: PixelParams = PixelParams()) -> Uniqueness:
+    """Slide the high image, warped by ``t`` (rotation, scale, tilt kept), over the whole low
+    image and compare the claimed placement with the best one elsewhere (``cv2.matchTemplate``,
+    ZNCC over the footprint's mask).
+
+    A repeated structure (the windows of a facade, the panels of a bus) matches wherever a copy
+    of it stands: the claimed placement is then no better than another one, and the claim is
+    ambiguous even when many points agree with it. A true match fits its own place better than
+    any copy (the pixels are the same ones, not alike ones).
+
+    >>> rng = np.random.default_rng(0)
+    >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
+    >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
+    >>> u = uniqueness(low, high, np.array([[0.25, 0, 30 - 0.375], [0, 0.25, 20 - 0.375]]))
+    >>> u.claimed > 0.9, u.ratio > 3
+    (True, True)
+    >>> tiled = np.tile(low[20:80, 30:110], (2, 2))            # the structure twice over
+    >>> u = uniqueness(tiled, high, np.array([[0.25, 0, -0.375], [0, 0.25, -0.375]]))
+    >>> 0.8 < u.ratio < 1.25
+    True
+    """
+    nan = float("nan")
+    low = np.asarray(low, np.float32)
+    t3 = as_matrix3(np.asarray(t, np.float64))
+    corners = footprint(t3, high.shape)
+    if corners is None or not np.all(np.isfinite(t3)):
+        return Uniqueness(nan, nan, nan)
+    area = _quad_area(corners)
+    ratio = similarity_parts(t3)[0]
+    if area < params.min_overlap_px or not (math.isfinite(ratio) and ratio > 0):
+        return Uniqueness(nan, nan, nan)
+    q = min(1.0, params.max_side_px / math.sqrt(area))
+    if q < 1.0:
+        low, shrink = _shrunk(low, 1.0 / q)
+        t3 = shrink @ t3
+        ratio = ratio / shrink[0, 0]
+    small, k = blurred_for_ratio(high, ratio)
+    hh, ww = low.shape
+    img, mask = _warp_into(small, t3 @ _small_to_high(k), (ww, hh), params.edge_px)
+    rows, cols = np.nonzero(mask)
+    if rows.size < params.min_overlap_px:
+        return Uniqueness(nan, nan, nan)
+    y0, y1, x0, x1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    tpl = np.ascontiguousarray(img[y0:y1, x0:x1])
+    tmask = np.ascontiguousarray(mask[y0:y1, x0:x1]).astype(np.uint8)
+    if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask > 0].std()) <= params.min_std:
+        return Uniqueness(nan, nan, nan)  # no room to place it anywhere else, or flat
+    r = cv2.matchTemplate(low, tpl, cv2.TM_CCOEFF_NORMED, mask=tmask)
+    r = np.where(np.isfinite(r), r, -1.0)
+    claimed = float(r[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
+    yy, xx = np.mgrid[0:r.shape[0], 0:r.shape[1]]
+    radius = UNIQUE_EXCLUSION * min(tpl.shape)
+    far = (yy - y0) ** 2 + (xx - x0) ** 2 > radius * radius
+    if not far.any():
+        return Uniqueness(claimed, nan, nan)
+    elsewhere = float(r[far].max())
+    return Uniqueness(claimed, elsewhere, (1.0 - elsewhere) / max(1.0 - claimed, MISFIT_FLOOR))

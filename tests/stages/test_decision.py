@@ -106,3 +106,26 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     _, three = _outcomes(k=3, n=8)
     verdict = decide(three, (768, 1024), (480, 640), config, look=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
+
+
+def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
+    """The uniqueness check (docs/NULLS.md, the hardest nulls): the finer image warped by the
+    transform must fit its place at least min_unique_ratio times better (misfit 1 - ZNCC) than
+    any other place in the coarser image."""
+    import cv2
+
+    from scalematch.config import Config
+    from scalematch.result import Evidence
+    from scalematch.stages.decision import ambiguous
+
+    params = Config().decision
+    base = raccoon[200:260, 300:380]  # 80 x 60 px
+    high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)  # 4x finer
+    t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
+    unique = raccoon[170:350, 260:500]  # the place, and other (unrelated) texture around it
+    evidence, reason = ambiguous(unique, high, t, Evidence(), params)
+    assert reason == "" and evidence.unique_ratio > 3 * params.min_unique_ratio
+    tiled = np.tile(base, (3, 3))  # the same structure nine times over
+    t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
+    evidence, reason = ambiguous(tiled, high, t_tiled, Evidence(), params)
+    assert reason.startswith("ambiguous") and evidence.unique_ratio < params.min_unique_ratio
