@@ -62,7 +62,10 @@ ORDERS = ("given", "swapped")
 #: The evidence keys charted and summarised, in this order; a key absent from every row is left
 #: out (names change as the decision grows: every scalar key is recorded whatever its name).
 CHART_KEYS = ("log10_nfa", "inliers", "candidates", "agreeing_scales", "probe_score",
-              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check")
+              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers")
+#: Charted keys read from the row itself when the evidence lacks them (the recorder's own
+#: figures, e.g. the most inliers any scale of the reported search reached).
+ROW_KEYS = ("scales_max_inliers",)
 #: Gap between the two halves of a same-photo pair, as a fraction of the split side, and at
 #: least ``SPLIT_GAP_MIN_PX``: the two regions are disjoint with a margin, so no feature (a
 #: Harris window, a descriptor patch, the blur) can see across.
@@ -646,6 +649,8 @@ def evidence_values(rows: Sequence[Dict[str, Any]], key: str) -> np.ndarray:
     vals = []
     for r in rows:
         v = (r.get("evidence") or {}).get(key)
+        if v is None and key in ROW_KEYS:
+            v = r.get(key)
         if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
             vals.append(float(v))
     return np.asarray(vals, dtype=np.float64)
@@ -765,6 +770,17 @@ def format_percentiles(stats: Dict[str, Dict[str, Dict[str, Any]]]) -> str:
     return "\n".join(out) + "\n"
 
 
+def _time_sentence(groups: Sequence[GroupSummary]) -> str:
+    """One line comparing the nulls' median time with SIFT's on the same runs ("" without)."""
+    g = next((g for g in groups if g.kind == "all nulls"), None)
+    if g is None or not g.sift_runs or not math.isfinite(g.sift_median_seconds):
+        return ""
+    return (f"\nNo-match median time: scalematch {g.median_seconds:.2f} s, SIFT "
+            f"{g.sift_median_seconds:.2f} s on the same {g.sift_runs} runs "
+            f"({g.median_seconds / g.sift_median_seconds:.1f}x); SIFT claimed a match on "
+            f"{g.sift_claims} of them (every one false).\n")
+
+
 def false_claims(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
     """The rows claiming a match they should not have (nulls: any; true pairs: > 3 px off)."""
     return [r for r in rows if r.get("false_claim")]
@@ -843,6 +859,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     load_at_start = _load_average()
 
     specs = null_specs([p.name for p in paths], ratios, seed)
+    full_set = len(specs)
     if limit is not None:
         specs = specs[:max(int(limit), 0)]
     pair_dir = out / f"pairs-seed{seed}"
@@ -889,6 +906,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
 
     settings = {"command": command, "seed": seed, "mode": mode, "ratios": [float(r) for r in ratios],
                 "photos": [p.name for p in paths], "pairs": len(specs), "runs_planned": len(tasks),
+                "pairs_in_full_set": full_set,
                 "limit": limit, "jobs": jobs, "sift": sift, "true_count": true_count,
                 "max_minutes": max_minutes, "machine": machine(),
                 "load_average_at_start": load_at_start, "opencv": cv2.__version__,
@@ -898,8 +916,9 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
                 "keys_recorded": sorted({k for r in rows for k in (r.get("evidence") or {})}),
                 "pairs_folder": str(pair_dir), "rows_path": str(rows_path)}
     text = ("Runs (a false claim: any match on a null pair; on a true pair, a match more than "
-            "3 px off)\n\n" + format_summary(groups) + "\nEvidence percentiles\n\n"
-            + format_percentiles(stats))
+            "3 px off)\n\n" + format_summary(groups) + _time_sentence(groups)
+            + "\nEvidence percentiles (runs with the key; a no-match reports the evidence of its "
+            "first search: the order given, plain views)\n\n" + format_percentiles(stats))
     bad = false_claims(rows + true_rows)
     text += f"\nFalse claims: {len(bad)}\n" + "".join(
         f"- `{r['run_id']}`: transform {r.get('transform')}, evidence {r.get('evidence')}\n"
@@ -945,10 +964,12 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
                                    if s["jobs"] == 1 else ", one OpenCV thread each"),
         f"- Mode {s['mode']}; seed {s['seed']}; ratios "
         f"{', '.join(f'{r:g}' for r in s['ratios'])}; {len(s['photos'])} photos",
-        f"- Pairs planned: {s['pairs']} ({s['runs_planned']} runs); runs done: {runs}"
-        + ("" if runs >= s["runs_planned"] else
-           " (the run was cut short by its time budget; the prefix of the fixed run order is "
-           "a balanced sample of kinds, photos and ratios)"),
+        f"- The full null set: {s.get('pairs_in_full_set', s['pairs'])} pairs "
+        f"({2 * s.get('pairs_in_full_set', s['pairs'])} runs); this run: the first "
+        f"{s['pairs']} pairs of the fixed run order ({s['runs_planned']} runs), {runs} runs done"
+        + ("" if s["pairs"] >= s.get("pairs_in_full_set", s["pairs"]) else
+           " (a prefix of the fixed, seeded run order: the kinds alternate, photos and ratios "
+           "are shuffled, so it is a balanced sample)"),
         ("- SIFT: the reference (OpenCV SIFT, ratio test 0.8, RANSAC similarity at 3 px, "
          "claims from 4 inliers) on the same images in the same order, in the same process, "
          "alternately before and after scalematch.") if s["sift"] else "- SIFT not run.",
