@@ -685,20 +685,59 @@ def _groups_for_chart(rows: Sequence[Dict[str, Any]],
     return {k: v for k, v in groups.items() if v}
 
 
+def _symlog(x: np.ndarray) -> np.ndarray:
+    """sign(x) log10(1 + |x|): spreads values from -1000 to 1000 while keeping 0 and the sign."""
+    return np.sign(x) * np.log10(1.0 + np.abs(x))
+
+
+def _symlog_inverse(t: np.ndarray) -> np.ndarray:
+    return np.sign(t) * (10.0 ** np.abs(t) - 1.0)
+
+
+#: A panel is drawn on a symlog axis when its groups' median magnitudes differ by more than this
+#: factor (true pairs' log10 NFA near -1000 against the nulls' near +5).
+SYMLOG_SPREAD = 30.0
+
+
+def histogram_bins(groups: Sequence[np.ndarray], n_bins: int = 30) -> Tuple[np.ndarray, bool]:
+    """(bin edges, symlog) shared by the groups of values (each (N,)) of one panel.
+
+    Integers over a range of at most 60: one bin per integer. Groups whose median magnitudes
+    differ by more than ``SYMLOG_SPREAD``: bins even in ``sign(x) log10(1 + |x|)`` and
+    ``symlog`` True (the axis is drawn symlog, so both groups keep their shape). Else even bins.
+    """
+    groups = [np.asarray(g, np.float64) for g in groups if np.size(g)]
+    v = np.concatenate(groups)
+    lo, hi = float(v.min()), float(v.max())
+    if np.all(v == np.round(v)) and hi - lo <= 60:
+        return np.arange(lo - 0.5, hi + 1.5), False
+    mags = [max(float(np.median(np.abs(g))), 1.0) for g in groups]
+    if max(mags) > SYMLOG_SPREAD * min(mags):
+        t = np.linspace(float(_symlog(np.array(lo))), float(_symlog(np.array(hi))), n_bins + 1)
+        return _symlog_inverse(t), True
+    return np.linspace(lo, hi if hi > lo else lo + 1.0, n_bins + 1), False
+
+
 def plot_distributions(rows: Sequence[Dict[str, Any]], path: PathLike,
                        true_rows: Sequence[Dict[str, Any]] = (),
                        keys: Sequence[str] = CHART_KEYS, title: str = "",
-                       size: Tuple[int, int] = (1200, 800)) -> np.ndarray:
+                       size: Tuple[int, int] = (1200, 820)) -> np.ndarray:
     """Histograms of each charted evidence key: the nulls by kind, and true pairs if given.
 
-    One panel per key present (``chart_keys``), the fraction of each group's runs per bin
-    (so groups of different sizes compare); bins shared by the groups of a panel. Drawn with
-    the lab's matplotlib canvas (``plot._figure``), returned BGR and written to ``path``.
+    One panel per key present (``chart_keys``), the fraction of each group's runs that carry
+    the key, per bin (so groups of different sizes compare); bins shared by the groups of a
+    panel (``histogram_bins``; a symlog axis for keys spanning decades). One legend for the
+    figure: each group with its number of runs. Drawn with the lab's matplotlib canvas
+    (``plot._figure``), returned BGR and written to ``path``.
     """
+    from matplotlib.lines import Line2D
+
     from ..chart import save
     from .plot import PALETTE, _figure, _to_bgr
 
     groups = _groups_for_chart(rows, true_rows)
+    colours = {g: tuple(c / 255.0 for c in PALETTE[j % len(PALETTE)][::-1])
+               for j, g in enumerate(groups)}
     keys = chart_keys([r for g in groups.values() for r in g], keys)
     fig = _figure((int(size[0]), int(size[1])))
     if not keys:
@@ -709,27 +748,25 @@ def plot_distributions(rows: Sequence[Dict[str, Any]], path: PathLike,
     for i, key in enumerate(keys):
         ax = fig.add_subplot(n_row, n_col, i + 1)
         values = {g: evidence_values(rs, key) for g, rs in groups.items()}
-        allv = np.concatenate([v for v in values.values() if v.size])
-        lo, hi = float(allv.min()), float(allv.max())
-        integral = np.all(allv == np.round(allv)) and hi - lo <= 60
-        bins = (np.arange(lo - 0.5, hi + 1.5) if integral
-                else np.linspace(lo, hi if hi > lo else lo + 1.0, 31))
-        for j, (g, v) in enumerate(values.items()):
-            if not v.size:
-                continue
-            colour = tuple(c / 255.0 for c in PALETTE[j % len(PALETTE)][::-1])
-            ax.hist(v, bins=bins, weights=np.full(v.size, 1.0 / v.size), histtype="step",
-                    linewidth=2, color=colour, label=f"{g} ({v.size})")
-        ax.set_title(key, fontsize=10)
-        ax.set_ylabel("fraction of runs", fontsize=8)
+        bins, symlog = histogram_bins(list(values.values()))
+        for g, v in values.items():
+            if v.size:
+                ax.hist(v, bins=bins, weights=np.full(v.size, 1.0 / v.size), histtype="step",
+                        linewidth=2, color=colours[g])
+        if symlog:
+            ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_title(key + (" (symlog axis)" if symlog else ""), fontsize=10)
+        ax.set_ylabel("fraction of runs with the key", fontsize=8)
         ax.tick_params(labelsize=8)
         ax.grid(True, color="0.9")
         ax.set_axisbelow(True)
-        if i == 0:
-            ax.legend(fontsize=7, loc="best", framealpha=0.85)
+    if groups:
+        handles = [Line2D([], [], color=colours[g], linewidth=2) for g in groups]
+        fig.legend(handles, [f"{g} ({len(rs)} runs)" for g, rs in groups.items()],
+                   loc="lower center", ncol=min(len(groups), 4), fontsize=9, frameon=False)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     img = _to_bgr(fig)
     save(img, path)
     return img
