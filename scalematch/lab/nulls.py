@@ -662,11 +662,18 @@ def chart_keys(rows: Sequence[Dict[str, Any]], keys: Sequence[str] = CHART_KEYS)
 
 
 def percentiles(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> Dict[str, Dict[str, Any]]:
-    """key -> {"n", "min", "p5", ..., "p95", "max"} over ``rows`` (n = runs with the key)."""
+    """key -> {"n", "not_finite", "min", "p5", ..., "p95", "max"} over ``rows``.
+
+    ``n`` counts the runs with a finite value of the key, ``not_finite`` those where it was
+    inf or nan (recorded as strings, e.g. a log10 NFA with no more inliers than the sample;
+    None in rows of earlier versions).
+    """
     out = {}
     for k in keys:
         v = evidence_values(rows, k)
-        stats: Dict[str, Any] = {"n": int(v.size)}
+        ev = [r.get("evidence") or {} for r in rows]  # None: non-finite by an older recorder
+        odd = sum(k in e and (e[k] is None or isinstance(e[k], str)) for e in ev)
+        stats: Dict[str, Any] = {"n": int(v.size), "not_finite": int(odd)}
         if v.size:
             stats["min"] = float(v.min())
             stats.update({f"p{p}": float(np.percentile(v, p)) for p in PERCENTILES})
@@ -796,14 +803,48 @@ def format_summary(groups: Sequence[GroupSummary]) -> str:
 def format_percentiles(stats: Dict[str, Dict[str, Dict[str, Any]]]) -> str:
     """group -> key -> percentiles, as a Markdown table."""
     cols = ["min"] + [f"p{p}" for p in PERCENTILES] + ["max"]
-    out = ["| runs | key | n | " + " | ".join(cols) + " |",
-           "|---|---|---:|" + "---:|" * len(cols)]
+    out = ["| runs | key | n | not finite | " + " | ".join(cols) + " |",
+           "|---|---|---:|---:|" + "---:|" * len(cols)]
     for group, per_key in stats.items():
         for key, s in per_key.items():
             if not s["n"]:
                 continue
-            out.append(f"| {group} | {key} | {s['n']} | "
+            out.append(f"| {group} | {key} | {s['n']} | {s.get('not_finite', 0)} | "
                        + " | ".join(_fmt(s.get(c), ".3g") for c in cols) + " |")
+    return "\n".join(out) + "\n"
+
+
+def format_per_ratio(rows: Sequence[Dict[str, Any]]) -> str:
+    """Null runs per ratio: runs, false claims, median and max time, SIFT's claims (Markdown)."""
+    nulls = [r for r in rows if r.get("kind") in KINDS]
+    out = ["| ratio | runs | false claims | median s | max s | SIFT median s | SIFT claims |",
+           "|---:|---:|---:|---:|---:|---:|---:|"]
+    for ratio in sorted({float(r["ratio"]) for r in nulls}):
+        rs = [r for r in nulls if float(r["ratio"]) == ratio]
+        sift = [r["sift"] for r in rs if isinstance(r.get("sift"), dict)]
+        out.append(f"| {ratio:g} | {len(rs)} | {sum(bool(r.get('false_claim')) for r in rs)} | "
+                   f"{_fmt(_median([r.get('seconds') for r in rs]), '.3f')} | "
+                   f"{_fmt(_max([r.get('seconds') for r in rs]), '.3f')} | "
+                   f"{_fmt(_median([x.get('seconds') for x in sift]), '.3f')} | "
+                   f"{sum(bool(x.get('claimed')) for x in sift) if sift else '-'} |")
+    return "\n".join(out) + "\n"
+
+
+def format_reasons(rows: Sequence[Dict[str, Any]]) -> str:
+    """Why the null runs gave no match: the reason's first words, counted per kind."""
+    import collections
+
+    def head(reason: str) -> str:
+        text = str(reason or "(matched)").split(":")[0].split("(")[0].strip()
+        return " ".join(text.split()[:8])
+
+    kinds = [k for k in KINDS if any(r.get("kind") == k for r in rows)]
+    counts = {k: collections.Counter(head(r.get("reason", "")) for r in rows
+                                     if r.get("kind") == k) for k in kinds}
+    reasons = sorted({x for c in counts.values() for x in c},
+                     key=lambda x: -sum(c[x] for c in counts.values()))
+    out = ["| reason | " + " | ".join(kinds) + " |", "|---|" + "---:|" * len(kinds)]
+    out += [f"| {x} | " + " | ".join(str(counts[k][x]) for k in kinds) + " |" for x in reasons]
     return "\n".join(out) + "\n"
 
 
@@ -954,6 +995,9 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
                 "pairs_folder": str(pair_dir), "rows_path": str(rows_path)}
     text = ("Runs (a false claim: any match on a null pair; on a true pair, a match more than "
             "3 px off)\n\n" + format_summary(groups) + _time_sentence(groups)
+            + "\nNull runs per ratio\n\n" + format_per_ratio(rows)
+            + "\nWhy the null runs gave no match (the reason's first words)\n\n"
+            + format_reasons(rows)
             + "\nEvidence percentiles (runs with the key; a no-match reports the evidence of its "
             "first search: the order given, plain views)\n\n" + format_percentiles(stats))
     bad = false_claims(rows + true_rows)
