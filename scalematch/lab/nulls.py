@@ -62,10 +62,10 @@ ORDERS = ("given", "swapped")
 #: The evidence keys charted and summarised, in this order; a key absent from every row is left
 #: out (names change as the decision grows: every scalar key is recorded whatever its name).
 CHART_KEYS = ("log10_nfa", "inliers", "candidates", "agreeing_scales", "probe_score",
-              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers")
+              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers", "footprint_ncc")
 #: Charted keys read from the row itself when the evidence lacks them (the recorder's own
 #: figures, e.g. the most inliers any scale of the reported search reached).
-ROW_KEYS = ("scales_max_inliers",)
+ROW_KEYS = ("scales_max_inliers", "footprint_ncc")
 #: Gap between the two halves of a same-photo pair, as a fraction of the split side, and at
 #: least ``SPLIT_GAP_MIN_PX``: the two regions are disjoint with a margin, so no feature (a
 #: Harris window, a descriptor patch, the blur) can see across.
@@ -489,6 +489,56 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
         row["success"] = bool(row["matched"] and is_success(err))
         row["false_claim"] = bool(row["matched"] and not is_success(err))
     return row
+
+
+def footprint_ncc(low: np.ndarray, high: np.ndarray, transform: np.ndarray) -> float:
+    """Normalised cross-correlation of ``low`` with ``high`` placed by ``transform`` on it.
+
+    ``high`` is blurred for the shrink (``CAMERA_BLUR_PX * sqrt(r^2 - 1)``, the camera model of
+    the synthetic pairs), warped by ``transform`` (2x3, high px -> low px) and compared with
+    the low pixels it covers: 1 for the same content, about 0 for unrelated content. A figure
+    of the recorder (the lab's view of a claim), not the pipeline's evidence; nan when the
+    footprint covers fewer than 16 low pixels.
+    """
+    from ..stages.scalespace import CAMERA_BLUR_PX
+
+    t = np.asarray(transform, np.float64)[:2]
+    r = 1.0 / max(math.sqrt(abs(np.linalg.det(t[:, :2]))), 1e-9)
+    hi = np.asarray(high, np.float32)
+    blur = CAMERA_BLUR_PX * math.sqrt(max(r * r - 1.0, 0.0))
+    if blur > 0.05:
+        hi = cv2.GaussianBlur(hi, (0, 0), blur)
+    size = (int(low.shape[1]), int(low.shape[0]))
+    warped = cv2.warpAffine(hi, t, size, flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(np.ones(hi.shape, np.uint8), t, size, flags=cv2.INTER_NEAREST) > 0
+    if mask.sum() < 16:
+        return math.nan
+    a = np.asarray(low, np.float64)[mask]
+    b = warped[mask].astype(np.float64)
+    a, b = a - a.mean(), b - b.mean()
+    den = math.sqrt(float((a * a).sum() * (b * b).sum()))
+    return float((a * b).sum() / den) if den > 0 else math.nan
+
+
+def add_footprint_ncc(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[str, Any]],
+                      folder: PathLike) -> None:
+    """Set ``footprint_ncc`` on every matched row lacking it (in place; from the stored PNGs).
+
+    The transform maps the finer image to the coarser one: the pair's high to its low when
+    the match kept the pair's order (run ``given`` found ``given``, or ``swapped`` found
+    ``swapped``), else the other way round.
+    """
+    for r in rows:
+        if not r.get("matched") or r.get("transform") is None or "footprint_ncc" in r:
+            continue
+        e = entries.get(r.get("pair_id"))
+        if e is None:
+            continue
+        low = _read(str(Path(folder) / e["low_file"]))
+        high = _read(str(Path(folder) / e["high_file"]))
+        if (r.get("order") == "given") != (r.get("result_order", "given") == "given"):
+            low, high = high, low
+        r["footprint_ncc"] = _finite(footprint_ncc(low, high, np.asarray(r["transform"])))
 
 
 def _finite(v: Any) -> Optional[float]:
@@ -962,6 +1012,9 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     elif true_rows_path is not None:
         true_rows = [r for r in load_rows(true_rows_path) if r.get("kind") == TRUE_KIND]
 
+    add_footprint_ncc(rows, entries, pair_dir)
+    if true_count:
+        add_footprint_ncc(true_rows, tentries, pair_dir)
     groups = summarise(rows + true_rows)
     keys = chart_keys(rows + true_rows)
     stats: Dict[str, Dict[str, Dict[str, Any]]] = {}
@@ -1002,8 +1055,11 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
             "first search: the order given, plain views)\n\n" + format_percentiles(stats))
     bad = false_claims(rows + true_rows)
     text += f"\nFalse claims: {len(bad)}\n" + "".join(
-        f"- `{r['run_id']}`: transform {r.get('transform')}, evidence {r.get('evidence')}\n"
-        for r in bad)
+        f"- `{r['run_id']}`: ratio {_fmt(r.get('resolution_ratio'))}, rotation "
+        f"{_fmt(r.get('rotation_deg'), '.1f')} deg, {r.get('inliers')} inliers, footprint NCC "
+        f"{_fmt(r.get('footprint_ncc'))}; SIFT "
+        f"{'claimed too' if (r.get('sift') or {}).get('claimed') else 'no claim'}; transform "
+        f"{r.get('transform')}; evidence {r.get('evidence')}\n" for r in bad)
     with open(out / f"nulls_{mode}.json", "w") as f:
         json.dump({"settings": settings, "groups": [asdict(g) for g in groups], "stats": stats,
                    "false_claims": bad}, f, indent=1, default=str)

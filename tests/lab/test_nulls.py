@@ -190,3 +190,15 @@ def test_a_fixed_sample_end_to_end_makes_no_false_claim(shared_dir, tmp_path):
     assert all(not r["reason"].startswith("error") for r in report.rows)
     page = write_nulls_doc(report, tmp_path / "docs" / "NULLS.md")
     assert (page.parent / "nulls.png").is_file() and "False claims: 0" in page.read_text()
+
+
+def test_footprint_ncc_tells_the_right_placement_from_a_wrong_one():
+    from scalematch.geometry import similarity_matrix
+    from scalematch.lab.nulls import footprint_ncc
+
+    high = _photo(320, 240, 5)
+    t = similarity_matrix(0.25, 30.0, 60.0, 20.0)  # high px -> low px
+    blurred = cv2.GaussianBlur(high, (0, 0), 0.5 * np.sqrt(15.0))
+    low = cv2.warpAffine(blurred, t, (200, 160), flags=cv2.INTER_LINEAR)
+    assert footprint_ncc(low, high, t) > 0.95
+    assert abs(footprint_ncc(low, high, similarity_matrix(0.25, 120.0, 90.0, 60.0))) < 0.5
