@@ -541,6 +541,57 @@ def add_footprint_ncc(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[st
         r["footprint_ncc"] = _finite(footprint_ncc(low, high, np.asarray(r["transform"])))
 
 
+def false_claim_figure(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[str, Any]],
+                       folder: PathLike, path: PathLike, tile: int = 240,
+                       per_row: int = 3) -> Optional[np.ndarray]:
+    """A picture of each false claim (one per pair): the low image's pixels under the claimed
+    footprint (left) beside the high image placed there by the claim (right), captioned with
+    the pair id, inliers, log10 NFA and footprint NCC. BGR; None (nothing written) when there
+    is no false claim."""
+    from ..chart import save
+
+    seen, tiles = set(), []
+    for r in rows:
+        if not r.get("false_claim") or r.get("pair_id") in seen or r.get("transform") is None:
+            continue
+        e = entries.get(r["pair_id"])
+        if e is None:
+            continue
+        seen.add(r["pair_id"])
+        low = cv2.imread(str(Path(folder) / e["low_file"]), cv2.IMREAD_GRAYSCALE)
+        high = cv2.imread(str(Path(folder) / e["high_file"]), cv2.IMREAD_GRAYSCALE)
+        if (r.get("order") == "given") != (r.get("result_order", "given") == "given"):
+            low, high = high, low
+        t = np.asarray(r["transform"], np.float64)[:2]
+        size = (low.shape[1], low.shape[0])
+        placed = cv2.warpAffine(high, t, size, flags=cv2.INTER_AREA)
+        mask = cv2.warpAffine(np.ones_like(high), t, size, flags=cv2.INTER_NEAREST) > 0
+        if not mask.any():
+            continue
+        ys, xs = np.nonzero(mask)
+        box = (slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1))
+        pair = [cv2.resize(img[box], (tile, tile), interpolation=cv2.INTER_AREA)
+                for img in (low, placed)]
+        cell = np.full((tile + 44, 2 * tile + 6), 255, np.uint8)
+        cell[44:, :tile], cell[44:, tile + 6:] = pair
+        ev = r.get("evidence") or {}
+        lines = (f"{r['pair_id'][:48]}",
+                 f"{r.get('inliers')} inliers, log10 NFA {_fmt(ev.get('log10_nfa'), '.1f')}, "
+                 f"NCC {_fmt(r.get('footprint_ncc'))}")
+        for k, text in enumerate(lines):
+            cv2.putText(cell, text, (4, 17 + 20 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.45, 0, 1,
+                        cv2.LINE_AA)
+        tiles.append(np.pad(cell, ((0, 10), (0, 16)), constant_values=255))
+    if not tiles:
+        return None
+    while len(tiles) % per_row:
+        tiles.append(np.full_like(tiles[0], 255))
+    img = np.vstack([np.hstack(tiles[i:i + per_row]) for i in range(0, len(tiles), per_row)])
+    img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    save(img, path)
+    return img
+
+
 def _finite(v: Any) -> Optional[float]:
     try:
         f = float(v)
@@ -930,6 +981,7 @@ class NullReport:
     rows_path: Path
     chart_path: Optional[Path]
     text: str = field(repr=False)
+    false_claims_path: Optional[Path] = None  #: the picture of the false claims, if any
 
 
 def _log_none(_: str) -> None:
@@ -1033,6 +1085,10 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     except ImportError as exc:
         log(f"note: no chart ({exc})")
         chart_path = None
+    fc_path: Optional[Path] = out / f"nulls_{mode}_false_claims.png"
+    all_entries = dict(entries, **(tentries if true_count else {}))
+    if false_claim_figure(rows + true_rows, all_entries, pair_dir, fc_path) is None:
+        fc_path = None
     from .bench import _git_commit, machine
 
     settings = {"command": command, "seed": seed, "mode": mode, "ratios": [float(r) for r in ratios],
@@ -1064,7 +1120,8 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
         json.dump({"settings": settings, "groups": [asdict(g) for g in groups], "stats": stats,
                    "false_claims": bad}, f, indent=1, default=str)
     return NullReport(rows=tuple(rows), true_rows=tuple(true_rows), groups=groups, stats=stats,
-                      settings=settings, rows_path=rows_path, chart_path=chart_path, text=text)
+                      settings=settings, rows_path=rows_path, chart_path=chart_path, text=text,
+                      false_claims_path=fc_path)
 
 
 def _load_average() -> Optional[float]:
@@ -1116,8 +1173,14 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
         png = p.stem.lower() + ".png"
         shutil.copyfile(report.chart_path, p.parent / png)
         lines += [f"![evidence distributions on null and true runs]({png})", ""]
-    lines += [report.text, "",
-              "Photos: " + ", ".join(f"`{n}`" for n in s["photos"]), ""]
+    lines += [report.text, ""]
+    if report.false_claims_path is not None and Path(report.false_claims_path).is_file():
+        png = p.stem.lower() + "_false_claims.png"
+        shutil.copyfile(report.false_claims_path, p.parent / png)
+        lines += ["Each false claim: the low image under the claimed footprint (left), the high "
+                  "image placed there by the claim (right).", "",
+                  f"![the false claims]({png})", ""]
+    lines += ["Photos: " + ", ".join(f"`{n}`" for n in s["photos"]), ""]
     p.write_text("\n".join(lines))
     return p
 

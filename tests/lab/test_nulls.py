@@ -202,3 +202,23 @@ def test_footprint_ncc_tells_the_right_placement_from_a_wrong_one():
     low = cv2.warpAffine(blurred, t, (200, 160), flags=cv2.INTER_LINEAR)
     assert footprint_ncc(low, high, t) > 0.95
     assert abs(footprint_ncc(low, high, similarity_matrix(0.25, 120.0, 90.0, 60.0))) < 0.5
+
+
+def test_false_claim_figure_shows_each_claimed_pair_once(tmp_path):
+    from scalematch.lab.nulls import false_claim_figure
+
+    photo_dir = tmp_path / "photos"
+    photo_dir.mkdir()
+    for name, seed in (("a_1.png", 1), ("b_1.png", 2)):
+        cv2.imwrite(str(photo_dir / name), _photo(1000, 800, seed).astype(np.uint8))
+    specs = null_specs(["a_1.png", "b_1.png"], ratios=(3,), seed=0)[:2]
+    entries = ensure_pairs(specs, tmp_path / "pairs", photo_dir)
+    claim = [[0.3, 0.0, 20.0], [0.0, 0.3, 10.0]]
+    rows = [{"pair_id": s.pair_id, "order": o, "result_order": o, "false_claim": True,
+             "matched": True, "transform": claim, "inliers": 7, "evidence": {"log10_nfa": -12.0}}
+            for s in specs for o in ORDERS]
+    img = false_claim_figure(rows, entries, tmp_path / "pairs", tmp_path / "fc.png", tile=100,
+                             per_row=3)
+    assert img is not None and (tmp_path / "fc.png").is_file()
+    assert img.shape[1] == 3 * (2 * 100 + 6 + 16)  # two pairs in a row of three cells
+    assert false_claim_figure(rows[:0], entries, tmp_path / "pairs", tmp_path / "x.png") is None
