@@ -1046,6 +1046,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     tasks = make_tasks([entries[s.pair_id] for s in specs], pair_dir, mode, sift, seed)
     rows_path = out / f"nulls_{mode}_seed{seed}.jsonl"
     wanted = {t["run_id"] for t in tasks}
+    resumed = sum(r.get("run_id") in wanted for r in load_rows(rows_path))
     rows = [r for r in execute(tasks, rows_path, jobs, deadline=deadline, log=log)
             if r.get("run_id") in wanted]
 
@@ -1090,7 +1091,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
 
     settings = {"command": command, "seed": seed, "mode": mode, "ratios": [float(r) for r in ratios],
                 "photos": [p.name for p in paths], "pairs": len(specs), "runs_planned": len(tasks),
-                "pairs_in_full_set": full_set,
+                "pairs_in_full_set": full_set, "runs_resumed": resumed,
                 "limit": limit, "jobs": jobs, "sift": sift, "true_count": true_count,
                 "max_minutes": max_minutes, "machine": machine(),
                 "load_average_at_start": load_at_start, "opencv": cv2.__version__,
@@ -1158,6 +1159,9 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
         f"- The full null set: {s.get('pairs_in_full_set', s['pairs'])} pairs "
         f"({2 * s.get('pairs_in_full_set', s['pairs'])} runs); this run: the first "
         f"{s['pairs']} pairs of the fixed run order ({s['runs_planned']} runs), {runs} runs done"
+        + (f", {s['runs_resumed']} of them by earlier invocations of the same command, resumed "
+           "from the rows file (each run's time is measured where it ran; the load average "
+           "above is this invocation's)" if s.get("runs_resumed") else "")
         + ("" if s["pairs"] >= s.get("pairs_in_full_set", s["pairs"]) else
            " (a prefix of the fixed, seeded run order: the kinds alternate, photos and ratios "
            "are shuffled, so it is a balanced sample)"),
