@@ -62,7 +62,8 @@ ORDERS = ("given", "swapped")
 #: The evidence keys charted and summarised, in this order; a key absent from every row is left
 #: out (names change as the decision grows: every scalar key is recorded whatever its name).
 CHART_KEYS = ("log10_nfa", "inliers", "candidates", "agreeing_scales", "probe_score",
-              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers", "footprint_ncc")
+              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers",
+              "footprint_ncc")
 #: Charted keys read from the row itself when the evidence lacks them (the recorder's own
 #: figures, e.g. the most inliers any scale of the reported search reached).
 ROW_KEYS = ("scales_max_inliers", "footprint_ncc")
@@ -1089,7 +1090,8 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
         fc_path = None
     from .bench import _git_commit, machine
 
-    settings = {"command": command, "seed": seed, "mode": mode, "ratios": [float(r) for r in ratios],
+    settings = {"command": command, "seed": seed, "mode": mode,
+                "ratios": [float(r) for r in ratios],
                 "photos": [p.name for p in paths], "pairs": len(specs), "runs_planned": len(tasks),
                 "pairs_in_full_set": full_set, "runs_resumed": resumed,
                 "limit": limit, "jobs": jobs, "sift": sift, "true_count": true_count,
