@@ -18,6 +18,7 @@ LAB_COMMANDS = {
     "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
     "descriptor-study": ("scalematch.lab.descriptor_study", "descriptor_study_command"),
     "covariance": ("scalematch.lab.covariance", "covariance_command"),
+    "nulls": ("scalematch.lab.nulls", "nulls_command"),
 }
 
 
