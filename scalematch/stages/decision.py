@@ -69,13 +69,18 @@ class DecisionParams:
     #: growth and the pixel check, :func:`look_again`), recorded in the evidence
     look_min_inliers: int = 3
     #: the second look may accept a transform with fewer than ``min_inliers`` (issue 18: the
-    #: right answer at ratio 8-10 had 5 inliers at log10 NFA -10 to -13), down to this many ...
+    #: right answer at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13), down to this many ...
     few_min_inliers: int = 4
-    #: ... when its log10 NFA is at most this, its growth reaches ``few_min_grown`` distinct
-    #: inliers and its pixel check beats every nearby wrong placement by ``few_min_margin``
-    #: (ZNCC); see docs/FEWPOINTS.md for the distributions these were set from
+    #: ... when its log10 NFA is at most this (null runs' best transforms: median +4, none
+    #: below -6 but the repeated structures, docs/NULLS.md) ...
     few_max_log_nfa: float = -6.0
-    few_min_grown: int = 10
+    #: ... its guided growth keeps at least this many inliers (0: growth is recorded, not
+    #: required: at the coarse scales where few points remain there is nothing to grow into;
+    #: measured 5 -> 5 on the true 5-inlier answers at ratio 10-16, docs/FEWPOINTS.md) ...
+    few_min_grown: int = 0
+    #: ... and its pixel check beats every nearby wrong placement by this much ZNCC (true
+    #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
+    #: docs/FEWPOINTS.md); the uniqueness check (``min_unique_ratio``) follows, as for all
     few_min_margin: float = 0.1
     #: a transform about to be accepted must place the finer image better than anywhere else in
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
@@ -265,9 +270,10 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
             second.margin >= params.few_min_margin  # nan: cannot tell, so no
         if not confirmed:
             return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
-                      f"{params.min_inliers} needed, or {params.few_min_inliers} that grow to "
-                      f"{params.few_min_grown} and pass the pixel check)")
-        t, pairs = second.transform, second.inliers
+                      f"{params.min_inliers} needed, or {params.few_min_inliers} beyond chance "
+                      f"that pass the pixel check)")
+        if len(second.inliers) >= k:  # grown (or kept): the refit map and its inliers
+            t, pairs = second.transform, second.inliers
     if lnfa > params.max_log_nfa:
         return no(f"the best transform ({k} inliers of {n} candidates at scale "
                   f"{best.row.s * shown_scale:.3g}) "

@@ -98,8 +98,7 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
 
     _, outcomes = _outcomes(k=5, n=8)
     config = Config()
-    for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan")),
-                 _look(grown=5, margin=0.5)):
+    for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan"))):
         verdict = decide(outcomes, (768, 1024), (480, 640), config, look=look)
         assert not verdict.matched and "pass the pixel check" in verdict.reason
     # three inliers are never enough, whatever the look says (the evidence is recorded)
@@ -129,3 +128,15 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
     evidence, reason = ambiguous(tiled, high, t_tiled, Evidence(), params)
     assert reason.startswith("ambiguous") and evidence.unique_ratio < params.min_unique_ratio
+
+
+def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
+    """At coarse scales there may be nothing to grow into: the pixel check alone confirms, and
+    the hypothesis keeps its own transform and inliers."""
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+
+    t, outcomes = _outcomes(k=5, n=8)
+    verdict = decide(outcomes, (768, 1024), (480, 640), Config(), look=_look(grown=0, margin=0.3))
+    assert verdict.matched and verdict.inliers.shape == (5, 4)
+    assert np.allclose(verdict.transform, t)
