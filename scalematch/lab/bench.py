@@ -51,10 +51,11 @@ from .evaluation import SUCCESS_PX, is_success, reprojection_error, similarity_f
 from ..geometry import similarity_parts
 from ..imageio import read_grey
 from ..result import to_jsonable
-from .synthetic import ZoomPair, pairs_from_photos, unrelated_indices, zoom_pair_from_crop
+from .synthetic import (CROP_PICKS, ZoomPair, pairs_from_photos, unrelated_indices,
+                        zoom_pair_from_crop)
 
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
-RATIOS = (2, 3, 4, 6, 8, 10)
+RATIOS = (2, 3, 4, 6, 8, 10, 12, 16)
 #: scalematch configurations by name: the two modes, and the ablation steps from the paper's
 #: method to the default (``--methods`` takes any of them; docs/ABLATION.md reports what each
 #: step bought). Values: (one-line description, name of the preset in ``config.PRESETS``).
@@ -217,7 +218,7 @@ def make_large_pair(photo_path: PathLike, seed: int, size: Tuple[int, int] = LAR
 
 def prepare_pairs(paths: Sequence[Path], ratios: Sequence[float], seed: int, folder: Path,
                   shared: Optional[Path], unrelated: int, boat: bool, large: bool,
-                  log: Callable[[str], None]) -> List[PairRecord]:
+                  log: Callable[[str], None], crop: str = "most") -> List[PairRecord]:
     """Make every pair of the run, store it under ``folder`` and return the records.
 
     Order: synthetic (photo by photo in ``paths`` order, ratio by ratio), unrelated, boat, large.
@@ -225,7 +226,7 @@ def prepare_pairs(paths: Sequence[Path], ratios: Sequence[float], seed: int, fol
     folder.mkdir(parents=True, exist_ok=True)
     records: List[PairRecord] = []
     t0 = time.perf_counter()
-    for k, pair in enumerate(pairs_from_photos(paths, ratios, seed)):
+    for k, pair in enumerate(pairs_from_photos(paths, ratios, seed, pick=crop)):
         f = _store(folder, f"syn{k:04d}", pair.low, pair.high)
         records.append(_record("synthetic", pair, f, f))
     log(f"made {len(records)} synthetic pairs from {len(paths)} photos "
@@ -496,6 +497,26 @@ def summarise(rows: Sequence[Dict[str, Any]], methods: Sequence[str], ratios: Se
     return tuple(per_ratio), tuple(per_method)
 
 
+def pair_by_pair(rows: Sequence[Dict[str, Any]], methods: Sequence[str],
+                 ours: str = "scalematch") -> str:
+    """Markdown: for each other method, the synthetic pairs it solves and ``ours`` misses (and
+    the other way round), named, so a rate that looks better cannot hide a pair lost."""
+    if ours not in methods:
+        return ""
+    key = lambda x: (x["source"], float(x["ratio"]))  # noqa: E731
+    solved = {m: {key(x) for x in rows if x["method"] == m and x["kind"] == "synthetic"
+                  and x["success"]} for m in methods}
+    out = [f"Pair by pair against {ours} (synthetic pairs; a pair is a photo and a ratio)", "",
+           f"| method | solves, {ours} misses | {ours} solves, it misses |", "|---|---|---:|"]
+    for m in methods:
+        if m == ours:
+            continue
+        lost = sorted(solved[m] - solved[ours])
+        names = ", ".join(f"{s} x{r:g}" for s, r in lost) or "none"
+        out.append(f"| {m} | {len(lost)}: {names} | {len(solved[ours] - solved[m])} |")
+    return "\n".join(out) + "\n"
+
+
 def _fmt(v: float, spec: str = ".2f", none: str = "-") -> str:
     return none if v is None or not math.isfinite(v) else format(v, spec)
 
@@ -582,7 +603,7 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
                   methods: Sequence[str] = METHOD_NAMES, unrelated: int = UNRELATED_COUNT,
                   jobs: int = 2, batch_size: int = BATCH_SIZE, boat: bool = True,
                   large: bool = True, batch: bool = True, command: str = "",
-                  log: Optional[Callable[[str], None]] = None) -> BenchReport:
+                  log: Optional[Callable[[str], None]] = None, crop: str = "most") -> BenchReport:
     """Make the pairs, run every method on them, and write the CSV, the summary and the plot.
 
     Parameters
@@ -648,7 +669,8 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
             log(f"note: skipping {name}: {exc}")
 
     pair_dir = out / "pairs"
-    records = prepare_pairs(paths, ratios, seed, pair_dir, shared_path, unrelated, boat, large, log)
+    records = prepare_pairs(paths, ratios, seed, pair_dir, shared_path, unrelated, boat, large, log,
+                            crop)
     main_recs = [r for r in records if r.kind != "large"]
     large_recs = [r for r in records if r.kind == "large"]
     log(f"{len(main_recs)} pairs ({sum(r.kind == 'synthetic' for r in records)} synthetic, "
@@ -689,7 +711,8 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
 
     names = list(chosen)
     per_ratio, per_method = summarise(rows, names, ratios, memory, large_res, batch_res)
-    table = format_tables(per_ratio, per_method, ratios, len(batch_recs))
+    table = format_tables(per_ratio, per_method, ratios, len(batch_recs)) + "\n" + \
+        pair_by_pair(rows, names)
     if skipped:
         table += "\n" + "\n".join(f"Skipped {m}: {why}" for m, why in skipped) + "\n"
     csv_path = write_csv(rows, out / "results.csv")
@@ -707,6 +730,7 @@ def run_benchmark(*, shared: Optional[PathLike] = None, out_dir: PathLike = "ben
         "commit": _git_commit(), "opencv": cv2.__version__, "numpy": np.__version__,
         "python": platform.python_version(), "large_pair": large_recs[0].source if large_recs else "",
         "load_average_at_start": load_at_start, "opencv_threads": cv2.getNumThreads(),
+        "crop": crop,
     }
     summary_path = out / "summary.json"
     with open(summary_path, "w") as f:
@@ -768,7 +792,9 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
              f"- Machine: {s['machine']}",
              f"- Software: Python {s['python']}, OpenCV {s['opencv']}, NumPy {s['numpy']}",
              f"- Seed {s['seed']}; ratios {', '.join(f'{r:g}' for r in s['ratios'])}; "
-             f"{len(s['photos'])} photos; {s['unrelated']} unrelated pairs requested",
+             f"{len(s['photos'])} photos; {s['unrelated']} unrelated pairs requested; the "
+             f"high image is the {s.get('crop', 'most')} textured of 6 random crops "
+             "(640x480, 960x720 beyond ratio 10)",
              f"- Reference for times: {s['reference']}. Each method runs alone in its own worker "
              "process; peak memory = the worker's peak resident set size minus its size before "
              "the first pair (after imports and a warm-up call).",
@@ -841,7 +867,11 @@ def _command_line(ctx: click.Context) -> str:
               default=None, help="Shared data folder (default $SCALEMATCH_SHARED or ../shared).")
 @click.option("--out-dir", type=click.Path(file_okay=False, path_type=Path), default="bench-out",
               show_default=True, help="Where results.csv, summary.json and the plot go.")
-@click.option("--ratios", default="2,3,4,6,8,10", show_default=True, callback=_csv_floats,
+@click.option("--crop", type=click.Choice(CROP_PICKS), default="most", show_default=True,
+              help="Which of 6 random crops each pair's high image is: the most textured "
+                   "(EVALUATION.md) or the least (the hard set of issue 18).")
+@click.option("--ratios", default=",".join(map(str, RATIOS)), show_default=True,
+              callback=_csv_floats,
               help="Zoom ratios of the synthetic pairs.")
 @click.option("--photos", type=click.IntRange(min=1), default=None,
               help="Use only the first N photos (sorted by name). Default: all.")
@@ -860,7 +890,7 @@ def _command_line(ctx: click.Context) -> str:
               help="Also write this Markdown page (e.g. docs/BENCHMARKS.md).")
 @click.option("--silent", is_flag=True, help="No progress lines (the table is still printed).")
 @click.pass_context
-def bench_command(ctx, shared, out_dir, ratios, photos, seed, methods, unrelated, jobs,
+def bench_command(ctx, shared, out_dir, crop, ratios, photos, seed, methods, unrelated, jobs,
                   batch_size, no_large, no_boat, write_doc, silent):
     """Benchmark scalematch against OpenCV SIFT, ORB, AKAZE and BRISK on the same pairs.
 
@@ -876,7 +906,8 @@ def bench_command(ctx, shared, out_dir, ratios, photos, seed, methods, unrelated
         report = run_benchmark(shared=shared, out_dir=out_dir, ratios=ratios, photos=photos,
                                seed=seed, methods=methods, unrelated=unrelated, jobs=jobs,
                                batch_size=batch_size, boat=not no_boat, large=not no_large,
-                               batch=batch_size > 0, command=_command_line(ctx), log=log)
+                               batch=batch_size > 0, command=_command_line(ctx), log=log,
+                               crop=crop)
     except ValueError as exc:
         raise click.ClickException(str(exc))
     click.echo(report.table)

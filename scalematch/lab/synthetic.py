@@ -120,10 +120,17 @@ def texture_score(crop: np.ndarray, ratio: float) -> float:
     return float(np.mean(np.sqrt(gx * gx + gy * gy)))
 
 
+#: Which of the candidate crops a pair takes: EVALUATION.md's "most" textured, or the "least"
+#: (issue 18's hard set: a crop of plain sky or a smooth wall is what starves the detector)
+CROP_PICKS = ("most", "least")
+
+
 def choose_crop(photo: np.ndarray, ratio: float, rng: np.random.Generator,
                 high_size: Tuple[int, int] = HIGH_SIZE,
-                n_candidates: int = N_CROP_CANDIDATES) -> Tuple[int, int, int, int]:
-    """(x, y, w, h) of the most textured of ``n_candidates`` random crops away from the border.
+                n_candidates: int = N_CROP_CANDIDATES,
+                pick: str = "most") -> Tuple[int, int, int, int]:
+    """(x, y, w, h) of the most (``pick="least"``: the least) textured of ``n_candidates``
+    random crops away from the border.
 
     Parameters
     ----------
@@ -139,24 +146,28 @@ def choose_crop(photo: np.ndarray, ratio: float, rng: np.random.Generator,
         raise ValueError(f"photo {pw}x{ph} is too small to cut a high-resolution crop from")
     mx = min(int(BORDER_MARGIN_FRAC * pw), (pw - w) // 2)
     my = min(int(BORDER_MARGIN_FRAC * ph), (ph - h) // 2)
-    return most_textured_crop(photo, (w, h), (mx, my), n_candidates, ratio, rng)
+    return most_textured_crop(photo, (w, h), (mx, my), n_candidates, ratio, rng, pick)
 
 
 def most_textured_crop(photo: np.ndarray, size: Tuple[int, int], margin: Tuple[int, int],
-                       n_candidates: int, ratio: float,
-                       rng: np.random.Generator) -> Tuple[int, int, int, int]:
-    """(x, y, w, h): the most textured (``texture_score``) of ``n_candidates`` random crops.
+                       n_candidates: int, ratio: float, rng: np.random.Generator,
+                       pick: str = "most") -> Tuple[int, int, int, int]:
+    """(x, y, w, h): the most textured (``texture_score``) of ``n_candidates`` random crops
+    (``pick="least"``: the least textured; the same candidates either way).
 
     Each candidate draws x in [mx, W - w - mx], then y in [my, H - h - my] (``margin`` = (mx,
     my)); the first of equally textured crops wins.
     """
+    if pick not in CROP_PICKS:
+        raise ValueError(f"pick must be one of {CROP_PICKS}, got {pick!r}")
     ph, pw = photo.shape[:2]
     (w, h), (mx, my) = size, margin
-    best, best_score = None, -1.0
+    sign = 1.0 if pick == "most" else -1.0
+    best, best_score = None, -math.inf
     for _ in range(max(n_candidates, 1)):
         x = int(rng.integers(mx, pw - w - mx + 1))
         y = int(rng.integers(my, ph - h - my + 1))
-        score = texture_score(photo[y:y + h, x:x + w], ratio)
+        score = sign * texture_score(photo[y:y + h, x:x + w], ratio)
         if score > best_score:
             best, best_score = (x, y, w, h), score
     return best
@@ -237,7 +248,7 @@ def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], rati
 
 def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
                    high_size: Tuple[int, int] = HIGH_SIZE, low_max: Tuple[int, int] = LOW_MAX,
-                   source: str = "") -> ZoomPair:
+                   source: str = "", pick: str = "most") -> ZoomPair:
     """Cut a synthetic zoom pair with exact ground truth from one photo (EVALUATION.md 1-3).
 
     ``high`` is the most textured of 6 random crops (``choose_crop``); ``low`` is the whole photo
@@ -267,7 +278,7 @@ def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
         raise ValueError(f"photo must be a grey (H, W) array, got shape {photo.shape}")
     if not ratio >= 1.0:
         raise ValueError(f"ratio must be >= 1, got {ratio}")
-    crop = choose_crop(photo, ratio, rng, high_size)
+    crop = choose_crop(photo, ratio, rng, high_size, pick=pick)
     return zoom_pair_from_crop(photo, crop, ratio, rng, low_max, source)
 
 
@@ -348,7 +359,7 @@ def high_size_for(ratio: float) -> Tuple[int, int]:
 
 def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float], seed: int = 0,
                       high_size: Optional[Tuple[int, int]] = None,
-                      low_max: Tuple[int, int] = LOW_MAX) -> Iterator[ZoomPair]:
+                      low_max: Tuple[int, int] = LOW_MAX, pick: str = "most") -> Iterator[ZoomPair]:
     """Zoom pairs from photo files: for each path in the order given, each ratio in order.
 
     Each photo is read once (grey float32, EXIF orientation applied, ``imageio.read_grey``), and
@@ -368,7 +379,7 @@ def pairs_from_photos(paths: Iterable[Union[str, Path]], ratios: Sequence[float]
         photo = read_grey(p)
         for r in ratios:
             yield make_zoom_pair(photo, r, pair_rng(seed, p.name, r),
-                                 high_size or high_size_for(r), low_max, source=p.name)
+                                 high_size or high_size_for(r), low_max, source=p.name, pick=pick)
 
 
 # --------------------------------------------------------------------------------------------

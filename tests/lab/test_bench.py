@@ -31,3 +31,15 @@ def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
     text = page.read_text()
     assert text.count("## Real pairs") == 1 and "| a table |" in text
     assert text.index("Photos: ") < text.index(MARK_BEGIN) < text.index(MARK_END)
+
+
+def test_pair_by_pair_names_every_pair_a_peer_solves_and_scalematch_misses():
+    from scalematch.lab.bench import pair_by_pair
+
+    row = lambda m, src, r, ok: dict(method=m, kind="synthetic", source=src, ratio=r, success=ok)
+    rows = [row("scalematch", "a.jpg", 2.0, True), row("sift", "a.jpg", 2.0, True),
+            row("scalematch", "b.jpg", 8.0, False), row("sift", "b.jpg", 8.0, True),
+            row("scalematch", "c.jpg", 16.0, True), row("sift", "c.jpg", 16.0, False)]
+    text = pair_by_pair(rows, ["scalematch", "sift"])
+    assert "| sift | 1: b.jpg x8 | 1 |" in text
+    assert pair_by_pair(rows, ["sift"]) == ""

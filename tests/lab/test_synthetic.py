@@ -127,3 +127,14 @@ def test_unrelated_from_pairs_never_pairs_one_scene():
     again = unrelated_from_pairs(pairs, 3, np.random.default_rng(0), scene_of)
     assert [(u.source, u.high_source) for u in again] == \
         [(u.source, u.high_source) for u in out[:3]]
+
+
+def test_the_least_textured_crop_is_drawn_from_the_same_candidates(raccoon):
+    from scalematch.lab.synthetic import choose_crop, texture_score
+
+    most = choose_crop(raccoon, 3.0, np.random.default_rng(1), (200, 150))
+    least = choose_crop(raccoon, 3.0, np.random.default_rng(1), (200, 150), pick="least")
+    score = lambda c: texture_score(raccoon[c[1]:c[1] + c[3], c[0]:c[0] + c[2]], 3.0)  # noqa: E731
+    assert score(least) < score(most)
+    with pytest.raises(ValueError, match="pick must be one of"):
+        choose_crop(raccoon, 3.0, np.random.default_rng(1), (200, 150), pick="some")
