@@ -29,7 +29,9 @@ Run ``scalematch lab nulls --help``.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
+import enum
 import json
 import math
 import os
@@ -61,8 +63,8 @@ RATIOS = (2, 3, 4, 6, 8, 10, 12, 16)
 ORDERS = ("given", "swapped")
 #: The evidence keys charted and summarised, in this order; a key absent from every row is left
 #: out (names change as the decision grows: every scalar key is recorded whatever its name).
-CHART_KEYS = ("log10_nfa", "inliers", "candidates", "agreeing_scales", "probe_score",
-              "probe_margin", "pixel_ncc", "pixel_margin", "pixel_check", "scales_max_inliers",
+CHART_KEYS = ("log10_nfa", "inliers", "candidates", "agreeing_scales", "probe_best",
+              "grown_inliers", "pixel_ncc", "pixel_margin", "unique_ratio", "scales_max_inliers",
               "footprint_ncc")
 #: Charted keys read from the row itself when the evidence lacks them (the recorder's own
 #: figures, e.g. the most inliers any scale of the reported search reached).
@@ -401,14 +403,19 @@ def make_tasks(entries: Iterable[Dict[str, Any]], folder: PathLike, mode: str = 
     return tasks
 
 
-def scalar_evidence(evidence: Dict[str, Any]) -> Dict[str, Any]:
-    """Every scalar (number, bool, string) of an evidence dict, as plain JSON values.
+def scalar_evidence(evidence: Any) -> Dict[str, Any]:
+    """Every scalar (number, bool, string) of an evidence dict or dataclass (``result.Evidence``),
+    as plain JSON values.
 
     >>> scalar_evidence({"inliers": np.float64(5), "log10_nfa": float("inf"), "xy": [1, 2]})
     {'inliers': 5.0, 'log10_nfa': 'inf'}
     """
+    if dataclasses.is_dataclass(evidence):
+        evidence = dataclasses.asdict(evidence)
     out: Dict[str, Any] = {}
     for k, v in dict(evidence or {}).items():
+        if isinstance(v, enum.Enum):
+            v = v.value
         if isinstance(v, (bool, np.bool_)):
             out[str(k)] = bool(v)
         elif isinstance(v, (int, float, np.integer, np.floating)):
