@@ -1171,6 +1171,10 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
         + (f", {s['runs_resumed']} of them by earlier invocations of the same command, resumed "
            "from the rows file (each run's time is measured where it ran; the load average "
            "above is this invocation's)" if s.get("runs_resumed") else "")
+        + ("" if runs >= s["runs_planned"] else
+           f". **Not the whole set**: the time budget stopped the run after {runs} runs, a "
+           "prefix of the fixed, seeded order (kinds alternate, photos and ratios shuffled), "
+           "so a balanced sample; re-run the command to complete it")
         + ("" if s["pairs"] >= s.get("pairs_in_full_set", s["pairs"]) else
            " (a prefix of the fixed, seeded run order: the kinds alternate, photos and ratios "
            "are shuffled, so it is a balanced sample)"),
