@@ -1,6 +1,6 @@
 """A 24 MP high image matched at full size and at its working size, at several ratios (issue 12).
 
-Usage: python scripts/high_working_size.py [--ratios 1.5,2,3,5,10] [--seed 0]
+Usage: python scripts/high_working_size.py [--ratios 1.5,2,3,5,10] [--seed 0] [--sides full,2048]
 
 For each ratio r: the large pair of ``speed_bench.py`` (the largest photo of ../shared enlarged
 to 9000x6000, its centre 6000x4000 the high image, exact truth, EVALUATION.md) zoomed out by r,
@@ -44,6 +44,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ratios", default="1.5,2,3,5,10")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sides", default="full,2048",
+                    help="working sizes to compare, px ('full': the high image at full size)")
     a = ap.parse_args()
     shared = find_shared()
     if shared is None:
@@ -55,10 +57,15 @@ def main() -> None:
           f"{a.seed}, load average {os.getloadavg()[0]:.1f}\n")
     print("| ratio | low px | high image matched at | seconds | error px | ratio found | order |")
     print("|---|---|---|---:|---:|---:|---|")
-    settings = (("full size", Config(high_max_side=None)), ("2048 px (default)", Config()))
+    default = Config().high_max_side
+    settings = tuple(
+        ("full size", Config(high_max_side=None)) if side == "full" else
+        (f"{side} px{' (default)' if int(side) == default else ''}",
+         Config(low_max_side=int(side), high_max_side=int(side)))
+        for side in a.sides.split(","))
     for k, ratio in enumerate(float(r) for r in a.ratios.split(",")):
         p = large_pair(scene, a.seed, ratio, low_window(ratio), photo.name)
-        for name, config in settings if k % 2 == 0 else settings[::-1]:
+        for name, config in (settings if k % 2 == 0 else settings[::-1]):
             t0 = time.perf_counter()
             r = match(p.low, p.high, config)
             secs = time.perf_counter() - t0
