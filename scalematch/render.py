@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from .chart import bar_chart
-from .geometry import as_matrix3, footprint, similarity_parts
+from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult
 from .stages.estimator import model_of
@@ -72,7 +72,7 @@ def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
         img = cv2.resize(img, (sw, sh), interpolation=cv2.INTER_AREA)
         fx, fy = sw / w, sh / h
         # small px -> high px: x_high = (x_small + 0.5) / fx - 0.5
-        back = np.array([[1 / fx, 0, 0.5 / fx - 0.5], [0, 1 / fy, 0.5 / fy - 0.5], [0, 0, 1]])
+        back = as_matrix3(resize_map(1 / fx, 1 / fy))
         t3 = t3 @ back
     ones = np.full(img.shape[:2], 255, np.uint8)
     if np.asarray(transform).shape == (2, 3):
@@ -151,6 +151,18 @@ def verdict(result: MatchResult) -> str:
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}")
 
 
+def evidence_line(result: MatchResult) -> str:
+    """The evidence beyond the points, one line (issue 18): the pixel check, the uniqueness."""
+    e = result.evidence
+    parts = [f"log10 NFA {e.log10_nfa:.1f}"] if np.isfinite(e.log10_nfa) else []
+    if np.isfinite(e.pixel_ncc):
+        parts.append(f"pixels: ZNCC {e.pixel_ncc:.2f}, {e.pixel_margin:+.2f} against nearby "
+                     f"placements")
+    if np.isfinite(e.unique_ratio):
+        parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
+    return "; ".join(parts)
+
+
 # --------------------------------------------------------------------------- pictures
 
 def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
@@ -180,7 +192,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
-    lines = [verdict(result)]
+    lines = [verdict(result), evidence_line(result)]
     outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
     if result.matched and t is not None and model_of(result.model).has_ratio:
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
@@ -278,8 +290,8 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
         pts = pts[np.sort(keep)]
         note = f" ({MAX_LINES} of them drawn)"
     for xh, yh, xl, yl in pts:
-        pa = ((xl + 0.5) * fa - 0.5, (yl + 0.5) * fa - 0.5)
-        pb = (x0 + (xh + 0.5) * fb - 0.5, (yh + 0.5) * fb - 0.5)
+        pa = apply(resize_map(fa), [[xl, yl]])[0]
+        pb = apply(resize_map(fb), [[xh, yh]])[0] + (x0, 0.0)
         ia = (int(round(pa[0] * 16)), int(round(pa[1] * 16)))
         ib = (int(round(pb[0] * 16)), int(round(pb[1] * 16)))
         cv2.line(canvas, ia, ib, INLIER_LINE, 1, cv2.LINE_AA, shift=4)

@@ -373,6 +373,22 @@ def test_exit_3_is_documented():
     assert "3 batch: some pair has an \"error\" line" in " ".join(text.split())
 
 
+def test_a_paper_mode_batch_resumes(images, tmp_path):
+    """Issue 16: the config recorded with each line held an output of the search (the covariance
+    used), so a paper-mode batch run a second time refused its own file ("made with other
+    options"). Provenance is in the result now; the second run resumes and adds nothing."""
+    out = tmp_path / "paper.jsonl"
+    pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n")
+    first = run("batch", pairs, "--mode", "paper", "--output", out, "-q")
+    assert first.exit_code == 0, first.output
+    line = json.loads(out.read_text())
+    assert line["covariance_used"].startswith("packaged sha256:")
+    assert "covariance_used" not in line["config"]
+    again = run("batch", pairs, "--mode", "paper", "--output", out)
+    assert again.exit_code == 0, again.output
+    assert "resuming: 1 of 1" in again.stderr and out.read_text().count("\n") == 1
+
+
 def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
     out = tmp_path / "results.jsonl"
     pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n"
