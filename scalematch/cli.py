@@ -150,6 +150,10 @@ def _coerce(text: str, current: Any, path: str) -> Any:
             return int(text)
         if isinstance(current, float):
             return float(text)
+        if isinstance(current, tuple) and current and isinstance(current[0], tuple):
+            # a tuple of tuples (views.passes): groups split by ";", e.g. "2;4;6,8"
+            return tuple(tuple(float(v) for v in group.split(",") if v.strip())
+                         for group in text.split(";") if group.strip())
         if isinstance(current, tuple):
             return tuple(float(v) for v in text.split(",") if v.strip())
         if current is None:

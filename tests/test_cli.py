@@ -75,6 +75,17 @@ def test_help_shows_examples_and_exit_codes():
         assert opt in opts, opt
 
 
+def test_set_takes_groups_of_tilts_for_the_view_passes():
+    from scalematch.cli import build_config
+
+    config = build_config("default", None, None, None, {}, ["views.passes=2;4;6,8"])
+    assert config.views.passes == ((2.0,), (4.0,), (6.0, 8.0))
+    with pytest.raises(ValueError, match="passes needs a tuple value"):
+        build_config("default", None, None, None, {}, ["views.passes=2;x"])
+    with pytest.raises(ValueError, match="views.passes"):
+        build_config("default", None, None, None, {}, ["views.passes=2;0.5"])  # a tilt < 1
+
+
 def test_version():
     result = run("--version")
     assert result.exit_code == 0 and result.output.strip() == f"scalematch {__version__}"

@@ -341,6 +341,23 @@ def test_plain_zoom_pairs_keep_the_similarity(raccoon, ratio, seed):
     assert result.matched and result.model == "similarity"
 
 
+def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
+    """Issue 19: a zoom pair at ratio 2 seen with a tilt of 8 (directional ratios 2 and 16):
+    today's views (t = 2, 4) find nothing; the ``steep`` preset's third pass (t = 6, 8) solves
+    it with a view at t = 8, within 1 px (measured 0.26 px)."""
+    from scalematch.lab.realpairs import Pair, canonical, pair_error
+
+    pair = make_tilted_pair(raccoon, 2.0, 8.0, np.random.default_rng(1))
+    truth = Pair("tilted", "raccoon t8", pair.low, pair.high, np.vstack([pair.truth, [0, 0, 1]]),
+                 False, "homography", 2.0, 8.0)
+    plain = match(pair.low, pair.high)
+    assert not plain.matched
+    steep = match(pair.low, pair.high, Config.preset("steep"))
+    assert steep.matched, steep.reason
+    assert steep.evidence.view_tilt == 8.0
+    assert pair_error(truth, canonical(truth, steep.transform, steep.order == "given")) < 1.0
+
+
 # ------------------------------------------------------------- issue 18: few points
 
 def _smooth_photo():

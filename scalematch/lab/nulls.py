@@ -426,10 +426,14 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
     return out
 
 
+#: The configurations a null set is run in (``Config.preset`` names)
+NULL_MODES = ("default", "paper", "steep")
+
+
 def _config(mode: str, seed: int):
     from ..config import Config
 
-    return Config.preset("paper" if mode == "paper" else "default", seed=seed)
+    return Config.preset(mode, seed=seed)
 
 
 def _read(path: str) -> np.ndarray:
@@ -1011,7 +1015,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     ratios, photos, seed
         The pairs: ratios, the first ``photos`` photos (sorted by name; None: all), the seed.
     mode : str
-        "default" or "paper" (``Config.paper()``).
+        A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``) or "steep".
     jobs : int
         Worker processes (1: this process).
     limit : int, optional
@@ -1026,8 +1030,8 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     max_minutes : float, optional
         Start no new run after this many minutes (null runs first, then true runs).
     """
-    if mode not in ("default", "paper"):
-        raise ValueError(f"mode must be 'default' or 'paper', got {mode!r}")
+    if mode not in NULL_MODES:
+        raise ValueError(f"mode must be one of {NULL_MODES}, got {mode!r}")
     shared_path = Path(shared) if shared is not None else find_shared()
     if shared_path is None or not (shared_path / "data" / "photos").is_dir():
         raise ValueError("the shared data folder was not found: pass --shared or set "
@@ -1213,8 +1217,9 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
 @click.option("--photos", type=click.IntRange(min=2), default=None,
               help="Use only the first N photos (sorted by name). Default: all.")
 @click.option("--seed", type=int, default=0, show_default=True, help="The one seed of the run.")
-@click.option("--mode", type=click.Choice(["default", "paper"]), default="default",
-              show_default=True, help="scalematch's configuration (paper: Config.paper()).")
+@click.option("--mode", type=click.Choice(NULL_MODES), default="default",
+              show_default=True, help="scalematch's configuration (a preset: paper is "
+              "Config.paper(), steep the default with views at tilts 6 and 8).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (more than 1: one OpenCV thread each).")
 @click.option("--limit", type=click.IntRange(min=1), default=None,

@@ -26,6 +26,11 @@ from ..checks import in_range
 from ..geometry import apply, compose, invert, resize_map
 
 
+#: The passes of the ``steep`` preset (issue 19): today's two, then tilts 6 and 8 together
+#: (longitude steps 72/t: 15 and 20 views), as far as MODS's steepest view synthesis (t = 8)
+STEEP_PASSES: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,), (6.0, 8.0))
+
+
 @dataclass(frozen=True)
 class ViewParams:
     """Which tilted views to simulate when the plain search finds nothing."""

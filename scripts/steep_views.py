@@ -1,0 +1,139 @@
+"""Steep views (issue 19): tilted zoom pairs beyond t = 4, scalematch's view passes against SIFT.
+
+Usage: python scripts/steep_views.py [--tilts 5.66,8] [--ratios 2,4] [--photo-step 3]
+       [--variants default,steep] [--swapped] [--out FILE.jsonl]
+
+The pairs are ``lab.realpairs``' tilted set (``synthetic.make_tilted_pair``: the same seed, the
+same photos, every 3rd of ../shared/data/photos, exact affine truth, EVALUATION-TILT.md) at
+other tilts. Each pair is given in the given order (finer second), and with ``--swapped`` also
+in the other. Variants are scalematch configurations (``VARIANTS``); SIFT (ratio test 0.8 +
+RANSAC homography, as in ``lab real-pairs``) runs on the same pair right after them, in this
+process, one OpenCV thread. Success: grid error < 3 px (``lab.evaluation``). Prints one row per
+pair and a table per (variant, tilt); rows go to ``--out`` (resumed when it exists).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import cv2  # noqa: E402
+
+from scalematch import Config, match  # noqa: E402
+from scalematch.geometry import as_matrix3  # noqa: E402
+from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
+from scalematch.lab.evaluation import is_success  # noqa: E402
+from scalematch.lab.realpairs import Pair, canonical, pair_error, run_sift  # noqa: E402
+from scalematch.lab.synthetic import make_tilted_pair, pair_rng  # noqa: E402
+from scalematch.stages.views import ViewParams  # noqa: E402
+
+#: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
+#: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
+VARIANTS = {
+    "default": Config(),
+    "steep": Config(views=ViewParams(passes=((2.0,), (4.0,), (6.0, 8.0)))),
+}
+
+
+def make_pairs(paths, tilts, ratios, seed, swapped):
+    from scalematch.imageio import read_grey
+
+    out = []
+    for path in paths:
+        photo = read_grey(path)
+        for r in ratios:
+            for t in tilts:
+                # the same draw as lab.realpairs.synthetic_sets for this photo, ratio and tilt
+                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
+                                     source=path.name)
+                pair = Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
+                            as_matrix3(p.truth), False, "homography", r, t)
+                out.append(pair)
+                if swapped:
+                    out.append(Pair("tilted-swapped", pair.name, p.high, p.low, pair.truth, True,
+                                    "homography", r, t))
+    return out
+
+
+def run_variant(name, pair):
+    t0 = time.perf_counter()
+    r = match(pair.low, pair.high, VARIANTS[name])
+    secs = time.perf_counter() - t0
+    est = canonical(pair, r.transform if r.matched else None, r.order == "given")
+    return {"matched": bool(r.matched), "seconds": secs, "error_px": pair_error(pair, est),
+            "view_tilt": r.evidence.view_tilt, "inliers": r.n_inliers, "reason": r.reason}
+
+
+def run_peer(pair):
+    t0 = time.perf_counter()
+    t, fwd, info = run_sift(pair)
+    secs = time.perf_counter() - t0
+    est = canonical(pair, t, fwd)
+    return {"matched": t is not None, "seconds": secs, "error_px": pair_error(pair, est),
+            "inliers": info.get("inliers")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tilts", default="5.66,8")
+    ap.add_argument("--ratios", default="2,4")
+    ap.add_argument("--photo-step", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--variants", default="default,steep")
+    ap.add_argument("--swapped", action="store_true")
+    ap.add_argument("--out", default="bench-out/steep/rows.jsonl")
+    args = ap.parse_args()
+    cv2.setNumThreads(1)
+    tilts = [float(x) for x in args.tilts.split(",")]
+    ratios = [float(x) for x in args.ratios.split(",")]
+    variants = args.variants.split(",")
+    shared = find_shared(None)
+    if shared is None:
+        sys.exit("../shared is absent: this script needs its photos")
+    paths = list_photos(shared)[::args.photo_step]
+    pairs = make_pairs(paths, tilts, ratios, args.seed, args.swapped)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows = [json.loads(x) for x in out.read_text().splitlines()] if out.exists() else []
+    done = {(r["set"], r["pair"], r["method"]) for r in rows}
+    print(f"# {len(pairs)} pairs, {len(paths)} photos, tilts {tilts}, ratios {ratios}, "
+          f"load {os.getloadavg()[0]:.1f}", flush=True)
+    with out.open("a") as fh:
+        for pair in pairs:
+            for method in [*variants, "sift"]:
+                if (pair.set, pair.name, method) in done:
+                    continue
+                res = run_peer(pair) if method == "sift" else run_variant(method, pair)
+                row = {"set": pair.set, "pair": pair.name, "method": method, "ratio": pair.ratio,
+                       "tilt": pair.tilt, **res,
+                       "success": bool(is_success(res["error_px"]))}
+                row["wrong_claim"] = bool(row["matched"] and not row["success"])
+                rows.append(row)
+                fh.write(json.dumps(row, default=float) + "\n")
+                fh.flush()
+                print(f"{pair.set:15s} {pair.name:55s} {method:8s} "
+                      f"{'ok ' if row['success'] else ('BAD' if row['wrong_claim'] else '-  ')} "
+                      f"{res['seconds']:6.2f} s", flush=True)
+    print("\n| set | method | tilt | solved | wrong claims | median s |")
+    print("|---|---|---:|---:|---:|---:|")
+    for s in sorted({r["set"] for r in rows}):
+        for m in [*variants, "sift"]:
+            for t in tilts:
+                rs = [r for r in rows if r["set"] == s and r["method"] == m and r["tilt"] == t]
+                if rs:
+                    print(f"| {s} | {m} | {t:g} | {sum(r['success'] for r in rs)}/{len(rs)} | "
+                          f"{sum(r['wrong_claim'] for r in rs)} | "
+                          f"{np.median([r['seconds'] for r in rs]):.2f} |")
+
+
+if __name__ == "__main__":
+    main()
