@@ -29,11 +29,10 @@ sys.path.insert(0, str(ROOT))
 import cv2  # noqa: E402
 
 from scalematch import Config, match  # noqa: E402
-from scalematch.geometry import as_matrix3  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
-from scalematch.lab.realpairs import Pair, canonical, pair_error, run_sift  # noqa: E402
-from scalematch.lab.synthetic import make_tilted_pair, pair_rng  # noqa: E402
+from scalematch.lab.realpairs import (canonical, pair_error, run_sift, swap,  # noqa: E402
+                                      tilted_pairs)
 from scalematch.stages.views import ViewParams  # noqa: E402
 
 #: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
@@ -45,23 +44,9 @@ VARIANTS = {
 
 
 def make_pairs(paths, tilts, ratios, seed, swapped):
-    from scalematch.imageio import read_grey
-
-    out = []
-    for path in paths:
-        photo = read_grey(path)
-        for r in ratios:
-            for t in tilts:
-                # the same draw as lab.realpairs.synthetic_sets for this photo, ratio and tilt
-                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
-                                     source=path.name)
-                pair = Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
-                            as_matrix3(p.truth), False, "homography", r, t)
-                out.append(pair)
-                if swapped:
-                    out.append(Pair("tilted-swapped", pair.name, p.high, p.low, pair.truth, True,
-                                    "homography", r, t))
-    return out
+    """``lab.realpairs``' tilted pairs at these tilts, and with ``swapped`` each one swapped."""
+    pairs = tilted_pairs(paths, ratios, tilts, seed)
+    return pairs + (swap(pairs, "tilted-swapped") if swapped else [])
 
 
 def run_variant(name, pair):

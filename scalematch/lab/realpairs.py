@@ -122,26 +122,38 @@ def oxford_pairs(shared: Path) -> List[Pair]:
     return out
 
 
-def synthetic_sets(paths: Sequence[Path], seed: int,
-                   log=lambda s: None) -> Dict[str, List[Pair]]:
+def tilted_pairs(paths: Sequence[Path], ratios: Sequence[float], tilts: Sequence[float],
+                 seed: int) -> List[Pair]:
+    """The tilted zoom pairs of ``paths`` (``synthetic.make_tilted_pair``), each photo at each
+    ratio and tilt, drawn from ``pair_rng(seed, "<photo> tilt <t>", ratio)``."""
     from ..imageio import read_grey
 
+    out = []
+    for path in paths:
+        photo = read_grey(path)
+        for r in ratios:
+            for t in tilts:
+                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
+                                     source=path.name)
+                out.append(Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
+                                as_matrix3(p.truth), False, "homography", r, t))
+    return out
+
+
+def swap(pairs: Sequence[Pair], name: str) -> List[Pair]:
+    """Every pair given in the other order (finer image first), in the set ``name``."""
+    return [Pair(name, p.name, p.high, p.low, p.truth, True, p.model, p.ratio, p.tilt)
+            for p in pairs]
+
+
+def synthetic_sets(paths: Sequence[Path], seed: int,
+                   log=lambda s: None) -> Dict[str, List[Pair]]:
     zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, as_matrix3(p.truth), False,
                  "similarity", p.ratio)
             for p in pairs_from_photos(paths, ZOOM_RATIOS, seed)]
     log(f"made {len(zoom)} zoom pairs")
-    tilted = []
-    for path in paths:
-        photo = read_grey(path)
-        for r in TILTED_RATIOS:
-            for t in TILTS:
-                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
-                                     source=path.name)
-                tilted.append(Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
-                                   as_matrix3(p.truth), False, "homography", r, t))
+    tilted = tilted_pairs(paths, TILTED_RATIOS, TILTS, seed)
     log(f"made {len(tilted)} tilted pairs")
-    swap = lambda ps, name: [Pair(name, p.name, p.high, p.low, p.truth, True, p.model, p.ratio,
-                                  p.tilt) for p in ps]
     zp = list(pairs_from_photos(paths, (2.0, 4.0), seed))
     unrelated = [Pair("unrelated", f"{u.source} / {u.high_source}", u.low, u.high, None, False,
                       "similarity", u.ratio)
