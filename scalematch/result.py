@@ -68,6 +68,10 @@ class Evidence:
     unique_claimed: float = math.nan  #: ZNCC of the finer image at the claimed placement
     unique_elsewhere: float = math.nan  #: the best ZNCC anywhere half a footprint away
     unique_ratio: float = math.nan  #: misfit elsewhere over misfit at the claim
+    #: the pixel check of the final (refit) transform, as ``pixel_ncc`` / ``pixel_margin`` are
+    #: of the search's: the map reported, an affine map or a homography where the view is tilted
+    final_ncc: float = math.nan
+    final_margin: float = math.nan
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

@@ -91,6 +91,15 @@ class DecisionParams:
     #: 148); Oxford pairs 4.8 to 12.6; tilted pairs 10.7 and more. 2 sits between 1.1 and 3.75.
     #: nan (the finer image covers the coarser one: no room elsewhere) passes.
     min_unique_ratio: float = 2.0
+    #: the final (refit) transform must line the pixels up better than its nearby wrong
+    #: placements by more than this ZNCC (``Evidence.final_margin``). The search's own check
+    #: (``pixel_margin``) cannot serve: it measures the similarity found in a view, which a
+    #: tilted scene's true map is not (true tilted claims measured down to -0.56 there).
+    #: Measured (scripts/margin_study.py, docs/FEWPOINTS.md section 5) on the 686 right claims
+    #: of true pairs (zoom, hard set, Oxford, tilted to t = 8): 0.035 at the least (p5 0.07 to
+    #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
+    #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
+    min_final_margin: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -106,6 +115,7 @@ class DecisionParams:
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
         in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
+        in_range("decision", "min_final_margin", self.min_final_margin, lo=-2, hi=2)
 
 
 @dataclass(frozen=True)
@@ -213,7 +223,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     names the scales of the per-scale table. ``look(t, outcome)``, when given, takes the second
     look (:func:`look_again`) at a best transform of at least ``look_min_inliers`` inliers: its
     figures go in the evidence, and it may accept a transform of ``few_min_inliers`` or more.
-    The accepted transform faces one more test once refit (:func:`ambiguous`).
+    The accepted transform faces more tests once refit (:func:`final_checks`).
     """
     params: DecisionParams = config.decision
     model = config.model
@@ -304,24 +314,31 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     return Decision(True, "", best.row.s, t, pairs, evidence)
 
 
-def ambiguous(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
-              params: DecisionParams):
-    """(evidence, reason): the uniqueness of a match's final transform ``t`` (finer px ->
+def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
+                 params: DecisionParams):
+    """(evidence, reason): the pixel tests of a match's final transform ``t`` (finer px ->
     coarser px, refit), and why it is refused ("" when it is not).
 
-    A repeated structure is matched by many points wherever a copy of it stands; the pixels
-    tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio`` times
-    better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`). Measured
-    on the final transform: a similarity found before the refit may hold on part of the image
-    only (a tilted view, a mild tilt), which the pixels would count against it.
+    Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
+    the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
+    times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`).
+    Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
+    (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
+    Both are measured on the final transform: a similarity found before the refit may hold on
+    part of the image only (a tilted view, a mild tilt), which the pixels would count against it.
     """
-    from .pixelcheck import uniqueness
+    from .pixelcheck import pixel_check, uniqueness
 
     u = uniqueness(coarser, finer, t)
+    near = pixel_check(coarser, finer, t)
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
-                       unique_ratio=u.ratio)
-    if not u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        return evidence, ""
-    return evidence, (f"ambiguous: the high image fits elsewhere in the low image nearly as "
-                      f"well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at the transform "
-                      f"found): a repeated structure?")
+                       unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin)
+    if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
+        return evidence, (f"ambiguous: the high image fits elsewhere in the low image nearly "
+                          f"as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at the "
+                          f"transform found): a repeated structure?")
+    if near.margin <= params.min_final_margin:  # nan: no check possible, passes
+        return evidence, (f"the pixels do not confirm it: the transform found fits the low "
+                          f"image no better than nearby wrong placements (ZNCC margin "
+                          f"{near.margin:+.2f})")
+    return evidence, ""
