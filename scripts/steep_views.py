@@ -33,13 +33,12 @@ from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
 from scalematch.lab.realpairs import (canonical, pair_error, run_sift, swap,  # noqa: E402
                                       tilted_pairs)
-from scalematch.stages.views import ViewParams  # noqa: E402
 
 #: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
 #: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
 VARIANTS = {
     "default": Config(),
-    "steep": Config(views=ViewParams(passes=((2.0,), (4.0,), (6.0, 8.0)))),
+    "steep": Config.preset("steep"),
 }
 
 
