@@ -82,6 +82,14 @@ class DecisionParams:
     #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
     #: docs/FEWPOINTS.md); the uniqueness check (``min_unique_ratio``) follows, as for all
     few_min_margin: float = 0.1
+    #: ... or, with a pixel margin of at least ``few_strong_margin``, a log10 NFA of at most
+    #: ``few_strong_max_log_nfa``: the NFA counts every search made (32 for a pair that reaches
+    #: the views in both orders), which pushes a true 4-inlier answer at ratio 16 to -4.5
+    #: (hard set, cathedral x16: pixel margin 0.47) while the pixels speak clearly. On the null
+    #: set no best transform of 3 or more inliers reached a margin of 0.13, those of 4-5
+    #: inliers 0.018 (docs/NULLS.md, docs/FEWPOINTS.md section 4)
+    few_strong_margin: float = 0.3
+    few_strong_max_log_nfa: float = -4.0
     #: a transform about to be accepted must place the finer image better than anywhere else in
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
     #: times the claimed one's (``stages.pixelcheck.uniqueness``). A repeated structure (the
@@ -114,6 +122,8 @@ class DecisionParams:
             in_range("decision", name, getattr(self, name), lo=0, integer=True)
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
         in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
+        in_range("decision", "few_strong_margin", self.few_strong_margin, lo=-2, hi=2)
+        in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
         in_range("decision", "min_final_margin", self.min_final_margin, lo=-2, hi=2)
 
@@ -275,9 +285,13 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
                            pixel_margin=second.margin, pixel_z=second.z)
     few = k < params.min_inliers
     if few:
-        confirmed = second is not None and k >= params.few_min_inliers and \
-            lnfa <= params.few_max_log_nfa and len(second.inliers) >= params.few_min_grown and \
-            second.margin >= params.few_min_margin  # nan: cannot tell, so no
+        # nan margins compare False: cannot tell, so no
+        beyond = (lnfa <= params.few_max_log_nfa and second is not None
+                  and second.margin >= params.few_min_margin) or \
+            (lnfa <= params.few_strong_max_log_nfa and second is not None
+             and second.margin >= params.few_strong_margin)
+        confirmed = second is not None and k >= params.few_min_inliers and beyond and \
+            len(second.inliers) >= params.few_min_grown
         if not confirmed:
             return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
                       f"{params.min_inliers} needed, or {params.few_min_inliers} beyond chance "
