@@ -155,9 +155,11 @@ def evidence_line(result: MatchResult) -> str:
     """The evidence beyond the points, one line (issue 18): the pixel check, the uniqueness."""
     e = result.evidence
     parts = [f"log10 NFA {e.log10_nfa:.1f}"] if np.isfinite(e.log10_nfa) else []
-    if np.isfinite(e.pixel_ncc):
-        parts.append(f"pixels: ZNCC {e.pixel_ncc:.2f}, {e.pixel_margin:+.2f} against nearby "
-                     f"placements")
+    # the final map's check where there is one (a match), else the search's (few inliers)
+    ncc, margin = (e.final_ncc, e.final_margin) if np.isfinite(e.final_ncc) else \
+        (e.pixel_ncc, e.pixel_margin)
+    if np.isfinite(ncc):
+        parts.append(f"pixels: ZNCC {ncc:.2f}, {margin:+.2f} against nearby placements")
     if np.isfinite(e.unique_ratio):
         parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
     return "; ".join(parts)

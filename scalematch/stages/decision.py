@@ -65,8 +65,9 @@ class DecisionParams:
     #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
-    #: a best transform with at least this many distinct inliers gets a second look (guided
-    #: growth and the pixel check, :func:`look_again`), recorded in the evidence
+    #: a best transform with at least this many distinct inliers, and fewer than
+    #: ``min_inliers``, gets a second look (guided growth and the pixel check,
+    #: :func:`look_again`), recorded in the evidence
     look_min_inliers: int = 3
     #: the second look may accept a transform with fewer than ``min_inliers`` (issue 18: the
     #: right answer at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13), down to this many ...
@@ -277,8 +278,10 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     def no(reason: str) -> Decision:
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence)
 
+    # the second look decides only below min_inliers (the final map's pixel tests follow
+    # every match, final_checks): above, it would cost a tenth of a plain pair's time for nothing
     second = look(t, best) if look is not None and spec.has_ratio and \
-        k >= params.look_min_inliers else None
+        params.look_min_inliers <= k < params.min_inliers else None
     if second is not None:
         evidence = replace(evidence, grown_inliers=len(second.inliers),
                            grown_chance=second.chance, pixel_ncc=second.ncc,
