@@ -99,7 +99,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
                                              for d in Direction})
     meter = Meter(progress, sum(step.cost for step in plan))
-    coarser: Dict[Direction, LowFeatures] = {}
+    memo = Memo()
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
     timings: Dict[str, float] = {}
@@ -108,7 +108,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         if skips(step, attempts):
             meter.tick(step.cost)
             continue
-        found, record, seconds = run_step(step, work, config, whitening, coarser, meter,
+        found, record, seconds = run_step(step, work, config, whitening, memo, meter,
                                           searches=sum(r.views for r in records))
         attempts += found
         records.append(record)
@@ -217,10 +217,37 @@ class LowFeatures:
         return kp, rows(min(n_described, len(kp))), rows(len(kp))
 
 
-def describe_low(low: np.ndarray, config: Config, whitening) -> LowFeatures:
+def describe_low(low: np.ndarray, config: Config, whitening,
+                 contrast: Optional[Contrast] = None) -> LowFeatures:
+    """The coarser image's points at s = 1 (``contrast``: its own, for adaptive detection;
+    measured here when not given)."""
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
-    kp = detect_on_level(level, config.harris_low)
+    kp = detect_on_level(level, config.harris_low, contrast)
     return LowFeatures(low, _describe(level, kp, config, whitening), kp)
+
+
+@dataclass
+class Memo:
+    """What the steps of one search compute once and share: each direction's coarser image
+    described, and each image's contrast (a "no" runs up to six steps over the same two
+    images; the contrast alone is a full-image percentile)."""
+
+    coarser: Dict[Direction, LowFeatures] = field(default_factory=dict)
+    _contrasts: Dict[Tuple[int, float], Contrast] = field(default_factory=dict, repr=False)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def contrast(self, image: np.ndarray, params) -> Optional[Contrast]:
+        """``image_contrast(image, params.sigma)`` once per image (None: not adaptive)."""
+        if not params.adaptive:
+            return None
+        key = (id(image), float(params.sigma))
+        with self._lock:  # the coarser image is described on a thread
+            known = self._contrasts.get(key)
+        if known is None:
+            known = image_contrast(image, params.sigma)
+            with self._lock:
+                self._contrasts[key] = known
+        return known
 
 
 def shares_first_level(config: Config) -> bool:
@@ -368,13 +395,12 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
 
 
 
-def run_step(step: Step, work: WorkImages, config: Config, whitening,
-             coarser: Dict[Direction, "LowFeatures"], meter: Meter,
+def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo, meter: Meter,
              searches: int) -> Tuple[List[Attempt], StepRecord, float]:
     """Run one step of the plan: probe its views, match the promising ones in full, decide;
     (attempts, record, seconds).
 
-    ``coarser`` caches each direction's coarser image, described once; ``searches`` counts
+    ``memo`` holds what earlier steps computed on the same images; ``searches`` counts
     the views probed by earlier steps (the a-contrario test counts them all).
     """
     t0 = time.perf_counter()
@@ -383,9 +409,10 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening,
     start = meter.done
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
+    coarser = memo.coarser
     known = coarser.get(step.direction.other)
     # the detector adapts to the finer image's contrast (measured once, on the image itself)
-    contrast = image_contrast(hi_img) if cfg.harris.adaptive else None
+    contrast = memo.contrast(hi_img, cfg.harris)
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, config.views)
@@ -396,7 +423,7 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening,
     if step.direction not in coarser:  # described while the first view is detected
         view = tilt_view(hi_img, *keys[0], config.views)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, whitening),
+            lambda: describe_low(lo_img, cfg, whitening, memo.contrast(lo_img, cfg.harris_low)),
             lambda: detect_view(view, cfg, whitening, meter.tick, known, contrast)])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
@@ -435,7 +462,8 @@ def final_fit(attempt: Attempt, config: Config):
 
 
 def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
-    """(winner, its final fit): the matched attempt to report, or (None, None).
+    """(winner, its final fit, its pixel check): the matched attempt to report, or
+    (None, None, None); the pixel check is None unless several were compared.
 
     One matched attempt is the answer. When several matched (a weak plain match and a view
     of the pass that confirms it), each is refit and the one whose final transform lines the
@@ -451,17 +479,18 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)
-        return winner, (final_fit(winner, config) if winner is not None else None)
+        return winner, (final_fit(winner, config) if winner is not None else None), None
     fits = [final_fit(a, config) for a in matched]
+    checks = [pixel_check(*a.step.direction.coarser_finer(work.low, work.high), fit[0])
+              for a, fit in zip(matched, fits)]
 
     def fitness(k: int) -> Tuple[float, float]:
-        coarse, fine = matched[k].step.direction.coarser_finer(work.low, work.high)
-        ncc = pixel_check(coarse, fine, fits[k][0]).ncc
+        ncc = checks[k].ncc
         return (ncc if math.isfinite(ncc) else -math.inf,
                 -matched[k].verdict.evidence.log10_nfa)
 
     k = max(range(len(matched)), key=fitness)
-    return matched[k], fits[k]
+    return matched[k], fits[k], checks[k]
 
 
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
@@ -474,7 +503,7 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
     repeated structure is refused there.
     """
-    winner, final = best_fitting(attempts, config, work)
+    winner, final, near = best_fitting(attempts, config, work)
     shown = winner or attempts[0]
     searches = sum(r.views for r in records)
     evidence = replace(shown.verdict.evidence, searches=searches,
@@ -493,7 +522,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     has_ratio = model_of(model).has_ratio
     if has_ratio:
         coarse, fine = winner.step.direction.coarser_finer(work.low, work.high)
-        common["evidence"], reason = final_checks(coarse, fine, t, evidence, config.decision)
+        common["evidence"], reason = final_checks(coarse, fine, t, evidence, config.decision,
+                                                  near)
         if reason:
             return MatchResult(matched=False, reason=reason, **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,

@@ -7,30 +7,21 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 from scalematch.config import Config
 from scalematch.imageio import read_grey
-from scalematch.lab.synthetic import make_zoom_pair
+from scalematch.lab.datasets import find_shared
+from scalematch.lab.synthetic import make_zoom_pair, smooth_scene
 from scalematch.stages.detector import HarrisParams, detect, effective_threshold, image_contrast
-
-
-def smooth_scene(shape=(480, 640), seed=0) -> np.ndarray:
-    """Wide soft stripes and blobs (a smooth facade): the scene that starves the detector."""
-    rng = np.random.default_rng(seed)
-    h, w = shape
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    img = 128 + 50 * np.tanh(3 * np.sin(2 * np.pi * (x * 0.9 + y * 0.3) / 160.0))
-    for _ in range(6):
-        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(30, 90)
-        img += rng.uniform(-40, 40) * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * r * r))
-    return np.clip(img + rng.normal(0, 1.0, img.shape), 0, 255).astype(np.float32)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--photo", default="/work/shared/data/photos/jpegtest_006mp-cathedral.jpg")
+    ap.add_argument("--photo", default=str((find_shared() or Path("../shared")) / "data" / "photos"
+                                           / "jpegtest_006mp-cathedral.jpg"))
     ap.add_argument("--ratio", type=float, default=8.0)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -362,12 +361,9 @@ def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
 
 def _smooth_photo():
     """A smooth curved facade: wide soft stripes and blobs, 1 grey level of noise."""
-    import sys
+    from scalematch.lab.synthetic import smooth_scene
 
-    sys.path.insert(0, str(Path(__file__).parent / "stages"))
-    from test_detector import _smooth_scene
-
-    return _smooth_scene((1536, 2048), seed=2)
+    return smooth_scene((1536, 2048), seed=2)
 
 
 def test_a_smooth_scene_is_solved_by_the_point_budget():

@@ -467,3 +467,28 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
                     ratio=float(ratio), angle_deg=angle, gain=gain, offset=offset,
                     noise_std=noise_std, source=source, crop_xy=(x, y), window_xy=(wx, wy),
                     tilt=float(tilt), longitude_deg=longitude)
+
+
+# --------------------------------------------------------------------------------------------
+# A smooth scene (issue 18): what starves a fixed-threshold detector
+# --------------------------------------------------------------------------------------------
+
+#: Period of the stripes of ``smooth_scene``, px, and the number of soft blobs on them
+SMOOTH_STRIPE_PERIOD_PX = 160.0
+SMOOTH_BLOBS = 6
+
+
+def smooth_scene(shape: Tuple[int, int] = (480, 640), seed: int = 0) -> np.ndarray:
+    """A smooth curved facade, float32 grey levels (h, w): wide soft stripes (tanh of a sine,
+    +-50 grey levels about 128), ``SMOOTH_BLOBS`` Gaussian blobs of +-40, and 1 grey level of
+    noise; deterministic from ``seed``. Few corners at any scale.
+    """
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    img = 128 + 50 * np.tanh(3 * np.sin(2 * np.pi * (x * 0.9 + y * 0.3)
+                                        / SMOOTH_STRIPE_PERIOD_PX))
+    for _ in range(SMOOTH_BLOBS):
+        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(30, 90)
+        img += rng.uniform(-40, 40) * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * r * r))
+    return np.clip(img + rng.normal(0, 1.0, img.shape), 0, 255).astype(np.float32)

@@ -222,6 +222,20 @@ def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.nd
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
+def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> bool:
+    """Whether a few-inlier transform's NFA and pixel margin reach one of the two tiers: a
+    modest margin with a low NFA, or a wide margin with a weaker one (``few_*`` of
+    :class:`DecisionParams`). A nan margin (cannot tell) confirms nothing.
+
+    >>> p = DecisionParams()
+    >>> pixels_confirm(-7.0, 0.15, p), pixels_confirm(-4.5, 0.15, p), pixels_confirm(-4.5, 0.4, p)
+    (True, False, True)
+    """
+    tiers = ((params.few_max_log_nfa, params.few_min_margin),
+             (params.few_strong_max_log_nfa, params.few_strong_margin))
+    return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
+
+
 def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
            shown_scale: float = 1.0,
            look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
@@ -232,8 +246,9 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
     (the working size shrinks them, :mod:`scalematch.working`) in the reason's text, so it
     names the scales of the per-scale table. ``look(t, outcome)``, when given, takes the second
-    look (:func:`look_again`) at a best transform of at least ``look_min_inliers`` inliers: its
-    figures go in the evidence, and it may accept a transform of ``few_min_inliers`` or more.
+    look (:func:`look_again`) at a best transform of ``look_min_inliers`` to ``min_inliers - 1``
+    inliers: its figures go in the evidence, and it may accept a transform of
+    ``few_min_inliers`` or more (:func:`pixels_confirm`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
     """
     params: DecisionParams = config.decision
@@ -288,12 +303,8 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
                            pixel_margin=second.margin, pixel_z=second.z)
     few = k < params.min_inliers
     if few:
-        # nan margins compare False: cannot tell, so no
-        beyond = (lnfa <= params.few_max_log_nfa and second is not None
-                  and second.margin >= params.few_min_margin) or \
-            (lnfa <= params.few_strong_max_log_nfa and second is not None
-             and second.margin >= params.few_strong_margin)
-        confirmed = second is not None and k >= params.few_min_inliers and beyond and \
+        confirmed = second is not None and k >= params.few_min_inliers and \
+            pixels_confirm(lnfa, second.margin, params) and \
             len(second.inliers) >= params.few_min_grown
         if not confirmed:
             return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
@@ -332,7 +343,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
 
 
 def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
-                 params: DecisionParams):
+                 params: DecisionParams, near=None):
     """(evidence, reason): the pixel tests of a match's final transform ``t`` (finer px ->
     coarser px, refit), and why it is refused ("" when it is not).
 
@@ -343,11 +354,12 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
     Both are measured on the final transform: a similarity found before the refit may hold on
     part of the image only (a tilted view, a mild tilt), which the pixels would count against it.
+    ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
     """
     from .pixelcheck import pixel_check, uniqueness
 
     u = uniqueness(coarser, finer, t)
-    near = pixel_check(coarser, finer, t)
+    near = near if near is not None else pixel_check(coarser, finer, t)
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
                        unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin)
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare

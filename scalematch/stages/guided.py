@@ -17,7 +17,8 @@ near its predictions: ``Growth.chance`` is the number of such chance matches to 
 the density of low points near the predictions and the fraction of descriptor- and
 orientation-compatible pairs (an estimate, for comparison with ``Growth.n_inliers``).
 
-Pixel convention: OpenCV's, (x, y), pixel centres at integers. Not wired into the pipeline yet.
+Pixel convention: OpenCV's, (x, y), pixel centres at integers. Used by the decision's second
+look (:func:`scalematch.stages.decision.look_again`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 from ..geometry import apply, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
+from .matcher import distinct_rows
 
 #: High points whose neighbours are searched at once (bounds the (chunk, low) distance block).
 _CHUNK = 512
@@ -202,14 +204,6 @@ def chance_matches(t: np.ndarray, high: Described, low: Described,
     return inside * (1.0 - math.exp(-rho * f * math.pi * params.radius_px ** 2))
 
 
-def _distinct(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Row indices of the distinct (src, dst) position pairs, in first order."""
-    if len(src) == 0:
-        return np.zeros(0, int)
-    _, first = np.unique(np.round(np.hstack([src, dst]), 3), axis=0, return_index=True)
-    return np.sort(first)
-
-
 def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarity",
          params: GuidedParams = GuidedParams(),
          ransac: RansacParams = RansacParams()) -> Growth:
@@ -249,7 +243,7 @@ def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarit
     counts = []
     for _ in range(max(int(params.max_rounds), 1)):
         i, j, _ = guided_matches(best_t, high, low, params)
-        keep = _distinct(high.xy[i], low.xy[j])
+        keep = distinct_rows(high.xy[i], low.xy[j])
         src, dst = high.xy[i[keep]], low.xy[j[keep]]
         if len(src) == 0:
             break

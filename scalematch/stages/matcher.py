@@ -153,9 +153,13 @@ def distinct_pairs(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.nda
     >>> src.tolist()
     [[1.0, 2.0], [3.0, 4.0]]
     """
-    if len(src) == 0:
-        return src, dst
-    rows = np.round(np.hstack([src, dst]), 3)
-    _, first = np.unique(rows, axis=0, return_index=True)
-    keep = np.sort(first)
+    keep = distinct_rows(src, dst)
     return src[keep], dst[keep]
+
+
+def distinct_rows(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Row indices of the distinct (src, dst) position pairs (to 1e-3 px), in first order."""
+    if len(src) == 0:
+        return np.zeros(0, int)
+    _, first = np.unique(np.round(np.hstack([src, dst]), 3), axis=0, return_index=True)
+    return np.sort(first)

@@ -21,14 +21,15 @@ Cheap by construction: the high image is first shrunk by an integer factor ``k ~
 all placements are warped only onto the bounding box of the footprints in the low image, at the
 low image's resolution.
 
-Pixel convention: OpenCV's, (x, y), pixel centres at integers. Not wired into the pipeline yet.
+Pixel convention: OpenCV's, (x, y), pixel centres at integers. Used by the decision's second
+look and by the pixel tests of every match's final map (:mod:`scalematch.stages.decision`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Tuple
+from typing import NamedTuple, Tuple, Union
 
 import cv2
 import numpy as np
@@ -199,6 +200,40 @@ def _shrunk(image: np.ndarray, factor: float) -> Tuple[np.ndarray, np.ndarray]:
     return out, m
 
 
+class Placed(NamedTuple):
+    """A hypothesis ready to be warped: at most ``max_side_px`` of footprint (``low`` shrunk
+    and the map with it, centre-aligned, when it was larger)."""
+
+    low: np.ndarray  #: the low image, maybe shrunk
+    t3: np.ndarray  #: 3x3 high px -> (shrunk) low px
+    ratio: float  #: the map's ratio, high px per (shrunk) low px
+    corners: np.ndarray  #: (4, 2) the footprint in (shrunk) low px
+    area: float  #: its area, (shrunk) low px^2
+
+
+def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
+            params: PixelParams) -> Union[Placed, str]:
+    """The hypothesis ``t`` placed on ``low`` (:class:`Placed`), or why it cannot be: no
+    footprint, a footprint under ``min_overlap_px``, a singular map."""
+    t3 = as_matrix3(np.asarray(t, np.float64))
+    corners = footprint(t3, high_shape)
+    if corners is None or not np.all(np.isfinite(t3)):
+        return "the transform has no footprint"
+    area = _quad_area(corners)
+    if area < params.min_overlap_px:
+        return f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})"
+    ratio = similarity_parts(t3)[0]
+    if not (math.isfinite(ratio) and ratio > 0):
+        return "the transform is singular"
+    q = min(1.0, params.max_side_px / math.sqrt(area))
+    if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
+        low, shrink = _shrunk(low, 1.0 / q)
+        t3 = shrink @ t3
+        ratio, corners, area = (ratio / shrink[0, 0], footprint(t3, high_shape),
+                                area * shrink[0, 0] ** 2)
+    return Placed(low, t3, ratio, corners, area)
+
+
 def _nan_check(reason: str, overlap: int = 0, fraction: float = 0.0) -> PixelCheck:
     nan = float("nan")
     return PixelCheck(nan, nan, nan, nan, (), overlap, fraction, reason)
@@ -237,21 +272,10 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     high = np.asarray(high, np.float32)
     if low.ndim != 2 or high.ndim != 2:
         raise ValueError(f"expected 2-D grey images, got shapes {low.shape} and {high.shape}")
-    t3 = as_matrix3(np.asarray(t, np.float64))
-    corners = footprint(t3, high.shape)
-    if corners is None or not np.all(np.isfinite(t3)):
-        return _nan_check("the transform has no footprint")
-    area = _quad_area(corners)
-    if area < params.min_overlap_px:
-        return _nan_check(f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})")
-    ratio = similarity_parts(t3)[0]
-    if not (math.isfinite(ratio) and ratio > 0):
-        return _nan_check("the transform is singular")
-    q = min(1.0, params.max_side_px / math.sqrt(area))
-    if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
-        low, shrink = _shrunk(low, 1.0 / q)
-        t3 = shrink @ t3
-        ratio, corners, area = ratio / shrink[0, 0], footprint(t3, high.shape), area * shrink[0, 0] ** 2
+    placed = _placed(low, high.shape, t, params)
+    if isinstance(placed, str):
+        return _nan_check(placed)
+    low, t3, ratio, corners, area = placed
     others = perturbations(t3, high.shape, params)
     # one box holding every placement's footprint, clipped to the low image
     hh, ww = low.shape
@@ -341,20 +365,10 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     True
     """
     nan = float("nan")
-    low = np.asarray(low, np.float32)
-    t3 = as_matrix3(np.asarray(t, np.float64))
-    corners = footprint(t3, high.shape)
-    if corners is None or not np.all(np.isfinite(t3)):
+    placed = _placed(np.asarray(low, np.float32), high.shape, t, params)
+    if isinstance(placed, str):
         return Uniqueness(nan, nan, nan)
-    area = _quad_area(corners)
-    ratio = similarity_parts(t3)[0]
-    if area < params.min_overlap_px or not (math.isfinite(ratio) and ratio > 0):
-        return Uniqueness(nan, nan, nan)
-    q = min(1.0, params.max_side_px / math.sqrt(area))
-    if q < 1.0:
-        low, shrink = _shrunk(low, 1.0 / q)
-        t3 = shrink @ t3
-        ratio = ratio / shrink[0, 0]
+    low, t3, ratio, _, _ = placed
     small, k = blurred_for_ratio(high, ratio)
     hh, ww = low.shape
     img, mask = _warp_into(small, t3 @ _small_to_high(k), (ww, hh), params.edge_px)

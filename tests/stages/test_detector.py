@@ -104,6 +104,7 @@ def test_points_are_strongest_first_and_capped(raccoon):
 from scalematch.stages.detector import (REFERENCE_CONTRAST, Contrast,  # noqa: E402
                                         detect_on_level, effective_threshold, image_contrast)
 from scalematch.stages.scalespace import scale_space  # noqa: E402
+from scalematch.lab.synthetic import smooth_scene  # noqa: E402
 
 ADAPTIVE = HarrisParams(contrast_relative=True)
 LOW_CONTRAST_SCALES = (1.0, 2.0, 4.0)
@@ -112,18 +113,6 @@ LOW_CONTRAST_SCALES = (1.0, 2.0, 4.0)
 def _twelve_bit(img):
     """8-bit grey levels as a 12-bit sensor stored in a 16-bit PNG, read back: 0-15.9."""
     return (np.rint(img * (4095.0 / 255.0)) * (255.0 / 65535.0)).astype(np.float32)
-
-
-def _smooth_scene(shape=(480, 640), seed=0):
-    """Wide soft stripes and blobs with 1 grey level of noise (a smooth curved facade)."""
-    rng = np.random.default_rng(seed)
-    h, w = shape
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    img = 128 + 50 * np.tanh(3 * np.sin(2 * np.pi * (x * 0.9 + y * 0.3) / 160.0))
-    for _ in range(6):
-        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(30, 90)
-        img += rng.uniform(-40, 40) * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * r * r))
-    return np.clip(img + rng.normal(0, 1.0, img.shape), 0, 255).astype(np.float32)
 
 
 def test_adaptive_options_are_off_by_default(raccoon):
@@ -177,7 +166,7 @@ def test_adaptive_detector_finds_no_points_on_noise(gain):
 
 
 def test_budget_keeps_points_on_a_smooth_scene():
-    img = _smooth_scene()
+    img = smooth_scene()
     scales = (2.0, 2.52, 3.175, 4.0, 5.04)
     off = [len(k) for k in detect(img, scales)]
     rel = [len(k) for k in detect(img, scales, ADAPTIVE)]
