@@ -408,7 +408,7 @@ def exit_codes_in_help(*codes: int) -> Callable[[Callable], Callable]:
 @exit_codes_in_help()
 def cli() -> None:
     """Match a low-resolution image against a high-resolution image of the same scene with
-    unknown zoom (2x-10x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
+    unknown zoom (2x-16x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
 
     Without a command name, the arguments go to the match command:
 
@@ -440,13 +440,19 @@ def matching_options(f: Callable) -> Callable:
         click.option("--views/--no-views", "views", default=True, show_default=True,
                      help="When nothing matches, simulate tilted views of the finer image "
                           "(oblique shots; slower on pairs that do not match)."),
+        click.option("--time-budget", type=float, default=None, metavar="SECONDS",
+                     help="Start no further step of the search after SECONDS (the given "
+                          "order's plain search always runs): a pair with no match is answered "
+                          "sooner, but one only the other order or a tilted view would solve is "
+                          "missed, and the answer then depends on the machine's speed. "
+                          "[default: no limit]"),
         click.option("--working-size", type=click.IntRange(min=0), default=None, metavar="PX",
                      help="Match an image whose longer side exceeds PX at that size and give "
                           "the answer in its own pixels (0: always full size; the high image "
                           "only with --order auto). [default: 2048]"),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
-                          '"1,2,3.5". [default: 1-12.7 in third octaves; paper mode 1-8]'),
+                          '"1,2,3.5". [default: 1-16 in third octaves; paper mode 1-8]'),
     ]
     base = Config()
     for name, paths, typ, text in THRESHOLD_OPTIONS:
@@ -489,6 +495,11 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                               tuple(kwargs.pop("settings"))
                               + (f"order={kwargs.pop('order')}",
                                  f"views.enabled={kwargs.pop('views')}"))
+        budget = kwargs.pop("time_budget")
+        if budget is not None:
+            if not budget > 0:
+                raise ValueError(f"--time-budget must be more than 0 seconds, got {budget:g}")
+            config = set_path(config, "time_budget_s", float(budget))
         working = kwargs.pop("working_size")
         if working is not None and 0 < working < MIN_WORKING_SIDE_PX:
             raise ValueError(f"--working-size must be 0 (always full size) or at least "
@@ -536,7 +547,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
                   quiet: bool, verbose: bool, max_pixels: int, **kwargs: Any) -> None:
     """Match LOW (low-resolution image) against HIGH (high-resolution image).
 
-    Finds the zoom ratio (2x-10x), rotation and translation taking HIGH's pixels to LOW's, or
+    Finds the zoom ratio (2x-16x), rotation and translation taking HIGH's pixels to LOW's, or
     says "no reliable match". A one-line summary goes to stderr.
 
     \b
@@ -678,6 +689,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
       scalematch batch pairs.csv > results.jsonl
       scalematch batch pairs.csv --output results.jsonl --jobs 4 --mode paper
       scalematch batch pairs.csv --output results.jsonl --retry-errors
+      scalematch batch archive.csv --output results.jsonl --time-budget 1
       scalematch batch pairs.csv --output results.jsonl --scheduler tcp://host:8786
 
     \b

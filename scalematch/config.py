@@ -117,6 +117,12 @@ class Config:
     #: px a 24 MP high image was matched 2.1-5.9 times faster, 0.008-0.021 px from the truth
     #: at ratios 1.5 to 10 (full size: 0.008-0.041 px; docs/PERFORMANCE.md, section 5).
     high_max_side: Optional[int] = 2048
+    #: seconds after which no further step of the search plan is started (None: no limit).
+    #: Checked between steps, never before the first (the given order's plain search), so a
+    #: step under way finishes: a "no" comes sooner, but a pair only a later step would solve
+    #: (the other order, tilted views) is then missed, and the answer depends on the machine's
+    #: speed. docs/NULLS.md measures what a budget saves on the null set (issues 16 and 19)
+    time_budget_s: Optional[float] = None
 
     def __post_init__(self) -> None:
         one_of("", "order", self.order, ORDERS)
@@ -132,6 +138,8 @@ class Config:
         for s in self.scales:  # the high-resolution image is never enlarged
             in_range("", "scales", s, lo=1)
         in_range("", "min_footprint_px", self.min_footprint_px, lo=0)
+        if self.time_budget_s is not None:
+            in_range("", "time_budget_s", self.time_budget_s, lo=0, lo_open=True)
 
     @staticmethod
     def paper(**changes) -> "Config":
@@ -178,6 +186,10 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # at t = 2 and 4 found nothing (issue 19; docs/STEEP.md: tilted zoom pairs at t = 5.66
     # and 8 solved, the null set's claims and the time a "no" then takes)
     "steep": lambda: Config(views=ViewParams(passes=STEEP_PASSES)),
+    # the default with a time budget of 1 s (issues 16 and 19): no step of the plan starts
+    # after 1 s, so a "no" costs about that much; docs/NULLS-BUDGET.md measures it on the null
+    # set (what a "no" then costs, and that no claim appears)
+    "budget-1s": lambda: Config(time_budget_s=1.0),
     # the default without the rotation-consistency filter: one group holding every candidate
     "default-no-rotation-check": lambda: Config(
         orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1)),

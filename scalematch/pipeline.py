@@ -24,8 +24,8 @@ from .config import Config
 from .geometry import finer_to_coarser, similarity_parts
 from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
-from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, overwhelming, probe_best,
-                     search_plan, skips, stop_reason, strongest)
+from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
+                     probe_best, search_plan, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
 from .stages.decision import Look, final_checks, decide, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
@@ -34,7 +34,7 @@ from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.probe import probe_scores, select_scales
-from .stages.refit import pooled_refit, refit_in_high, richer_model
+from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
 from .stages.views import View, keep_inside, tilt_view
@@ -108,6 +108,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         if skips(step, attempts):
             meter.tick(step.cost)
             continue
+        if out_of_time(time.perf_counter() - t0, len(records), config):
+            stopped = "time budget"
+            break
         found, record, seconds = run_step(step, work, config, whitening, memo, meter,
                                           searches=sum(r.views for r in records))
         attempts += found
@@ -411,12 +414,13 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
     known = coarser.get(step.direction.other)
-    # the detector adapts to the finer image's contrast (measured once, on the image itself)
-    contrast = memo.contrast(hi_img, cfg.harris)
+    # the detector adapts to the finer image's contrast (measured once, on the image itself,
+    # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, config.views)
-        return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known, contrast),
+        return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
+                                             memo.contrast(hi_img, cfg.harris)),
                           coarser[step.direction], cfg)
 
     keys = list(step.views)
@@ -424,9 +428,11 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
         view = tilt_view(hi_img, *keys[0], config.views)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
             lambda: describe_low(lo_img, cfg, whitening, memo.contrast(lo_img, cfg.harris_low)),
-            lambda: detect_view(view, cfg, whitening, meter.tick, known, contrast)])
+            lambda: detect_view(view, cfg, whitening, meter.tick, known,
+                                memo.contrast(hi_img, cfg.harris))])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
+    memo.contrast(hi_img, cfg.harris)  # measured once before the views' threads share it
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     searches += len(probed)
     chosen = sorted(probed, key=lambda p: -p.score)
@@ -458,7 +464,8 @@ def final_fit(attempt: Attempt, config: Config):
     best = attempt.winning_outcome()
     fit = refit_in_high(attempt.view, attempt.verdict, best, config)
     fit = richer_model(fit, attempt.view, best, config)
-    return pooled_refit(fit, attempt.view, attempt.outcomes, config)
+    fit = pooled_refit(fit, attempt.view, attempt.outcomes, config)
+    return union_homography(fit, attempt.view, attempt.outcomes, config)
 
 
 def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
@@ -517,6 +524,9 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                   covariance_used=covariance_used)
     if winner is None:
         more = f" ({searches} searches: both orders, tilted views)" if searches > 1 else ""
+        if stopped == "time budget":
+            more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
+                     f"{len(records)} of {len(plan)} steps")
         return MatchResult(matched=False, reason=shown.verdict.reason + more, **common)
     t, inliers, model = final
     has_ratio = model_of(model).has_ratio

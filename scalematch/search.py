@@ -31,6 +31,7 @@ PLAIN: Tuple[ViewKey, ...] = ((1.0, 0.0),)
 STOP_REASONS = {
     "matched": "a reliable match was found",
     "plan done": "every step of the plan was run",
+    "time budget": "the time budget ran out before every step was run",
 }
 
 
@@ -162,6 +163,20 @@ def stop_reason(step: Step, attempts: Sequence[Attempt], plan: Sequence[Step],
     if confirm:
         return None
     return "matched"
+
+
+def out_of_time(elapsed_s: float, steps_run: int, config) -> bool:
+    """True when no further step may start: ``config.time_budget_s`` is spent and at least
+    one step has run (the first step, the given order's plain search, always runs).
+
+    >>> from scalematch.config import Config
+    >>> out_of_time(2.5, 1, Config(time_budget_s=2.0)), out_of_time(2.5, 0, Config(time_budget_s=2.0))
+    (True, False)
+    >>> out_of_time(99.0, 3, Config())  # no budget
+    False
+    """
+    budget = config.time_budget_s
+    return budget is not None and steps_run > 0 and elapsed_s >= budget
 
 
 def probe_best(probes: Sequence[float]) -> float:

@@ -2,6 +2,11 @@
 
 Usage: python scripts/steep_views.py [--tilts 5.66,8] [--ratios 2,4] [--photo-step 3]
        [--variants default,steep] [--swapped] [--out FILE.jsonl]
+       python scripts/steep_views.py --kind perspective --tilts 4,8 [...]
+
+``--kind perspective``: the perspective zoom pairs instead (``lab.realpairs.perspective_pairs``:
+the local ratio spans [ratio, ratio x spread] over the footprint, exact homography truth); the
+``--tilts`` are then the spreads.
 
 The pairs are ``lab.realpairs``' tilted set (``synthetic.make_tilted_pair``: the same seed, the
 same photos, every 3rd of ../shared/data/photos, exact affine truth, EVALUATION-TILT.md) at
@@ -31,21 +36,27 @@ import cv2  # noqa: E402
 from scalematch import Config, match  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
-from scalematch.lab.realpairs import (canonical, pair_error, run_sift, swap,  # noqa: E402
-                                      tilted_pairs)
+from scalematch.lab.realpairs import (canonical, pair_error, perspective_pairs,  # noqa: E402
+                                      run_sift, swap, tilted_pairs)
 
 #: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
 #: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
 VARIANTS = {
     "default": Config(),
     "steep": Config.preset("steep"),
+    # what a user who knows the pair is seen in perspective would ask for
+    "homography": Config(model="homography"),
 }
 
 
-def make_pairs(paths, tilts, ratios, seed, swapped):
-    """``lab.realpairs``' tilted pairs at these tilts, and with ``swapped`` each one swapped."""
-    pairs = tilted_pairs(paths, ratios, tilts, seed)
-    return pairs + (swap(pairs, "tilted-swapped") if swapped else [])
+def make_pairs(paths, tilts, ratios, seed, swapped, kind="tilted"):
+    """``lab.realpairs``' tilted pairs at these tilts (perspective pairs at these spreads), and
+    with ``swapped`` each one swapped."""
+    if kind == "perspective":
+        pairs = perspective_pairs(paths, ratios, tilts, seed)
+    else:
+        pairs = tilted_pairs(paths, ratios, tilts, seed)
+    return pairs + (swap(pairs, f"{kind}-swapped") if swapped else [])
 
 
 def run_variant(name, pair):
@@ -74,6 +85,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variants", default="default,steep")
     ap.add_argument("--swapped", action="store_true")
+    ap.add_argument("--kind", choices=("tilted", "perspective"), default="tilted")
     ap.add_argument("--out", default="bench-out/steep/rows.jsonl")
     args = ap.parse_args()
     cv2.setNumThreads(1)
@@ -84,7 +96,7 @@ def main() -> None:
     if shared is None:
         sys.exit("../shared is absent: this script needs its photos")
     paths = list_photos(shared)[::args.photo_step]
-    pairs = make_pairs(paths, tilts, ratios, args.seed, args.swapped)
+    pairs = make_pairs(paths, tilts, ratios, args.seed, args.swapped, args.kind)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rows = [json.loads(x) for x in out.read_text().splitlines()] if out.exists() else []
@@ -107,7 +119,8 @@ def main() -> None:
                 print(f"{pair.set:15s} {pair.name:55s} {method:8s} "
                       f"{'ok ' if row['success'] else ('BAD' if row['wrong_claim'] else '-  ')} "
                       f"{res['seconds']:6.2f} s", flush=True)
-    print("\n| set | method | tilt | solved | wrong claims | median s |")
+    what = "spread" if args.kind == "perspective" else "tilt"
+    print(f"\n| set | method | {what} | solved | wrong claims | median s |")
     print("|---|---|---:|---:|---:|---:|")
     for s in sorted({r["set"] for r in rows}):
         for m in [*variants, "sift"]:

@@ -177,7 +177,9 @@ MEANINGLESS = [("--ransac-threshold", "-1", "ransac.threshold_px must be > 0"),
                ("--min-inliers", "-1", "decision.min_inliers must be an integer >= 0"),
                ("--max-log-nfa", "inf", "decision.max_log_nfa must be a finite number"),
                ("--set", "ransac.threshold_px=-1", "ransac.threshold_px"),
-               ("--set", "matcher.ratio=2", "matcher.ratio")]
+               ("--set", "matcher.ratio=2", "matcher.ratio"),
+               ("--time-budget", "0", "--time-budget must be more than 0 seconds"),
+               ("--set", "time_budget_s=-2", "time_budget_s must be > 0")]
 
 
 @pytest.mark.parametrize("command", ["match", "batch"])

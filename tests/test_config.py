@@ -29,6 +29,7 @@ def test_every_preset_is_a_valid_config_and_the_variants_differ_from_their_base(
     assert configs["default-no-rotation-check"].orientation.max_peaks == 1
     assert configs["steep"].views.passes == ((2.0,), (4.0,), (6.0, 8.0))
     assert configs["steep"].views.passes[:2] == Config().views.passes  # today's, then steeper
+    assert configs["budget-1s"].time_budget_s == 1.0 and Config().time_budget_s is None
 
 
 def test_an_unknown_preset_names_the_known_ones():
@@ -38,6 +39,7 @@ def test_an_unknown_preset_names_the_known_ones():
 
 @pytest.mark.parametrize("make,message", [
     (lambda: Config(matcher=MatcherParams(ratio=5.0)), "matcher.ratio must be in (0, 1], got 5.0"),
+    (lambda: Config(time_budget_s=0.0), "time_budget_s must be > 0, got 0.0"),
     (lambda: Config(ransac=RansacParams(threshold_px=-1)),
      "ransac.threshold_px must be > 0, got -1"),
     (lambda: RansacParams(max_iters=2.5), "ransac.max_iters must be an integer >= 1, got 2.5"),

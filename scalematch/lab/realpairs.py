@@ -40,7 +40,8 @@ from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
 from .datasets import find_shared, list_photos, scene_of
 from .evaluation import is_success, reprojection_error
-from .synthetic import TILTS, make_tilted_pair, pair_rng, pairs_from_photos, unrelated_from_pairs
+from .synthetic import (TILTS, make_perspective_pair, make_tilted_pair, pair_rng,
+                        pairs_from_photos, unrelated_from_pairs)
 
 #: Oxford sequences of the set: boat (zoom + rotation), graf and wall (viewpoint)
 OXFORD = ("boat", "graf", "wall")
@@ -122,22 +123,40 @@ def oxford_pairs(shared: Path) -> List[Pair]:
     return out
 
 
-def tilted_pairs(paths: Sequence[Path], ratios: Sequence[float], tilts: Sequence[float],
-                 seed: int) -> List[Pair]:
-    """The tilted zoom pairs of ``paths`` (``synthetic.make_tilted_pair``), each photo at each
-    ratio and tilt, drawn from ``pair_rng(seed, "<photo> tilt <t>", ratio)``."""
+def _photo_sweep(paths: Sequence[Path], ratios: Sequence[float], values: Sequence[float],
+                 seed: int, kind: str, make, key: str, short: str) -> List[Pair]:
+    """``make(photo, ratio, value, rng, source=...)`` for each photo, ratio and value, drawn
+    from ``pair_rng(seed, "<photo> <key> <value>", ratio)``, as Pairs of set ``kind`` named
+    "<photo> x<ratio> <short><value>" (``Pair.tilt`` holds the value)."""
     from ..imageio import read_grey
 
     out = []
     for path in paths:
         photo = read_grey(path)
         for r in ratios:
-            for t in tilts:
-                p = make_tilted_pair(photo, r, t, pair_rng(seed, f"{path.name} tilt {t}", r),
-                                     source=path.name)
-                out.append(Pair("tilted", f"{path.name} x{r:g} t{t:g}", p.low, p.high,
-                                as_matrix3(p.truth), False, "homography", r, t))
+            for v in values:
+                p = make(photo, r, v, pair_rng(seed, f"{path.name} {key} {v}", r),
+                         source=path.name)
+                out.append(Pair(kind, f"{path.name} x{r:g} {short}{v:g}", p.low, p.high,
+                                as_matrix3(p.truth), False, "homography", r, v))
     return out
+
+
+def tilted_pairs(paths: Sequence[Path], ratios: Sequence[float], tilts: Sequence[float],
+                 seed: int) -> List[Pair]:
+    """The tilted zoom pairs of ``paths`` (``synthetic.make_tilted_pair``), each photo at each
+    ratio and tilt, drawn from ``pair_rng(seed, "<photo> tilt <t>", ratio)``."""
+    return _photo_sweep(paths, ratios, tilts, seed, "tilted", make_tilted_pair, "tilt", "t")
+
+
+def perspective_pairs(paths: Sequence[Path], ratios: Sequence[float], spreads: Sequence[float],
+                      seed: int) -> List[Pair]:
+    """The perspective zoom pairs of ``paths`` (``synthetic.make_perspective_pair``: the local
+    ratio spans ``[ratio, ratio * spread]`` over the footprint, exact homography truth), each
+    photo at each ratio and spread, drawn from ``pair_rng(seed, "<photo> spread <k>", ratio)``;
+    ``Pair.tilt`` holds the spread."""
+    return _photo_sweep(paths, ratios, spreads, seed, "perspective", make_perspective_pair,
+                        "spread", "spread")
 
 
 def swap(pairs: Sequence[Pair], name: str) -> List[Pair]:

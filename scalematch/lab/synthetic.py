@@ -470,6 +470,151 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
 
 
 # --------------------------------------------------------------------------------------------
+# Perspective zoom pairs (issue 19): the local ratio varies across the footprint
+# --------------------------------------------------------------------------------------------
+
+#: Spreads of the perspective pairs: the local ratio's largest over its smallest value across
+#: the high image's footprint (issue 19: "varies across the footprint by 4x and more")
+SPREADS = (4.0, 8.0)
+#: Pixels whose depth factor w (the homography's third coordinate, 1 at the crop's centre) is
+#: below this are left out of the low image (black): near w = 0 lies the horizon, where the
+#: photo would be shrunk without bound
+PERSPECTIVE_MIN_W = 0.25
+#: Anti-aliasing levels of a perspective pair: the photo blurred for local ratios a half
+#: octave apart, blended per low pixel (the camera model of ``zoom_warp``, per pixel)
+PERSPECTIVE_LEVEL_STEP = math.sqrt(2.0)
+
+
+def perspective_homography(ratio: float, spread: float, angle_deg: float, direction_deg: float,
+                           crop: Tuple[int, int, int, int]) -> Tuple[np.ndarray, np.ndarray, float]:
+    """(H 3x3 photo px -> low px up to a shift, the depth gradient (gx, gy) per photo px, the
+    local ratio at the crop's centre).
+
+    ``H = (1 / r_c) R(theta) P T(-c)`` with ``c`` the crop's centre and ``P`` the projective map
+    ``p -> p / w(p)``, ``w(p) = 1 + g . p``, ``g`` along ``direction_deg``. At a photo point the
+    linear shrink is ``w`` across ``g`` and ``w^2`` along it, so the local ratio (high px per
+    low px, geometric mean) is ``r_c w^1.5``. ``|g|`` is set so that it spans exactly
+    ``[ratio, ratio * spread]`` over the crop: ``w`` spans ``[1 - a, 1 + a]`` with
+    ``((1 + a) / (1 - a))^1.5 = spread``, and ``r_c = ratio / (1 - a)^1.5``.
+
+    >>> h, g, rc = perspective_homography(2.0, 4.0, 0.0, 0.0, (0, 0, 641, 481))
+    >>> w = lambda x: 1 + g[0] * (x - 320)
+    >>> round(float(rc * w(0) ** 1.5), 6), round(float(rc * w(640) ** 1.5), 6)
+    (2.0, 8.0)
+    """
+    x, y, w, h = crop
+    cx, cy = x + (w - 1) / 2.0, y + (h - 1) / 2.0
+    k = float(spread) ** (2.0 / 3.0)  # w's largest over its smallest value
+    a = (k - 1.0) / (k + 1.0)
+    u = np.array([math.cos(math.radians(direction_deg)), math.sin(math.radians(direction_deg))])
+    half = abs(u[0]) * (w - 1) / 2.0 + abs(u[1]) * (h - 1) / 2.0  # largest u.(p - c) on the crop
+    g = u * (a / half)
+    r_c = float(ratio) / (1.0 - a) ** 1.5
+    proj = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [g[0], g[1], 1.0]])
+    shift = np.array([[1.0, 0.0, -cx], [0.0, 1.0, -cy], [0.0, 0.0, 1.0]])
+    lin = np.eye(3)
+    lin[:2, :2] = similarity_matrix(1.0 / r_c, angle_deg)[:, :2]
+    return lin @ proj @ shift, g, r_c
+
+
+def _clip_half_plane(poly: np.ndarray, g: np.ndarray, c: np.ndarray, w_min: float) -> np.ndarray:
+    """The polygon (N, 2) cut to the half-plane ``1 + g.(p - c) >= w_min`` (Sutherland-Hodgman)."""
+    out = []
+    n = len(poly)
+    for i in range(n):
+        p, q = poly[i], poly[(i + 1) % n]
+        fp, fq = 1 + g @ (p - c) - w_min, 1 + g @ (q - c) - w_min
+        if fp >= 0:
+            out.append(p)
+        if (fp >= 0) != (fq >= 0):
+            out.append(p + (q - p) * (fp / (fp - fq)))
+    return np.array(out)
+
+
+def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
+                          rng: np.random.Generator, high_size: Tuple[int, int] = HIGH_SIZE,
+                          low_max: Tuple[int, int] = LOW_MAX, source: str = "") -> ZoomPair:
+    """A zoom pair seen in perspective: the local ratio grows from ``ratio`` to
+    ``ratio * spread`` across the high image's footprint (issue 19), exact homography truth.
+
+    As ``make_tilted_pair`` (most textured of 6 crops, measured at the mean shrink
+    ``ratio * sqrt(spread)``; grey-level change, noise, a window of at most ``low_max``), but the
+    photo is mapped by ``perspective_homography`` (theta uniform in [-180, 180), the depth
+    gradient's direction in [0, 360)), each low pixel blurred for its own local ratio (the photo
+    blurred at levels ``PERSPECTIVE_LEVEL_STEP`` apart, blended), and photo points beyond
+    ``PERSPECTIVE_MIN_W`` (towards the horizon) left black. ``truth`` is the 3x3 homography
+    high px -> low px; ``tilt`` holds the spread. ``rng`` draws, in order: the crop positions,
+    theta, the direction, gain, offset, noise std, the window offset and the noise.
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if not (ratio >= 1.0 and spread >= 1.0):
+        raise ValueError(f"ratio and spread must be >= 1, got {ratio}, {spread}")
+    crop = choose_crop(photo, ratio * math.sqrt(spread), rng, high_size)
+    x, y, w, h = crop
+    high = np.ascontiguousarray(photo[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    direction = float(rng.uniform(0.0, 360.0))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    hom, g, r_c = perspective_homography(ratio, spread, angle, direction, crop)
+    c = np.array([x + (w - 1) / 2.0, y + (h - 1) / 2.0])
+    ph, pw = photo.shape
+    frame = np.array([[0, 0], [pw - 1, 0], [pw - 1, ph - 1], [0, ph - 1]], dtype=np.float64)
+    seen = _clip_half_plane(frame, g, c, PERSPECTIVE_MIN_W)  # the photo short of the horizon
+    mapped = apply(hom, seen)
+    origin = np.floor(mapped.min(axis=0))
+    canvas = np.ceil(mapped.max(axis=0) - origin).astype(int) + 1
+    to_canvas = np.array([[1.0, 0.0, -origin[0]], [0.0, 1.0, -origin[1]], [0.0, 0.0, 1.0]]) @ hom
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((int(canvas[0]), int(canvas[1])),
+                                   apply(to_canvas, corners + [x, y]), low_max, rng)
+    to_low = np.array([[1.0, 0.0, -wx], [0.0, 1.0, -wy], [0.0, 0.0, 1.0]]) @ to_canvas
+    # every low pixel's photo point, its depth factor and its local ratio
+    gx, gy = np.meshgrid(np.arange(ww, dtype=np.float64), np.arange(wh, dtype=np.float64))
+    src = apply(np.linalg.inv(to_low), np.column_stack([gx.ravel(), gy.ravel()]))
+    depth = (1.0 + (src - c) @ g).reshape(wh, ww)
+    inside = ((src[:, 0] >= 0) & (src[:, 0] <= pw - 1) & (src[:, 1] >= 0)
+              & (src[:, 1] <= ph - 1)).reshape(wh, ww) & (depth >= PERSPECTIVE_MIN_W)
+    local = r_c * np.clip(depth, PERSPECTIVE_MIN_W, None) ** 1.5
+    level = np.log(np.maximum(local, 1.0)) / math.log(PERSPECTIVE_LEVEL_STEP)
+    # only the part of the photo the window sees is blurred (with room for the widest blur)
+    src_in = src[inside.ravel()]
+    top = int(np.ceil(level[inside].max())) + 1 if src_in.size else 1
+    pad = int(np.ceil(4 * CAMERA_BLUR_PX * PERSPECTIVE_LEVEL_STEP ** top)) + 2
+    x0, y0 = (np.maximum(np.floor(src_in.min(axis=0)) - pad, 0).astype(int) if src_in.size
+              else (0, 0))
+    x1, y1 = (np.minimum(np.ceil(src_in.max(axis=0)) + pad, [pw - 1, ph - 1]).astype(int) + 1
+              if src_in.size else (pw, ph))
+    part = photo[y0:y1, x0:x1]
+    m = to_low @ np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
+    low = np.zeros((wh, ww), np.float32)
+    below = None
+    for j in range(top + 1):
+        rho = PERSPECTIVE_LEVEL_STEP ** j
+        sigma = CAMERA_BLUR_PX * math.sqrt(max(rho * rho - 1.0, 0.0))
+        blurred = cv2.GaussianBlur(part, (0, 0), sigma) if sigma > 0.01 else part
+        here = cv2.warpPerspective(blurred, m, (ww, wh), flags=cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if below is not None:  # level in [j - 1, j]: blend the two
+            f = np.clip(level - (j - 1), 0.0, 1.0).astype(np.float32)
+            sel = (level >= j - 1) & (level < j)
+            low[sel] = ((1 - f) * below + f * here)[sel]
+        if j == 0:
+            low[level < 0] = here[level < 0]
+        below = here
+    low[level >= top] = below[level >= top]
+    low[~inside] = 0.0
+    low = degrade(low, gain, offset, noise_std, rng)
+    low[~inside] = 0.0
+    truth = to_low @ np.array([[1.0, 0.0, x], [0.0, 1.0, y], [0.0, 0.0, 1.0]])
+    return ZoomPair(low=low, high=high, truth=truth / truth[2, 2], ratio=float(ratio),
+                    angle_deg=angle, gain=gain, offset=offset, noise_std=noise_std,
+                    source=source, crop_xy=(x, y), window_xy=(wx, wy), tilt=float(spread),
+                    longitude_deg=direction)
+
+
+# --------------------------------------------------------------------------------------------
 # A smooth scene (issue 18): what starves a fixed-threshold detector
 # --------------------------------------------------------------------------------------------
 

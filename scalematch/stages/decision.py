@@ -40,6 +40,7 @@ from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .descriptors import Described
 from .estimator import model_of
+from .threads import thread_map
 
 
 @dataclass(frozen=True)
@@ -358,8 +359,9 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     """
     from .pixelcheck import pixel_check, uniqueness
 
-    u = uniqueness(coarser, finer, t)
-    near = near if near is not None else pixel_check(coarser, finer, t)
+    u, near = thread_map(lambda job: job(), [  # side by side: neither needs the other
+        lambda: uniqueness(coarser, finer, t),
+        lambda: near if near is not None else pixel_check(coarser, finer, t)])
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
                        unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin)
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare

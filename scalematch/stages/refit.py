@@ -7,6 +7,9 @@ Three refinements, in this order, each keeping the answer unless the evidence sa
 2. :func:`richer_model`: a similarity that explains clearly fewer candidates than an affine map
    or a homography gives way to it (``ModelCheckParams``).
 3. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
+4. :func:`union_homography`: a homography fitted afresh to those pooled candidates replaces an
+   answer that explains clearly fewer of them (perspective: each scale matches the part of the
+   footprint at its own local ratio, so only the union sees the whole of it; issue 19).
 
 Each takes the winning scale's outcome (``best``: its candidates ``src`` -> ``dst``) or all the
 outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)``.
@@ -44,6 +47,11 @@ class ModelCheckParams:
     #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
     min_gain: float = 1.25
     min_extra: int = 10
+    #: pool the candidates of every scale matched in full and fit a homography to them afresh
+    #: (:func:`union_homography`, same ``min_gain`` and ``min_extra``): on perspective zoom pairs
+    #: whose local ratio spans 4x across the footprint the winning scale sees one band of it,
+    #: and its similarity was 4.6-6.8 px off at the far ends (docs/STEEP.md, section 4)
+    union: bool = True
 
     def __post_init__(self) -> None:
         for name in self.models:
@@ -127,3 +135,36 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
     keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
         config.ransac.threshold_px
     return est.transform, inliers[keep], model
+
+
+def union_homography(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
+    """A homography fitted to the candidates of every scale matched in full, when it explains
+    clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
+    same pooled pairs count for both, so a plain zoom pair, where the similarity explains them
+    all, keeps it).
+
+    In perspective the local ratio changes across the footprint, so each scale matches the
+    band of it whose local ratio is near that scale, and a similarity or an affine map fitted
+    there holds on that band only: the pooled candidates of neighbouring scales cover the
+    others, and a homography fitted to all of them holds on the whole. Only for a similarity
+    asked for with the model check on (``ModelCheckParams.union``) and a homography among its
+    models, as :func:`richer_model`.
+    """
+    t, inliers, model = fit
+    check = config.model_check
+    if (not check.enabled or not check.union or config.model != "similarity"
+            or model == "homography" or "homography" not in check.models):
+        return fit
+    done = [o for o in outcomes if o.estimate is not None and len(o.src)]
+    if len(done) < 2:
+        return fit
+    src, dst = distinct_pairs(to_high(view, np.vstack([o.src for o in done])),
+                              np.vstack([o.dst for o in done]))
+    before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
+    est = estimate("homography", src, dst, config.ransac, seed=config.seed)
+    if est.transform is None or folded(est.transform):
+        return fit
+    if est.n_inliers >= check.min_gain * before and est.n_inliers - before >= check.min_extra:
+        inl = est.inliers
+        return est.transform, np.hstack([src[inl], dst[inl]]), "homography"
+    return fit

@@ -1,0 +1,81 @@
+"""refit: the union homography (issue 19, perspective) on fabricated outcomes with a known map."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from scalematch.config import Config
+from scalematch.geometry import apply
+from scalematch.result import ScaleRow
+from scalematch.search import ScaleOutcome
+from scalematch.stages.estimator import Estimate, estimate
+from scalematch.stages.refit import union_homography
+from scalematch.stages.views import identity_view
+
+#: a perspective map of a 640x480 high image: the local ratio grows about 4x across it
+PERSPECTIVE = np.array([[0.30, 0.02, 400.0], [-0.01, 0.28, 300.0], [6e-4, 1e-5, 1.0]])
+
+
+def _outcomes(truth: np.ndarray, bands, n: int = 40, outliers: int = 10, seed: int = 0):
+    """One outcome per x band of the high image: ``n`` exact pairs of ``truth`` in the band
+    and ``outliers`` random pairs (as a scale of a perspective pair sees its own band)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for x0, x1 in bands:
+        src = np.column_stack([rng.uniform(x0, x1, n), rng.uniform(0, 479, n)])
+        dst = apply(truth, src)
+        src = np.vstack([src, rng.uniform(0, 479, (outliers, 2))])
+        dst = np.vstack([dst, rng.uniform(0, 600, (outliers, 2))])
+        row = ScaleRow(s=2.0, ratio=3.0, points=n, initial=n, kept=n, inliers=n, outlier_pct=0.0)
+        est = Estimate("similarity", np.eye(3)[:2], np.ones(len(src), bool), np.zeros(len(src)))
+        out.append(ScaleOutcome(row, est, src, dst, len(src)))
+    return out
+
+
+def _similarity_on(outcome, config):
+    """The similarity the winning scale alone would give: fitted to its own band."""
+    est = estimate("similarity", outcome.src, outcome.dst, config.ransac, seed=0)
+    inl = est.inliers
+    return est.transform, np.hstack([outcome.src[inl], outcome.dst[inl]]), "similarity"
+
+
+def _grid_error(t: np.ndarray, truth: np.ndarray) -> float:
+    xy = np.stack(np.meshgrid(np.linspace(0, 639, 9), np.linspace(0, 479, 7)), -1).reshape(-1, 2)
+    return float(np.max(np.linalg.norm(apply(t, xy) - apply(truth, xy), axis=1)))
+
+
+def test_a_perspective_answer_becomes_the_homography_of_every_scale():
+    """Three scales each match a third of the footprint; the middle one's similarity is tens
+    of px off at the ends, the homography fitted to all three is exact (within 0.1 px)."""
+    config = Config()
+    outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
+    fit = _similarity_on(outcomes[1], config)
+    assert _grid_error(fit[0], PERSPECTIVE) > 10
+    t, inliers, model = union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
+                                         config)
+    assert model == "homography" and len(inliers) >= 110
+    assert _grid_error(t, PERSPECTIVE) < 0.1
+
+
+def test_a_plain_zoom_answer_keeps_its_similarity():
+    """Where the similarity explains the pooled candidates already, a homography fits a few more
+    outliers at best: the answer stays as it is."""
+    config = Config()
+    zoom = np.array([[0.25, -0.1, 300.0], [0.1, 0.25, 200.0], [0.0, 0.0, 1.0]])
+    outcomes = _outcomes(zoom, [(0, 213), (213, 426), (426, 639)], seed=1)
+    fit = _similarity_on(outcomes[1], config)
+    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes, config) is fit
+
+
+@pytest.mark.parametrize("config", [
+    Config(model="affine"),  # a model the user chose is kept
+    Config(model_check=replace(Config().model_check, union=False)),
+    Config(model_check=replace(Config().model_check, models=("affine",))),
+], ids=["affine asked", "union off", "no homography in the model check"])
+def test_the_union_is_only_tried_for_a_similarity_with_the_model_check(config):
+    outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
+    fit = _similarity_on(outcomes[1], Config())
+    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes, config) is fit
