@@ -161,6 +161,8 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, config) -> Refi
     src, dst = distinct_pairs(to_high(view, np.vstack([o.src for o in done])),
                               np.vstack([o.dst for o in done]))
     before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
+    if len(src) < check.min_gain * before or len(src) - before < check.min_extra:
+        return fit  # no homography could explain enough more: the fit is not tried (same answer)
     est = estimate("homography", src, dst, config.ransac, seed=config.seed)
     if est.transform is None or folded(est.transform):
         return fit
