@@ -216,6 +216,29 @@ class Placed(NamedTuple):
     area: float  #: its area, (shrunk) low px^2
 
 
+def local_ratio(t3: np.ndarray, high_shape: Tuple[int, int]) -> float:
+    """High px per low px of the 3x3 map ``t3`` at the high image's centre: ``w^1.5 /
+    sqrt(|det t3|)`` with ``w`` the centre's third coordinate (the Jacobian of a homography has
+    determinant ``det / w^3``). For an affine map (w = 1 everywhere) it is the ratio of
+    :func:`scalematch.geometry.similarity_parts`; for a homography it is the ratio where the
+    footprint is, not at the high image's origin (in perspective, a factor 4 and more apart
+    across the footprint: the high image is blurred for its middle).
+
+    >>> h = np.array([[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 1.0]])
+    >>> local_ratio(h, (101, 201)), local_ratio(h * 3.0, (101, 201))
+    (2.0, 2.0)
+    >>> round(local_ratio(np.array([[0.5, 0, 0], [0, 0.5, 0], [0.01, 0, 1.0]]), (101, 201)), 3)
+    5.657
+    """
+    t3 = np.asarray(t3, np.float64)
+    det = abs(float(np.linalg.det(t3)))
+    h, w = high_shape[:2]
+    depth = float(t3[2] @ [(w - 1) / 2.0, (h - 1) / 2.0, 1.0])
+    if det == 0.0 or depth == 0.0:
+        return math.inf
+    return abs(depth) ** 1.5 / math.sqrt(det)
+
+
 def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
             params: PixelParams) -> Union[Placed, str]:
     """The hypothesis ``t`` placed on ``low`` (:class:`Placed`), or why it cannot be: no
@@ -227,7 +250,7 @@ def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
     area = _quad_area(corners)
     if area < params.min_overlap_px:
         return f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})"
-    ratio = similarity_parts(t3)[0]
+    ratio = local_ratio(t3, high_shape)
     if not (math.isfinite(ratio) and ratio > 0):
         return "the transform is singular"
     q = min(1.0, params.max_side_px / math.sqrt(area))
