@@ -46,6 +46,8 @@ VARIANTS = {
     "steep": Config.preset("steep"),
     # what a user who knows the pair is seen in perspective would ask for
     "homography": Config(model="homography"),
+    # the default with a time budget of 1 s: what the budget costs on pairs that have an answer
+    "budget-1s": Config.preset("budget-1s"),
 }
 
 
