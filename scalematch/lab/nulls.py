@@ -39,6 +39,7 @@ import platform
 import shutil
 import time
 import zlib
+from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -635,6 +636,18 @@ def load_rows(path: PathLike) -> List[Dict[str, Any]]:
     return rows
 
 
+def made_on(run_commits: Dict[str, int]) -> str:
+    """Which code made the rows: "rows made on 3dd204b (1216 runs)", "" for rows that
+    predate the record.
+
+    >>> made_on({"3dd204b": 1200, "": 16})
+    'rows made on 3dd204b (1200 runs), on a commit not recorded (16 runs)'
+    """
+    parts = [f"{c or 'a commit not recorded'} ({n} runs)"
+             for c, n in sorted(run_commits.items(), key=lambda kv: -kv[1])]
+    return ("rows made on " + ", on ".join(parts)) if parts else "rows: none"
+
+
 def execute(tasks: Sequence[Dict[str, Any]], rows_path: PathLike, jobs: int = 1,
             run: Callable[[Dict[str, Any]], Dict[str, Any]] = run_task,
             deadline: Optional[float] = None,
@@ -654,8 +667,12 @@ def execute(tasks: Sequence[Dict[str, Any]], rows_path: PathLike, jobs: int = 1,
         log(f"resuming: {len(tasks) - len(todo)} of {len(tasks)} runs already in {rows_path}")
     new: List[Dict[str, Any]] = []
     t0 = time.perf_counter()
+    from .bench import _git_commit
+
+    commit = _git_commit()  # the code these runs are made with (a page may be written later)
 
     def record(row: Dict[str, Any]) -> None:
+        row = dict(row, commit=commit)
         with open(rows_path, "a") as f:
             f.write(json.dumps(row, allow_nan=False, default=str) + "\n")
         new.append(row)
@@ -1111,6 +1128,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
                 "load_average_at_start": load_at_start, "opencv": cv2.__version__,
                 "numpy": np.__version__, "python": platform.python_version(),
                 "commit": _git_commit(), "opencv_threads": cv2.getNumThreads(),
+                "run_commits": dict(Counter(r.get("commit") or "" for r in rows + true_rows)),
                 "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                 "keys_recorded": sorted({k for r in rows for k in (r.get("evidence") or {})}),
                 "pairs_folder": str(pair_dir), "rows_path": str(rows_path)}
@@ -1162,7 +1180,8 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
         "orders: `given` = `match(low, high)`, `swapped` = `match(high, low)`. "
         "Code: `scalematch/lab/nulls.py`.", "",
         f"- Command: `{s['command']}`",
-        f"- Date: {s['date']}; commit {s['commit'] or 'unknown'}",
+        f"- Date: {s['date']}; commit {s['commit'] or 'unknown'} (the page's); "
+        f"{made_on(s.get('run_commits') or {})}",
         f"- Machine: {s['machine']}; load average at the start {s['load_average_at_start']} "
         "(the cores are shared with other work: times are wall-clock)",
         f"- Software: Python {s['python']}, OpenCV {s['opencv']}, NumPy {s['numpy']}; "
