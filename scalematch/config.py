@@ -121,7 +121,8 @@ class Config:
     #: Checked between steps, never before the first (the given order's plain search), so a
     #: step under way finishes: a "no" comes sooner, but a pair only a later step would solve
     #: (the other order, tilted views) is then missed, and the answer depends on the machine's
-    #: speed. docs/NULLS.md measures what a budget saves on the null set (issues 16 and 19)
+    #: speed. docs/STEEP.md section 5 and docs/NULLS-BUDGET.md measure what a 1 s budget saves on
+    #: the null set and what it costs on tilted pairs (issues 16 and 19)
     time_budget_s: Optional[float] = None
 
     def __post_init__(self) -> None:

@@ -64,7 +64,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
     the finer image (``config.views``), in both orders (:func:`scalematch.search.search_plan`).
     The a-contrario test counts every search made, so trying more cannot make a chance
-    transform look reliable.
+    transform look reliable. With ``config.time_budget_s`` no step starts once it is spent
+    (the first always runs; ``evidence.stopped`` is then "time budget").
 
     An image longer than its working size (``config.low_max_side``, ``config.high_max_side``)
     is matched shrunk and the answer given in its own pixels (:mod:`scalematch.working`).

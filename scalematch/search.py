@@ -170,8 +170,9 @@ def out_of_time(elapsed_s: float, steps_run: int, config) -> bool:
     one step has run (the first step, the given order's plain search, always runs).
 
     >>> from scalematch.config import Config
-    >>> out_of_time(2.5, 1, Config(time_budget_s=2.0)), out_of_time(2.5, 0, Config(time_budget_s=2.0))
-    (True, False)
+    >>> two = Config(time_budget_s=2.0)
+    >>> out_of_time(2.5, 1, two), out_of_time(2.5, 0, two), out_of_time(1.5, 1, two)
+    (True, False, False)
     >>> out_of_time(99.0, 3, Config())  # no budget
     False
     """

@@ -531,6 +531,39 @@ def _clip_half_plane(poly: np.ndarray, g: np.ndarray, c: np.ndarray, w_min: floa
     return np.array(out)
 
 
+def blurred_warp(image: np.ndarray, m3: np.ndarray, size: Tuple[int, int],
+                 level: np.ndarray) -> np.ndarray:
+    """``image`` warped by the 3x3 map ``m3`` onto ``size`` (w, h), each output pixel blurred for
+    its own local ratio: ``level`` (h, w), ``log_step`` of that ratio (``PERSPECTIVE_LEVEL_STEP``;
+    0 for ratio 1). The image is blurred for the ratios ``step^j`` (the camera model of
+    ``zoom_warp``), each warped, and every pixel blends the two levels around its own, linearly.
+
+    >>> img = np.tile(np.float32([0, 255]), (40, 20))        # the finest stripes there are
+    >>> flat = blurred_warp(img, np.eye(3), (40, 40), np.full((40, 40), 6.0))  # ratio 8
+    >>> sharp = blurred_warp(img, np.eye(3), (40, 40), np.zeros((40, 40)))     # ratio 1
+    >>> bool(np.ptp(flat[10:30, 10:30]) < 1.0), bool(np.ptp(sharp[10:30, 10:30]) == 255.0)
+    (True, True)
+    """
+    w, h = size
+    out = np.zeros((h, w), np.float32)
+    top = int(np.ceil(level.max())) if level.size else 0
+    below = None
+    for j in range(top + 1):
+        rho = PERSPECTIVE_LEVEL_STEP ** j
+        sigma = CAMERA_BLUR_PX * math.sqrt(max(rho * rho - 1.0, 0.0))
+        blurred = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0.01 else image
+        here = cv2.warpPerspective(blurred, m3, (w, h), flags=cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if below is None:
+            out[level <= 0] = here[level <= 0]
+        else:  # pixels whose level lies in (j - 1, j]: the two levels blended
+            sel = (level > j - 1) & (level <= j)
+            f = (level - (j - 1)).astype(np.float32)
+            out[sel] = ((1 - f) * below + f * here)[sel]
+        below = here
+    return out
+
+
 def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
                           rng: np.random.Generator, high_size: Tuple[int, int] = HIGH_SIZE,
                           low_max: Tuple[int, int] = LOW_MAX, source: str = "") -> ZoomPair:
@@ -586,24 +619,8 @@ def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
               else (0, 0))
     x1, y1 = (np.minimum(np.ceil(src_in.max(axis=0)) + pad, [pw - 1, ph - 1]).astype(int) + 1
               if src_in.size else (pw, ph))
-    part = photo[y0:y1, x0:x1]
     m = to_low @ np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
-    low = np.zeros((wh, ww), np.float32)
-    below = None
-    for j in range(top + 1):
-        rho = PERSPECTIVE_LEVEL_STEP ** j
-        sigma = CAMERA_BLUR_PX * math.sqrt(max(rho * rho - 1.0, 0.0))
-        blurred = cv2.GaussianBlur(part, (0, 0), sigma) if sigma > 0.01 else part
-        here = cv2.warpPerspective(blurred, m, (ww, wh), flags=cv2.INTER_LINEAR,
-                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        if below is not None:  # level in [j - 1, j]: blend the two
-            f = np.clip(level - (j - 1), 0.0, 1.0).astype(np.float32)
-            sel = (level >= j - 1) & (level < j)
-            low[sel] = ((1 - f) * below + f * here)[sel]
-        if j == 0:
-            low[level < 0] = here[level < 0]
-        below = here
-    low[level >= top] = below[level >= top]
+    low = blurred_warp(photo[y0:y1, x0:x1], m, (ww, wh), np.minimum(level, top))
     low[~inside] = 0.0
     low = degrade(low, gain, offset, noise_std, rng)
     low[~inside] = 0.0
