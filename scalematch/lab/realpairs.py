@@ -28,7 +28,7 @@ import multiprocessing as mp
 import os
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -40,7 +40,7 @@ from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
 from .datasets import find_shared, list_photos, scene_of
 from .evaluation import is_success, reprojection_error
-from .synthetic import (TILTS, make_perspective_pair, make_tilted_pair, pair_rng,
+from .synthetic import (SPREADS, TILTS, make_perspective_pair, make_tilted_pair, pair_rng,
                         pairs_from_photos, unrelated_from_pairs)
 
 #: Oxford sequences of the set: boat (zoom + rotation), graf and wall (viewpoint)
@@ -165,21 +165,40 @@ def swap(pairs: Sequence[Pair], name: str) -> List[Pair]:
             for p in pairs]
 
 
-def synthetic_sets(paths: Sequence[Path], seed: int,
-                   log=lambda s: None) -> Dict[str, List[Pair]]:
-    zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, as_matrix3(p.truth), False,
-                 "similarity", p.ratio)
-            for p in pairs_from_photos(paths, ZOOM_RATIOS, seed)]
-    log(f"made {len(zoom)} zoom pairs")
-    tilted = tilted_pairs(paths, TILTED_RATIOS, TILTS, seed)
-    log(f"made {len(tilted)} tilted pairs")
-    zp = list(pairs_from_photos(paths, (2.0, 4.0), seed))
-    unrelated = [Pair("unrelated", f"{u.source} / {u.high_source}", u.low, u.high, None, False,
-                      "similarity", u.ratio)
-                 for u in unrelated_from_pairs(zp, UNRELATED,
-                                               np.random.default_rng([seed, 1]), scene_of)]
-    return {"zoom": zoom, "zoom-swapped": swap(zoom, "zoom-swapped"), "tilted": tilted,
-            "tilted-swapped": swap(tilted, "tilted-swapped"), "unrelated": unrelated}
+#: Tilts of the steep sets (issue 19; ``scripts/steep_views.py``): beyond the views' t = 4
+STEEP_TILTS = (5.66, 8.0)
+
+
+def synthetic_sets(paths: Sequence[Path], seed: int, log=lambda s: None,
+                   wanted: Sequence[str] = ("zoom", "zoom-swapped", "tilted", "tilted-swapped",
+                                            "unrelated")) -> Dict[str, List[Pair]]:
+    """The synthetic sets named in ``wanted`` (only those are made): zoom pairs, tilted pairs
+    (t 1.41-4), steep ones (t 5.66 and 8), perspective ones (spreads 4 and 8), each also
+    swapped, and unrelated pairs."""
+    out: Dict[str, List[Pair]] = {}
+    if {"zoom", "zoom-swapped"} & set(wanted):
+        zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, as_matrix3(p.truth),
+                     False, "similarity", p.ratio)
+                for p in pairs_from_photos(paths, ZOOM_RATIOS, seed)]
+        log(f"made {len(zoom)} zoom pairs")
+        out.update({"zoom": zoom, "zoom-swapped": swap(zoom, "zoom-swapped")})
+    for name, make in (("tilted", lambda: tilted_pairs(paths, TILTED_RATIOS, TILTS, seed)),
+                       ("steep", lambda: [replace(p, set="steep") for p in tilted_pairs(
+                           paths, TILTED_RATIOS, STEEP_TILTS, seed)]),
+                       ("perspective", lambda: perspective_pairs(paths, TILTED_RATIOS, SPREADS,
+                                                                 seed))):
+        if {name, f"{name}-swapped"} & set(wanted):
+            pairs = make()
+            log(f"made {len(pairs)} {name} pairs")
+            out.update({name: pairs, f"{name}-swapped": swap(pairs, f"{name}-swapped")})
+    if "unrelated" in wanted:
+        zp = list(pairs_from_photos(paths, (2.0, 4.0), seed))
+        out["unrelated"] = [Pair("unrelated", f"{u.source} / {u.high_source}", u.low, u.high,
+                                 None, False, "similarity", u.ratio)
+                            for u in unrelated_from_pairs(zp, UNRELATED,
+                                                          np.random.default_rng([seed, 1]),
+                                                          scene_of)]
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -270,8 +289,9 @@ def asift_subset(pairs: Sequence[Pair], n: int) -> List[Pair]:
 def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
     """Per (set, method): pairs, solved, rate, median error of successes, false claims, time."""
     out = []
+    known = SET_ORDER + EXTRA_SETS
     keys = sorted({(r["set"], r["method"]) for r in rows},
-                  key=lambda k: (SET_ORDER.index(k[0]) if k[0] in SET_ORDER else 99,
+                  key=lambda k: (known.index(k[0]) if k[0] in known else 99,
                                  METHODS.index(k[1])))
     for s, m in keys:
         rs = [r for r in rows if r["set"] == s and r["method"] == m]
@@ -286,17 +306,25 @@ def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
 
 
 SET_ORDER = ("oxford", "zoom", "zoom-swapped", "tilted", "tilted-swapped", "unrelated")
+#: Sets run only when named (``--sets``): slower, and beyond what the default search is built
+#: for (issue 19: tilts 5.66 and 8, perspective); docs/STEEP.md
+EXTRA_SETS = ("steep", "steep-swapped", "perspective", "perspective-swapped")
+#: The sets reported by tilt (or spread), with the values and the column label
+BY_TILT = (("tilted", TILTS, "t"), ("steep", STEEP_TILTS, "t"),
+           ("perspective", SPREADS, "spread"))
 
 
 def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, int]]:
-    """(set, method, tilt, solved, pairs) for the tilted sets."""
+    """(set, method, tilt or spread, solved, pairs) for the tilted, steep and perspective sets."""
     out = []
-    for s in ("tilted", "tilted-swapped"):
-        for m in METHODS:
-            for t in TILTS:
-                rs = [r for r in rows if r["set"] == s and r["method"] == m and r["tilt"] == t]
-                if rs:
-                    out.append((s, m, t, sum(r["success"] for r in rs), len(rs)))
+    for family, values, _ in BY_TILT:
+        for s in (family, f"{family}-swapped"):
+            for m in METHODS:
+                for t in values:
+                    rs = [r for r in rows if r["set"] == s and r["method"] == m
+                          and r["tilt"] == t]
+                    if rs:
+                        out.append((s, m, t, sum(r["success"] for r in rs), len(rs)))
     return out
 
 
@@ -323,15 +351,20 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]]) -> str:
         solved = "-" if r["set"] == "unrelated" else str(r["solved"])
         lines.append(f"| {r['set']} | {r['method']} | {r['pairs']} | {solved} | {rate} | {err} | "
                      f"{r['false_claims']} | {r['median_s']:.2f} |")
-    lines += ["", "Tilted pairs by tilt (solved / pairs):", "",
-              "| set | method | " + " | ".join(f"t = {t:g}" for t in TILTS) + " |",
-              "|---|---|" + "---:|" * len(TILTS)]
-    for s in ("tilted", "tilted-swapped"):
-        for m in METHODS:
-            cells = {t: f"{k}/{n}" for ss, mm, t, k, n in tilt_rows if ss == s and mm == m}
-            if cells:
-                lines.append(f"| {s} | {m} | " + " | ".join(cells.get(t, "-") for t in TILTS)
-                             + " |")
+    for family, values, label in BY_TILT:
+        sets = (family, f"{family}-swapped")
+        if not any(ss in sets for ss, *_ in tilt_rows):
+            continue
+        lines += ["", f"{family.capitalize()} pairs by {'tilt' if label == 't' else label} "
+                  "(solved / pairs):", "",
+                  "| set | method | " + " | ".join(f"{label} = {t:g}" for t in values) + " |",
+                  "|---|---|" + "---:|" * len(values)]
+        for s in sets:
+            for m in METHODS:
+                cells = {t: f"{k}/{n}" for ss, mm, t, k, n in tilt_rows if ss == s and mm == m}
+                if cells:
+                    lines.append(f"| {s} | {m} | "
+                                 + " | ".join(cells.get(t, "-") for t in values) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -355,7 +388,8 @@ def write_section(doc: Path, text: str) -> None:
 @click.option("--shared", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
 @click.option("--sets", default=",".join(SET_ORDER), show_default=True,
-              help="Comma-separated sets to run.")
+              help="Comma-separated sets to run; also " + ", ".join(EXTRA_SETS)
+                   + " (tilts 5.66 and 8, and perspective pairs: docs/STEEP.md).")
 @click.option("--methods", default=",".join(METHODS), show_default=True)
 @click.option("--photo-step", type=click.IntRange(min=1), default=PHOTO_STEP, show_default=True,
               help="Use every N-th photo.")
@@ -387,6 +421,10 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
     if shared is None:
         raise click.ClickException("../shared is absent: this benchmark needs its photos")
     wanted = [s.strip() for s in sets.split(",") if s.strip()]
+    for s in wanted:
+        if s not in SET_ORDER + EXTRA_SETS:
+            raise click.BadParameter(f"unknown set {s!r}; one of "
+                                     f"{', '.join(SET_ORDER + EXTRA_SETS)}", param_hint="--sets")
     names = [m.strip() for m in methods.split(",") if m.strip()]
     for m in names:
         if m not in METHODS:
@@ -397,7 +435,7 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
     if not names:  # report the rows of earlier runs only
         wanted = []
     elif any(s != "oxford" for s in wanted):
-        pool.update(synthetic_sets(paths, seed, log))
+        pool.update(synthetic_sets(paths, seed, log, wanted))
     if names and "oxford" in wanted:
         pool["oxford"] = oxford_pairs(shared)
     meta = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "seed": seed,

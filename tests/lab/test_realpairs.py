@@ -38,3 +38,31 @@ def test_write_section_replaces_only_its_own_block(tmp_path):
     text = doc.read_text()
     assert text.startswith("# Benchmarks\n\nkept text\n") and "second" in text
     assert "first" not in text and text.count("real-pairs: begin") == 1
+
+
+def test_the_tables_by_tilt_and_by_spread_follow_the_sets_run():
+    """by_tilt and markdown (issue 19): a table per family of sets run, labelled t or spread."""
+    from scalematch.lab.realpairs import by_tilt, markdown, summarise
+
+    rows = [{"set": s, "method": "scalematch", "pair": f"p{k}", "tilt": t, "success": k % 2 == 0,
+             "claimed": True, "error_px": 0.5, "seconds": 1.0, "false_claim": False,
+             "ratio": 2.0}
+            for k, (s, t) in enumerate([("perspective", 4.0), ("perspective", 4.0),
+                                        ("perspective-swapped", 8.0), ("steep", 8.0)])]
+    tilts = by_tilt(rows)
+    assert ("perspective", "scalematch", 4.0, 1, 2) in tilts
+    assert ("perspective-swapped", "scalematch", 8.0, 1, 1) in tilts
+    text = markdown(summarise(rows), tilts, [])
+    assert "| set | method | spread = 4 | spread = 8 |" in text
+    assert "| perspective | scalematch | 1/2 | - |" in text
+    assert "| steep | scalematch | - | 0/1 |" in text and "Tilted pairs" not in text
+
+
+def test_an_unknown_set_is_a_usage_error():
+    from click.testing import CliRunner
+
+    from scalematch.lab.realpairs import real_pairs_command
+
+    result = CliRunner().invoke(real_pairs_command, ["--sets", "tilted,sideways",
+                                                     "--shared", "."])
+    assert result.exit_code == 2 and "unknown set 'sideways'" in result.output
