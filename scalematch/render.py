@@ -167,6 +167,29 @@ def evidence_line(result: MatchResult) -> str:
 
 # --------------------------------------------------------------------------- pictures
 
+def match_grey_levels(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``image`` (uint8) brought to ``reference``'s grey levels over ``mask``: the gain and offset
+    that give it the reference's mean and standard deviation there (the two photos of a pair
+    differ by exposure; without this the overlay's blend reads as colour where the pixels
+    agree). Unchanged where either is flat or the mask is empty.
+
+    >>> ref = np.arange(0, 200, 2, dtype=np.uint8).reshape(10, 10)
+    >>> img = (ref // 2 + 60).astype(np.uint8)          # half the contrast, brighter
+    >>> out = match_grey_levels(img, ref, np.ones(ref.shape, bool))
+    >>> int(np.abs(out.astype(int) - ref).max()) <= 1
+    True
+    """
+    if not mask.any():
+        return image
+    a = image[mask].astype(np.float64)
+    b = reference[mask].astype(np.float64)
+    if a.std() < 1e-6 or b.std() < 1e-6:
+        return image
+    gain = b.std() / a.std()
+    out = (image.astype(np.float64) - a.mean()) * gain + b.mean()
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
 def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
             footer: Sequence[str] = ()) -> np.ndarray:
     """The high image warped onto the low one, false-colour blended, footprint outlined.
@@ -200,6 +223,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
         high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
         warped, mask = _warp_high(high_grey, t, (ww, hh))
         inside = mask > 0
+        warped = match_grey_levels(warped, low_grey, inside)  # grey where they agree
         dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
         out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
         out[inside, 0] = low_grey[inside]  # B: low

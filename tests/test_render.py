@@ -81,6 +81,21 @@ def test_overlay_fits_and_outlines_where_the_transform_says(pair, as_homography)
     assert diff.mean() < 6.0
 
 
+def test_overlay_is_grey_where_they_agree_whatever_the_exposure(pair):
+    """The low image darker and flatter than the high one (gain 0.6, offset 20, as the
+    benchmark's pairs are): the warped high image is brought to the low one's grey levels, so
+    a correct fit still reads grey (green = red within 6 levels on average)."""
+    low, high, t = pair
+    dim = np.clip(low * 0.6 + 20.0, 0, 255)
+    out = overlay(dim, high, make_result(t))
+    corners = footprint(t, high.shape)
+    inside = np.zeros(low.shape, np.uint8)
+    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
+    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
+    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    assert diff.mean() < 6.0
+
+
 def test_overlay_of_a_wrong_transform_disagrees(pair):
     low, high, t = pair
     wrong = t.copy()
