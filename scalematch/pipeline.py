@@ -33,6 +33,7 @@ from .stages.detector import MIN_SIDE_PX, Contrast, Keypoints, detect_on_level, 
 from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
+from .stages.pixelcheck import pixel_check
 from .stages.probe import probe_scores, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
@@ -238,20 +239,22 @@ class Memo:
 
     coarser: Dict[Direction, LowFeatures] = field(default_factory=dict)
     _contrasts: Dict[Tuple[int, float], Contrast] = field(default_factory=dict, repr=False)
+    _locks: Dict[Tuple[int, float], threading.Lock] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def contrast(self, image: np.ndarray, params) -> Optional[Contrast]:
-        """``image_contrast(image, params.sigma)`` once per image (None: not adaptive)."""
+        """``image_contrast(image, params.sigma)`` once per image (None: not adaptive). Threads
+        asking for the same image wait for the one measuring it; two images are measured side
+        by side (the coarser image is described on a thread while the finer one is detected)."""
         if not params.adaptive:
             return None
         key = (id(image), float(params.sigma))
-        with self._lock:  # the coarser image is described on a thread
-            known = self._contrasts.get(key)
-        if known is None:
-            known = image_contrast(image, params.sigma)
-            with self._lock:
-                self._contrasts[key] = known
-        return known
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            if key not in self._contrasts:
+                self._contrasts[key] = image_contrast(image, params.sigma)
+            return self._contrasts[key]
 
 
 def shares_first_level(config: Config) -> bool:
@@ -433,7 +436,6 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
                                 memo.contrast(hi_img, cfg.harris))])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
-    memo.contrast(hi_img, cfg.harris)  # measured once before the views' threads share it
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     searches += len(probed)
     chosen = sorted(probed, key=lambda p: -p.score)
@@ -482,8 +484,6 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     at log10 NFA -43, 48 px off, beat the plain similarity of 11 inliers that was right; its
     pixels: ZNCC 0.963 against 0.996.
     """
-    from .stages.pixelcheck import pixel_check
-
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)

@@ -28,7 +28,8 @@ from scalematch import Config, match  # noqa: E402
 from scalematch.geometry import as_matrix3, invert  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success, reprojection_error  # noqa: E402
-from scalematch.lab.realpairs import canonical, oxford_pairs, pair_error  # noqa: E402
+from scalematch.lab.realpairs import (STEEP_TILTS, canonical, oxford_pairs,  # noqa: E402
+                                      pair_error)
 from scalematch.lab.synthetic import TILTS, pairs_from_photos  # noqa: E402
 from steep_views import make_pairs  # noqa: E402
 
@@ -47,7 +48,7 @@ def jobs(sets, photos):
         for pair in oxford_pairs(find_shared(None)):
             yield "oxford", pair.name, pair.low, pair.high, \
                 lambda t, fwd, pair=pair: pair_error(pair, canonical(pair, t, fwd))
-    for name, tilts in (("tilted", TILTS), ("steep", (5.66, 8.0))):
+    for name, tilts in (("tilted", TILTS), ("steep", STEEP_TILTS)):
         if name in sets:
             for pair in make_pairs(photos[::3], tilts, (2.0, 4.0), 0, False):
                 yield name, pair.name, pair.low, pair.high, \

@@ -36,8 +36,8 @@ import cv2  # noqa: E402
 from scalematch import Config, match  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
-from scalematch.lab.realpairs import (canonical, pair_error, perspective_pairs,  # noqa: E402
-                                      run_sift, swap, tilted_pairs)
+from scalematch.lab.realpairs import (STEEP_TILTS, canonical, pair_error,  # noqa: E402
+                                      perspective_pairs, run_sift, swap, tilted_pairs)
 
 #: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
 #: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
@@ -81,7 +81,7 @@ def run_peer(pair):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--tilts", default="5.66,8")
+    ap.add_argument("--tilts", default=",".join(f"{t:g}" for t in STEEP_TILTS))
     ap.add_argument("--ratios", default="2,4")
     ap.add_argument("--photo-step", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)

@@ -47,6 +47,15 @@ def make_result(t, model="similarity", matched=True, high_shape=(360, 480)) -> M
         timings={"total": 1.0}, config=Config())
 
 
+def green_red_gap(out: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """|green - red| of the overlay over the footprint ``corners``, eroded by 3 px: the warped
+    high image against the low one, pixel by pixel."""
+    inside = np.zeros(out.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
+    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
+    return np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+
+
 def outline_mask(img: np.ndarray) -> np.ndarray:
     return np.all(np.abs(img.astype(int) - np.array(OUTLINE)) <= 40, axis=2)
 
@@ -74,10 +83,7 @@ def test_overlay_fits_and_outlines_where_the_transform_says(pair, as_homography)
         d = np.minimum(d, np.hypot(xs - p[0] - tpar * v[0], ys - p[1] - tpar * v[1]))
     assert np.percentile(d, 99) <= 2.5
     # inside the footprint the warped high (green) agrees with low (red): a correct fit
-    inside = np.zeros(low.shape, np.uint8)
-    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
-    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
-    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    diff = green_red_gap(out, corners)
     assert diff.mean() < 6.0
 
 
@@ -89,10 +95,7 @@ def test_overlay_is_grey_where_they_agree_whatever_the_exposure(pair):
     dim = np.clip(low * 0.6 + 20.0, 0, 255)
     out = overlay(dim, high, make_result(t))
     corners = footprint(t, high.shape)
-    inside = np.zeros(low.shape, np.uint8)
-    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
-    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
-    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    diff = green_red_gap(out, corners)
     assert diff.mean() < 6.0
 
 
@@ -102,10 +105,7 @@ def test_overlay_of_a_wrong_transform_disagrees(pair):
     wrong[:, 2] += 12.0  # 12 low-res pixels off
     out = overlay(low, high, make_result(wrong))
     corners = footprint(wrong, high.shape)
-    inside = np.zeros(low.shape, np.uint8)
-    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
-    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
-    diff = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    diff = green_red_gap(out, corners)
     assert diff.mean() > 10.0
 
 

@@ -170,11 +170,11 @@ STEEP_TILTS = (5.66, 8.0)
 
 
 def synthetic_sets(paths: Sequence[Path], seed: int, log=lambda s: None,
-                   wanted: Sequence[str] = ("zoom", "zoom-swapped", "tilted", "tilted-swapped",
-                                            "unrelated")) -> Dict[str, List[Pair]]:
-    """The synthetic sets named in ``wanted`` (only those are made): zoom pairs, tilted pairs
-    (t 1.41-4), steep ones (t 5.66 and 8), perspective ones (spreads 4 and 8), each also
-    swapped, and unrelated pairs."""
+                   wanted: Optional[Sequence[str]] = None) -> Dict[str, List[Pair]]:
+    """The synthetic sets named in ``wanted`` (only those are made; None: those of
+    ``SET_ORDER``): zoom pairs, tilted pairs (t 1.41-4), steep ones (t 5.66 and 8), perspective
+    ones (spreads 4 and 8), each also swapped, and unrelated pairs."""
+    wanted = SET_ORDER if wanted is None else wanted
     out: Dict[str, List[Pair]] = {}
     if {"zoom", "zoom-swapped"} & set(wanted):
         zoom = [Pair("zoom", f"{p.source} x{p.ratio:g}", p.low, p.high, as_matrix3(p.truth),

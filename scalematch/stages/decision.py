@@ -359,9 +359,11 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     """
     from .pixelcheck import pixel_check, uniqueness
 
-    u, near = thread_map(lambda job: job(), [  # side by side: neither needs the other
-        lambda: uniqueness(coarser, finer, t),
-        lambda: near if near is not None else pixel_check(coarser, finer, t)])
+    if near is None:  # side by side: neither needs the other
+        u, near = thread_map(lambda job: job(), [lambda: uniqueness(coarser, finer, t),
+                                                 lambda: pixel_check(coarser, finer, t)])
+    else:
+        u = uniqueness(coarser, finer, t)
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
                        unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin)
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare

@@ -34,7 +34,7 @@ from typing import NamedTuple, Tuple, Union
 import cv2
 import numpy as np
 
-from ..geometry import apply, as_matrix3, footprint, similarity_matrix, similarity_parts
+from ..geometry import apply, as_matrix3, footprint, similarity_matrix
 from .scalespace import CAMERA_BLUR_PX
 
 
@@ -437,10 +437,10 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
         return Uniqueness(nan, nan, nan)
     y0, y1, x0, x1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
     tpl = np.ascontiguousarray(img[y0:y1, x0:x1])
-    tmask = np.ascontiguousarray(mask[y0:y1, x0:x1]).astype(np.uint8)
-    if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask > 0].std()) <= params.min_std:
+    tmask = mask[y0:y1, x0:x1]
+    if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask].std()) <= params.min_std:
         return Uniqueness(nan, nan, nan)  # no room to place it anywhere else, or flat
-    r = masked_zncc_map(low, tpl, tmask > 0, params.min_std)
+    r = masked_zncc_map(low, tpl, tmask, params.min_std)
     claimed = float(r[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
     yy, xx = np.ogrid[0:r.shape[0], 0:r.shape[1]]
     radius = UNIQUE_EXCLUSION * min(tpl.shape)

@@ -18,7 +18,7 @@ outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -52,6 +52,15 @@ class ModelCheckParams:
     #: whose local ratio spans 4x across the footprint the winning scale sees one band of it,
     #: and its similarity was 4.6-6.8 px off at the far ends (docs/STEEP.md, section 4)
     union: bool = True
+
+    def clearly_more(self, n: int, k: int) -> bool:
+        """Whether ``n`` inliers of a richer model clearly beat ``k`` of the simpler one
+        (``min_gain`` times as many and ``min_extra`` more).
+
+        >>> ModelCheckParams().clearly_more(28, 20), ModelCheckParams().clearly_more(60, 40)
+        (False, True)
+        """
+        return n >= self.min_gain * k and n - k >= self.min_extra
 
     def __post_init__(self) -> None:
         for name in self.models:
@@ -105,10 +114,20 @@ def richer_model(fit: Refit, view: View, best, config) -> Refit:
         est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
         if est.transform is None or folded(est.transform):
             continue
-        if est.n_inliers >= check.min_gain * k and est.n_inliers - k >= check.min_extra:
+        if check.clearly_more(est.n_inliers, k):
             inl = est.inliers
             return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
     return fit
+
+
+def _pooled(view: View, outcomes: Sequence) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """The distinct candidates (finer px, coarser px) of every scale matched in full, or None
+    when fewer than two scales were."""
+    done = [o for o in outcomes if o.estimate is not None and len(o.src)]
+    if len(done) < 2:
+        return None
+    return distinct_pairs(to_high(view, np.vstack([o.src for o in done])),
+                          np.vstack([o.dst for o in done]))
 
 
 def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
@@ -121,13 +140,10 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
     scale (the pairs the decision counted) that the refined transform still explains.
     """
     t, inliers, model = fit
-    if not model_of(model).has_ratio:
+    pool = _pooled(view, outcomes) if model_of(model).has_ratio else None
+    if pool is None:
         return fit
-    done = [o for o in outcomes if o.estimate is not None and len(o.src)]
-    if len(done) < 2:
-        return fit
-    src = to_high(view, np.vstack([o.src for o in done]))
-    src, dst = distinct_pairs(src, np.vstack([o.dst for o in done]))
+    src, dst = pool
     before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
     est = refine(model, t, src, dst, config.ransac)
     if est.n_inliers < before or folded(est.transform):
@@ -155,18 +171,17 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, config) -> Refi
     if (not check.enabled or not check.union or config.model != "similarity"
             or model == "homography" or "homography" not in check.models):
         return fit
-    done = [o for o in outcomes if o.estimate is not None and len(o.src)]
-    if len(done) < 2:
+    pool = _pooled(view, outcomes)
+    if pool is None:
         return fit
-    src, dst = distinct_pairs(to_high(view, np.vstack([o.src for o in done])),
-                              np.vstack([o.dst for o in done]))
+    src, dst = pool
     before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
-    if len(src) < check.min_gain * before or len(src) - before < check.min_extra:
+    if not check.clearly_more(len(src), before):
         return fit  # no homography could explain enough more: the fit is not tried (same answer)
     est = estimate("homography", src, dst, config.ransac, seed=config.seed)
     if est.transform is None or folded(est.transform):
         return fit
-    if est.n_inliers >= check.min_gain * before and est.n_inliers - before >= check.min_extra:
+    if check.clearly_more(est.n_inliers, before):
         inl = est.inliers
         return est.transform, np.hstack([src[inl], dst[inl]]), "homography"
     return fit
