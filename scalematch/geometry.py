@@ -232,3 +232,61 @@ def footprint(t: np.ndarray, high_shape: Tuple[int, ...], edges: bool = True
         return None
     out = apply(t, corners)
     return out if np.all(np.isfinite(out)) else None
+
+
+def pairs_within(a: np.ndarray, b: np.ndarray, radius: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Every pair (i, k) of points ``a[i]``, ``b[k]`` ((N, 2) and (M, 2)) at most ``radius``
+    apart, sorted by i then k (the row-major order of the full N x M table).
+
+    ``b`` is put in a grid of cells a little wider than ``radius``; each point of ``a`` looks only
+    in the 3 x 3 cells around its own, so the work follows the pairs that are near, not N x M
+    (the full table of a 12 MP pair, about 20 000 x 20 000, took 3.5 s). Distances are
+    ``dx**2 + dy**2`` in float64, compared with ``radius**2``: the pairs the full table gives.
+    Points that are not finite have no pair.
+
+    >>> i, k = pairs_within([[0, 0], [10, 0]], [[1, 0], [9, 1], [30, 30]], 2.0)
+    >>> i.tolist(), k.tolist()
+    ([0, 1], [0, 1])
+    """
+    a = np.asarray(a, np.float64).reshape(-1, 2)
+    b = np.asarray(b, np.float64).reshape(-1, 2)
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    b_ok = np.nonzero(np.all(np.isfinite(b), axis=1))[0]
+    a_ok = np.all(np.isfinite(a), axis=1)
+    if b_ok.size == 0 or not a_ok.any() or not radius >= 0:
+        return none
+    cell = max(float(radius), 1e-6) * (1 + 1e-6)  # any cell >= radius: the 3 x 3 cells hold all
+    origin = b[b_ok].min(axis=0)
+    cb = np.floor((b[b_ok] - origin) / cell).astype(np.int64)
+    top = cb.max(axis=0)  # (largest x cell, largest y cell)
+    key_b = cb[:, 1] * (top[0] + 1) + cb[:, 0]
+    order = np.argsort(key_b, kind="stable")  # by cell, then by row of b
+    sorted_keys = key_b[order]
+    rows = np.nonzero(a_ok)[0]
+    ca = np.floor((a[rows] - origin) / cell)
+    # cells far outside b's grid have no neighbour (and would overflow the integer key)
+    near = np.all((ca >= -1) & (ca <= top + 1), axis=1)
+    rows, ca = rows[near], ca[near].astype(np.int64)
+    found_a, found_b = [], []
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            cx, cy = ca[:, 0] + dx, ca[:, 1] + dy
+            inside = (cx >= 0) & (cx <= top[0]) & (cy >= 0) & (cy <= top[1])
+            key = cy[inside] * (top[0] + 1) + cx[inside]
+            lo = np.searchsorted(sorted_keys, key, "left")
+            count = np.searchsorted(sorted_keys, key, "right") - lo
+            total = int(count.sum())
+            if total == 0:
+                continue
+            ends = np.cumsum(count)
+            within = np.arange(total) - np.repeat(ends - count, count)
+            found_a.append(np.repeat(rows[inside], count))
+            found_b.append(b_ok[order[np.repeat(lo, count) + within]])
+    if not found_a:
+        return none
+    i, k = np.concatenate(found_a), np.concatenate(found_b)
+    d = a[i] - b[k]
+    close = d[:, 0] ** 2 + d[:, 1] ** 2 <= float(radius) * float(radius)
+    i, k = i[close], k[close]
+    order = np.lexsort((k, i))
+    return i[order], k[order]

@@ -29,13 +29,11 @@ from typing import Tuple
 
 import numpy as np
 
-from ..geometry import apply, similarity_parts
+from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
 from .matcher import distinct_rows
 
-#: High points whose neighbours are searched at once (bounds the (chunk, low) distance block).
-_CHUNK = 512
 #: High points sampled (evenly, no randomness) to estimate the fraction of compatible pairs.
 _CHANCE_SAMPLE = 256
 #: ... and of low points in the region (their pairs with the high sample estimate the fraction)
@@ -129,30 +127,23 @@ def guided_matches(t: np.ndarray, high: Described, low: Described,
     rows = np.nonzero(ok)[0]
     if near.size == 0 or rows.size == 0:
         return empty
-    lxy = low.xy[near]
     rot = _rotation(t)
-    hd = np.asarray(high.desc, np.float32)
-    ld = np.asarray(low.desc, np.float32)
+    a, b = pairs_within(pred[rows], low.xy[near], r)  # by high row, then low row
+    i, j = rows[a], near[b]
+    keep = _angle_ok(high, low, i, j, rot, params)
+    i, j = i[keep], j[keep]
+    dist = np.linalg.norm(np.asarray(high.desc, np.float32)[i]
+                          - np.asarray(low.desc, np.float32)[j], axis=1)
+    keep = dist <= params.max_distance
+    i, j, dist = i[keep], j[keep], dist[keep]
+    order = np.lexsort((dist, i))  # by high row, nearest descriptor first
+    i, j, dist = i[order], j[order], dist[order]
+    first = np.ones(i.size, bool)
+    first[1:] = i[1:] != i[:-1]
     best_j = np.full(len(high), -1)
     best_d = np.full(len(high), np.inf, np.float32)
-    for start in range(0, rows.size, _CHUNK):
-        ii = rows[start:start + _CHUNK]
-        d2 = ((pred[ii, None, :] - lxy[None, :, :]) ** 2).sum(axis=2)
-        a, b = np.nonzero(d2 <= r * r)
-        if a.size == 0:
-            continue
-        i, j = ii[a], near[b]
-        keep = _angle_ok(high, low, i, j, rot, params)
-        i, j = i[keep], j[keep]
-        dist = np.linalg.norm(hd[i] - ld[j], axis=1)
-        keep = dist <= params.max_distance
-        i, j, dist = i[keep], j[keep], dist[keep]
-        order = np.lexsort((dist, i))  # by high row, nearest descriptor first
-        i, j, dist = i[order], j[order], dist[order]
-        first = np.ones(i.size, bool)
-        first[1:] = i[1:] != i[:-1]
-        best_j[i[first]] = j[first]
-        best_d[i[first]] = dist[first]
+    best_j[i[first]] = j[first]
+    best_d[i[first]] = dist[first]
     i = np.nonzero(best_j >= 0)[0]
     j, dist = best_j[i], best_d[i]
     # one to one: a low point goes to the high point nearest to it in descriptor
