@@ -33,6 +33,7 @@ from scalematch.stages.detector import HarrisParams, detect_one
 from scalematch.stages.mahalanobis import load_covariance, whiten
 from scalematch.stages.matcher import MatcherParams, match_descriptors
 from scalematch.stages.scalespace import Level
+from scalematch.stages import descriptors
 
 NAMES = ("v2", "v3", "v4", "v5", "v6", "v7", "v8")
 #: components not touched by the v5/v7 bug
@@ -410,3 +411,15 @@ def test_gradient_nearest_neighbour_is_the_true_point(photo, noisy_copy):
     # measured: 83.5 % of all points, 96.2 % of those with a partner (jets: 50.4 %, 58.1 %)
     assert hit.mean() > 0.72
     assert hit[has].mean() > 0.88
+
+
+@pytest.mark.parametrize("shape", [(1, 7), (7, 1), (2, 2), (31, 45)])
+def test_gradients_at_points_are_sobels_values_bit_for_bit(shape):
+    """The orientation window samples central differences at its points only: the values of the
+    full-image Sobel filter (ksize 1, scale 0.5, reflected borders) it replaced, exactly."""
+    rng = np.random.default_rng(3)
+    img = rng.uniform(0, 255, shape).astype(np.float32)
+    py, px = np.mgrid[0:shape[0], 0:shape[1]]
+    gx, gy = descriptors._gradients_at(img, px, py)
+    assert np.array_equal(gx, cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=1, scale=0.5))
+    assert np.array_equal(gy, cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=1, scale=0.5))
