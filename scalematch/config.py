@@ -191,6 +191,9 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # after 1 s, so a "no" costs about that much; docs/NULLS-BUDGET.md measures it on the null
     # set (what a "no" then costs, and that no claim appears)
     "budget-1s": lambda: Config(time_budget_s=1.0),
+    # the default searching for a homography (``--model homography``: Oxford, perspective
+    # pairs), so that the null set can be run with it (docs/NULLS-HOMOGRAPHY.md)
+    "homography": lambda: Config(model="homography"),
     # the default without the rotation-consistency filter: one group holding every candidate
     "default-no-rotation-check": lambda: Config(
         orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1)),

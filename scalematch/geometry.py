@@ -73,6 +73,32 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
     return ratio, angle, (float(tr[0]), float(tr[1]))
 
 
+def ratio_at(t: np.ndarray, xy) -> float:
+    """Resolution ratio (high px per low px) of ``t`` at the high-image point ``xy`` (x, y).
+
+    For a 2x3 map it is :func:`similarity_parts`'s ratio everywhere. A homography's ratio varies
+    across the image: its Jacobian at ``xy`` has determinant ``det(T) / w^3`` (``w`` the point's
+    third coordinate), so the ratio there is ``|w|^1.5 / sqrt|det T|``. Taken at the origin, as
+    ``similarity_parts`` does, a perspective map's ratio can be far from the one where its points
+    are (Oxford graf 1->6 through a t = 4 view: 0.57 at the origin, 0.95 where the 142 inliers
+    are, at scale 1).
+
+    >>> h = np.array([[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.001, 0.0, 1.0]])
+    >>> round(ratio_at(h, (0, 0)), 3), round(ratio_at(h, (1000, 0)), 3)
+    (2.0, 5.657)
+    >>> ratio_at(similarity_matrix(0.25, 30.0), (123.0, 45.0))
+    4.0
+    """
+    t = np.asarray(t, dtype=np.float64)
+    if t.shape != (3, 3):
+        return similarity_parts(t)[0]
+    det = abs(float(np.linalg.det(t)))
+    w = float(t[2] @ [float(xy[0]), float(xy[1]), 1.0])
+    if det == 0.0 or w == 0.0 or not math.isfinite(det * w):
+        return math.inf
+    return abs(w) ** 1.5 / math.sqrt(det)
+
+
 def as_matrix3(t: np.ndarray) -> np.ndarray:
     """The 3x3 matrix of a 2x3 affine map (last row 0 0 1) or of a 3x3 homography (as given).
 

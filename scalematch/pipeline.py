@@ -21,7 +21,7 @@ from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 import numpy as np
 
 from .config import Config
-from .geometry import finer_to_coarser, similarity_parts
+from .geometry import finer_to_coarser, ratio_at, similarity_parts
 from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
 from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
@@ -184,7 +184,9 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
     if n_in and model_of(config.model).has_ratio:
-        ratio, angle, _ = similarity_parts(best.transform)
+        _, angle, _ = similarity_parts(best.transform)
+        # where the inliers are: a homography's ratio varies across the image (perspective)
+        ratio = ratio_at(best.transform, best_src[best.inliers].mean(axis=0))
     initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
                    inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,

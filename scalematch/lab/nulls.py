@@ -428,7 +428,7 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
 
 
 #: The configurations a null set is run in (``Config.preset`` names)
-NULL_MODES = ("default", "paper", "steep", "budget-1s")
+NULL_MODES = ("default", "paper", "steep", "budget-1s", "homography")
 
 
 def _config(mode: str, seed: int):
@@ -1032,8 +1032,9 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     ratios, photos, seed
         The pairs: ratios, the first ``photos`` photos (sorted by name; None: all), the seed.
     mode : str
-        A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "steep" or
-        "budget-1s" (the default with a 1 s time budget).
+        A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "steep",
+        "budget-1s" (the default with a 1 s time budget) or "homography" (the default searching
+        for a homography).
     jobs : int
         Worker processes (1: this process).
     limit : int, optional
@@ -1240,7 +1241,7 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
 @click.option("--mode", type=click.Choice(NULL_MODES), default="default",
               show_default=True, help="scalematch's configuration (a preset: paper is "
               "Config.paper(), steep the default with views at tilts 6 and 8, budget-1s the "
-              "default with --time-budget 1).")
+              "default with --time-budget 1, homography the default with --model homography).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (more than 1: one OpenCV thread each).")
 @click.option("--limit", type=click.IntRange(min=1), default=None,
