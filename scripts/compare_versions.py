@@ -8,10 +8,13 @@ Prints success per ratio, median error of the successes and the median in-proces
 
     python scripts/compare_versions.py --old ../old-checkout --photos 38
     python scripts/compare_versions.py --old ../old-checkout --photos 13 --swapped --unrelated 50
+    python scripts/compare_versions.py --old ../old-checkout --photos 0 --nulls bench-out/nulls/pairs-seed0 --every 20
 
 ``--swapped`` gives each pair in the other order too (the answer must still map the finer image
 into the coarser one); ``--unrelated N`` adds N pairs of unrelated photos (the low image of one
-scene, the high image of another), where any match claimed is false.
+scene, the high image of another), where any match claimed is false. ``--nulls FOLDER`` adds
+the null pairs that ``scalematch lab nulls`` stored there (every ``--every``-th, in both orders;
+any claim is false): the time of a "no".
 """
 
 from __future__ import annotations
@@ -43,6 +46,33 @@ def _worker(tree: str, jobs, results) -> None:
         results.put((k, time.perf_counter() - t0, r.transform if r.matched else None))
 
 
+class _Stored:
+    """A null pair read from a folder of ``scalematch lab nulls`` (no truth: any claim is false)."""
+
+    def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
+        self.low, self.high, self.ratio, self.truth = low, high, float("nan"), None
+
+
+def _stored_nulls(folder: Path, every: int) -> list:
+    """Every ``every``-th null pair (not the true ones) of a ``lab nulls`` pairs folder."""
+    import json
+
+    import cv2
+
+    with open(folder / "manifest.json") as f:
+        entries = sorted(json.load(f), key=lambda e: e["pair_id"])
+    entries = [e for e in entries if e["kind"] != "true"][::max(every, 1)]
+    return [_Stored(cv2.imread(str(folder / e["low_file"]), cv2.IMREAD_GRAYSCALE),
+                    cv2.imread(str(folder / e["high_file"]), cv2.IMREAD_GRAYSCALE))
+            for e in entries]
+
+
+def _join(workers: dict) -> None:
+    for proc, jobs, _ in workers.values():
+        jobs.put(None)
+        proc.join()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--old", required=True, help="source tree of the older version")
@@ -53,6 +83,8 @@ def main() -> None:
                     help="comma-separated ratios (default: %(default)s)")
     ap.add_argument("--swapped", action="store_true", help="each pair in both orders")
     ap.add_argument("--unrelated", type=int, default=0, help="unrelated pairs added")
+    ap.add_argument("--nulls", help="folder of null pairs stored by `scalematch lab nulls`")
+    ap.add_argument("--every", type=int, default=1, help="every N-th null pair (default 1)")
     a = ap.parse_args()
     ratios = tuple(float(r) for r in a.ratios.split(","))
     sys.path.insert(0, a.new)
@@ -71,6 +103,8 @@ def main() -> None:
     jobs_list = [("zoom", p, False) for p in pairs]
     jobs_list += [("swapped", p, True) for p in pairs] if a.swapped else []
     jobs_list += [("unrelated", p, False) for p in nulls]
+    stored = _stored_nulls(Path(a.nulls), a.every) if a.nulls else []
+    jobs_list += [("null", p, swapped) for p in stored for swapped in (False, True)]
     ctx = mp.get_context("spawn")
     workers = {}
     for name, tree in (("old", a.old), ("new", a.new)):
@@ -82,6 +116,8 @@ def main() -> None:
     found = {name: [] for name in workers}  # the transforms, to compare the answers
     load = os.getloadavg()
     claims = {name: 0 for name in workers}
+    null_secs = {name: [] for name in workers}
+    null_claims = {name: 0 for name in workers}
     for k, (kind, p, swapped) in enumerate(jobs_list):
         order = ("old", "new") if k % 2 == 0 else ("new", "old")
         for name in order:
@@ -89,17 +125,28 @@ def main() -> None:
             jobs.put((k, p.high, p.low) if swapped else (k, p.low, p.high))
             _, secs, t = results.get()
             found[name].append(t)
+            if kind == "null":
+                null_claims[name] += t is not None
+                null_secs[name].append(secs)
+                continue
             if kind == "unrelated":
                 claims[name] += t is not None
                 continue
             err = reprojection_error(t, p.truth, p.high.shape, p.low.shape)
             rows[name].append((p.ratio, secs, err, is_success(err)))
-    for proc, jobs, _ in workers.values():
-        jobs.put(None)
-        proc.join()
+    _join(workers)
     print(f"{len(pairs)} pairs ({a.photos} photos x ratios {ratios}){' in both orders' if a.swapped else ''}"
-          f", {len(nulls)} unrelated, seed {a.seed}, load average "
-          f"at start {load[0]:.1f}, at end {os.getloadavg()[0]:.1f}")
+          f", {len(nulls)} unrelated, {2 * len(stored)} stored null runs, seed {a.seed}, load "
+          f"average at start {load[0]:.1f}, at end {os.getloadavg()[0]:.1f}")
+    if stored:
+        for name, secs in null_secs.items():
+            print(f"null runs, {name}: median {np.median(secs):.3f} s, mean {np.mean(secs):.3f} s")
+        print(f"null median time new / old: "
+              f"{np.median(null_secs['new']) / np.median(null_secs['old']):.3f}")
+        print(f"claims on the stored null runs: old {null_claims['old']}, "
+              f"new {null_claims['new']}")
+    if not pairs:
+        return
     print("| version | " + " | ".join(f"x{r:g}" for r in ratios) + " | all | median error px "
           "| median s | false claims |")
     print("|---|" + "---:|" * (len(ratios) + 4))
