@@ -21,7 +21,7 @@ from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 import numpy as np
 
 from .config import Config
-from .geometry import finer_to_coarser, ratio_at, similarity_parts
+from .geometry import answer_parts, finer_to_coarser
 from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
 from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
@@ -184,9 +184,8 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
     if n_in and model_of(config.model).has_ratio:
-        _, angle, _ = similarity_parts(best.transform)
         # where the inliers are: a homography's ratio varies across the image (perspective)
-        ratio = ratio_at(best.transform, best_src[best.inliers].mean(axis=0))
+        ratio, angle, _ = answer_parts(best.transform, best_src[best.inliers])
     initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
                    inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,
@@ -541,8 +540,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
             return MatchResult(matched=False, reason=reason, **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
-    ratio, angle, tr = similarity_parts(t) if has_ratio else (math.nan, math.nan,
-                                                              (math.nan, math.nan))
+    ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
+        math.nan, math.nan, (math.nan, math.nan))
     return MatchResult(**dict(common, model=model), matched=True, transform=t,
                        resolution_ratio=ratio, rotation_deg=angle, translation=tr,
                        inliers=inliers,

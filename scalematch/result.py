@@ -126,8 +126,10 @@ class MatchResult:
     reason: str = ""  #: why not matched ("" when matched)
     #: high px -> low px (None when not matched)
     transform: Optional[np.ndarray] = field(default=None, repr=False)
-    resolution_ratio: float = math.nan  #: 1/h: high-res pixels per low-res pixel
-    rotation_deg: float = math.nan  #: atan2(T[1,0], T[0,0]) in degrees
+    #: 1/h: high-res pixels per low-res pixel (a homography's: where its inliers are,
+    #: :func:`scalematch.geometry.answer_parts`)
+    resolution_ratio: float = math.nan
+    rotation_deg: float = math.nan  #: atan2(T[1,0], T[0,0]) in degrees (a homography's: there)
     translation: Tuple[float, float] = (math.nan, math.nan)  #: (T[0,2], T[1,2])
     best_scale: float = math.nan  #: the winning scale s (nan when none)
     #: (N, 4) x_high, y_high, x_low, y_low

@@ -28,8 +28,8 @@ from typing import Dict, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .geometry import (apply, as_matrix3, compose, finer_to_coarser, invert, resize_map,
-                       similarity_parts)
+from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarser, invert,
+                       resize_map)
 from .result import Direction, MatchResult
 from .stages.estimator import model_of
 
@@ -146,7 +146,7 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
         return replace(out, transform=t, inliers=inliers)
     # the shrinking can make the finer working image the coarser original one
     t, inliers, swapped = finer_to_coarser(t, inliers, swapped)
-    ratio, angle, tr = similarity_parts(t)
+    ratio, angle, tr = answer_parts(t, inliers[:, :2])
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
                    rotation_deg=angle, translation=tr,
                    order=Direction.SWAPPED if swapped else Direction.GIVEN)
