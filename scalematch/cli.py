@@ -429,7 +429,9 @@ def matching_options(f: Callable) -> Callable:
     """The options shared by ``match`` and ``batch``: what is matched and how."""
     opts = [
         click.option("--model", type=click.Choice(MODELS), default=None,
-                     help="Transform fitted from high-res px to low-res px. [default: similarity]"),
+                     help="Transform fitted from high-res px to low-res px: homography for a "
+                          "planar scene seen from another viewpoint or in perspective (Oxford "
+                          "graf, a facade from below). [default: similarity]"),
         click.option("--mode", type=click.Choice(MODES), default="default", show_default=True,
                      help="'paper': the method as published (jets, Mahalanobis, semi-local "
                           "constraints, scales 1-8)."),
