@@ -55,13 +55,11 @@ class _Stored:
 
 def _stored_nulls(folder: Path, every: int) -> list:
     """Every ``every``-th null pair (not the true ones) of a ``lab nulls`` pairs folder."""
-    import json
-
     import cv2
+    from scalematch.lab.nulls import TRUE_KIND, read_manifest
 
-    with open(folder / "manifest.json") as f:
-        entries = sorted(json.load(f), key=lambda e: e["pair_id"])
-    entries = [e for e in entries if e["kind"] != "true"][::max(every, 1)]
+    entries = [e for _, e in sorted(read_manifest(folder).items())
+               if e["kind"] != TRUE_KIND][::max(every, 1)]
     return [_Stored(cv2.imread(str(folder / e["low_file"]), cv2.IMREAD_GRAYSCALE),
                     cv2.imread(str(folder / e["high_file"]), cv2.IMREAD_GRAYSCALE))
             for e in entries]

@@ -136,22 +136,25 @@ def guided_matches(t: np.ndarray, high: Described, low: Described,
                           - np.asarray(low.desc, np.float32)[j], axis=1)
     keep = dist <= params.max_distance
     i, j, dist = i[keep], j[keep], dist[keep]
-    order = np.lexsort((dist, i))  # by high row, nearest descriptor first
-    i, j, dist = i[order], j[order], dist[order]
-    first = np.ones(i.size, bool)
-    first[1:] = i[1:] != i[:-1]
-    best_j = np.full(len(high), -1)
-    best_d = np.full(len(high), np.inf, np.float32)
-    best_j[i[first]] = j[first]
-    best_d[i[first]] = dist[first]
-    i = np.nonzero(best_j >= 0)[0]
-    j, dist = best_j[i], best_d[i]
+    i, j, dist = _nearest_each(i, dist, j)  # each high point's nearest low point
     # one to one: a low point goes to the high point nearest to it in descriptor
-    order = np.lexsort((dist, j))
-    i, j, dist = i[order], j[order], dist[order]
-    first = np.ones(j.size, bool)
-    first[1:] = j[1:] != j[:-1]
-    return i[first], j[first], dist[first].astype(np.float32)
+    j, i, dist = _nearest_each(j, dist, i)
+    return i, j, dist.astype(np.float32)
+
+
+def _nearest_each(key: np.ndarray, dist: np.ndarray, other: np.ndarray):
+    """(key, other, dist) of the pair of smallest ``dist`` for each value of ``key`` (the first
+    of ties in the order given), sorted by ``key``.
+
+    >>> k, o, d = _nearest_each(np.array([2, 1, 2]), np.array([0.5, 0.3, 0.1]), np.array([7, 8, 9]))
+    >>> k.tolist(), o.tolist(), d.tolist()
+    ([1, 2], [8, 9], [0.3, 0.1])
+    """
+    order = np.lexsort((dist, key))
+    key, other, dist = key[order], other[order], dist[order]
+    first = np.ones(key.size, bool)
+    first[1:] = key[1:] != key[:-1]
+    return key[first], other[first], dist[first]
 
 
 def chance_matches(t: np.ndarray, high: Described, low: Described,

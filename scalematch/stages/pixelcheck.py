@@ -34,7 +34,7 @@ from typing import NamedTuple, Tuple, Union
 import cv2
 import numpy as np
 
-from ..geometry import apply, as_matrix3, footprint, similarity_matrix
+from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
 from .scalespace import CAMERA_BLUR_PX
 
 
@@ -217,9 +217,8 @@ class Placed(NamedTuple):
 
 
 def local_ratio(t3: np.ndarray, high_shape: Tuple[int, int]) -> float:
-    """High px per low px of the 3x3 map ``t3`` at the high image's centre: ``w^1.5 /
-    sqrt(|det t3|)`` with ``w`` the centre's third coordinate (the Jacobian of a homography has
-    determinant ``det / w^3``). For an affine map (w = 1 everywhere) it is the ratio of
+    """High px per low px of the 3x3 map ``t3`` at the high image's centre
+    (:func:`scalematch.geometry.ratio_at` there). For an affine map (w = 1 everywhere) it is the ratio of
     :func:`scalematch.geometry.similarity_parts`; for a homography it is the ratio where the
     footprint is, not at the high image's origin (in perspective, a factor 4 and more apart
     across the footprint: the high image is blurred for its middle).
@@ -230,13 +229,8 @@ def local_ratio(t3: np.ndarray, high_shape: Tuple[int, int]) -> float:
     >>> round(local_ratio(np.array([[0.5, 0, 0], [0, 0.5, 0], [0.01, 0, 1.0]]), (101, 201)), 3)
     5.657
     """
-    t3 = np.asarray(t3, np.float64)
-    det = abs(float(np.linalg.det(t3)))
     h, w = high_shape[:2]
-    depth = float(t3[2] @ [(w - 1) / 2.0, (h - 1) / 2.0, 1.0])
-    if det == 0.0 or depth == 0.0:
-        return math.inf
-    return abs(depth) ** 1.5 / math.sqrt(det)
+    return ratio_at(np.asarray(t3, np.float64), ((w - 1) / 2.0, (h - 1) / 2.0))
 
 
 def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
