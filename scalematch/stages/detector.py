@@ -29,6 +29,7 @@ s = 1 image once (:func:`image_contrast`) and applied at every scale:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import List, Optional, Sequence
 
@@ -153,7 +154,8 @@ def noise_std(image: np.ndarray) -> float:
         return 0.0
     mask = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
     r = cv2.filter2D(img, cv2.CV_32F, mask, borderType=cv2.BORDER_REFLECT_101)[1:-1, 1:-1]
-    return float(np.sqrt(np.pi / 2.0) / 6.0 * np.mean(np.abs(r)))
+    # the mean |r| as OpenCV's L1 norm: np.abs on the strided view was 1 ms of 1.3 (640x480)
+    return float(np.sqrt(np.pi / 2.0) / 6.0 * cv2.norm(r, cv2.NORM_L1) / r.size)
 
 
 def image_contrast(image: np.ndarray, sigma: float = 1.0) -> Contrast:
@@ -170,13 +172,30 @@ def image_contrast(image: np.ndarray, sigma: float = 1.0) -> Contrast:
     (16.0, 16.0)
     """
     img = np.asarray(image, np.float32)
-    gx = gaussian_derivative(img, sigma, 1, 0)
-    gy = gaussian_derivative(img, sigma, 0, 1)
     step = CONTRAST_SAMPLE_STEP
-    gx, gy = gx[::step, ::step], gy[::step, ::step]
-    mag = np.sqrt(gx * gx + gy * gy)
-    return Contrast(gradient=float(np.percentile(mag, CONTRAST_PERCENTILE)),
+    gx = np.ascontiguousarray(gaussian_derivative(img, sigma, 1, 0)[::step, ::step])
+    gy = np.ascontiguousarray(gaussian_derivative(img, sigma, 0, 1)[::step, ::step])
+    return Contrast(gradient=percentile(cv2.magnitude(gx, gy), CONTRAST_PERCENTILE),
                     noise_std=noise_std(img))
+
+
+def percentile(values: np.ndarray, q: float) -> float:
+    """``np.percentile(values, q)`` (linear interpolation), partitioning ``values`` in place.
+
+    >>> v = np.random.default_rng(0).uniform(0, 9, 1001).astype(np.float32)
+    >>> abs(percentile(v.copy(), 90.0) - float(np.percentile(v, 90.0))) < 1e-6
+    True
+    """
+    flat = values.reshape(-1)
+    n = flat.size
+    if n == 0:
+        return float("nan")
+    pos = q / 100.0 * (n - 1)
+    lo = int(math.floor(pos))
+    hi = min(lo + 1, n - 1)
+    flat.partition([lo, hi] if hi > lo else lo)
+    a, b = float(flat[lo]), float(flat[hi])
+    return a + (b - a) * (pos - lo)
 
 
 def noise_floor(contrast: Contrast, s: float = 1.0) -> float:
