@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_OUT := out/demo
 
-.PHONY: setup bytecode demo test test-fast bench bench-real repeatability covariance clean
+.PHONY: setup bytecode demo test test-fast bench bench-real repeatability clean
 
 setup: $(STAMP)
 

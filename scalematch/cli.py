@@ -13,6 +13,7 @@ import importlib
 import importlib.machinery
 import importlib.util
 import os
+import math
 import re
 import sys
 import traceback
@@ -45,15 +46,38 @@ EXIT_CODES = (
 )
 
 
-def exit_code_table(codes: Iterable[int] = tuple(c for c, _ in EXIT_CODES)) -> str:
-    """The exit codes ``codes`` and their meaning, one a line, for a command's help.
+#: What a code means for one command, where the whole table's line is about several.
+MATCH_EXIT_TEXT = {EXIT_MATCHED: "matched"}
+BATCH_EXIT_TEXT = {
+    EXIT_MATCHED: "every pair has its line, none an error",
+    EXIT_BAD_INPUT: "bad usage (the CSV, an option value, the output file); a pair's missing or "
+                    "bad image is its error line (exit 3)",
+}
+
+
+def plural(n: int, word: str) -> str:
+    """``word`` as it goes with the count ``n``.
+
+    >>> plural(1, "error"), plural(0, "error"), plural(2, "pair")
+    ('error', 'errors', 'pairs')
+    """
+    return word if n == 1 else word + "s"
+
+
+def exit_code_table(codes: Iterable[int] = tuple(c for c, _ in EXIT_CODES),
+                    texts: Optional[Dict[int, str]] = None) -> str:
+    """The exit codes ``codes`` and their meaning, one a line, for a command's help
+    (``texts``: the meanings that differ for that command).
 
     >>> print(exit_code_table((1, 130)))
       1  no reliable match
     130  interrupted (Ctrl-C)
+    >>> print(exit_code_table((0,), MATCH_EXIT_TEXT))
+      0  matched
     """
-    wanted = set(codes)
-    return "\n".join(f"{code:>3}  {text}" for code, text in EXIT_CODES if code in wanted)
+    wanted, texts = set(codes), texts or {}
+    return "\n".join(f"{code:>3}  {texts.get(code, text)}" for code, text in EXIT_CODES
+                     if code in wanted)
 
 #: Subcommands that live in other modules: name -> (module, attribute, line of the group's help).
 #: Loaded on first use and left out (not listed, "No such command") when the module is absent
@@ -113,15 +137,20 @@ def parse_scales(text: str) -> Tuple[float, ...]:
                 lo_txt, _, hi_txt = rng.partition("-")
                 lo, hi = float(lo_txt), float(hi_txt)
                 step = float(step_txt) if step_txt else 1.0
-                if step <= 0 or hi < lo:
-                    raise ValueError
+                if hi < lo:
+                    raise ValueError(f"scales {item!r} go down: write the range from the "
+                                     f"smaller scale, {hi_txt}-{lo_txt}")
+                if not step > 0:
+                    raise ValueError(f"the step of scales {item!r} must be more than 0")
                 n = int(np.floor((hi - lo) / step + 1e-9))
                 out.extend(round(lo + k * step, 6) for k in range(n + 1))
             elif ":" in item:
                 raise ValueError
             else:
                 out.append(float(item))
-        except ValueError:
+        except ValueError as exc:
+            if str(exc).startswith(("scales ", "the step")):
+                raise ValueError(f"{exc}; {forms}") from None
             raise ValueError(f"cannot read scales {text!r} at {item!r}; {forms}") from None
     if not out:
         raise ValueError(f"no scales in {text!r}; {forms}")
@@ -385,15 +414,17 @@ def _module_exists(name: str) -> bool:
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
-def exit_codes_in_help(*codes: int) -> Callable[[Callable], Callable]:
-    """A decorator putting the table of ``codes`` (all when none) in place of the line
-    ``{exit_codes}`` of a command's docstring (put it under the click decorators)."""
+def exit_codes_in_help(*codes: int,
+                       texts: Optional[Dict[int, str]] = None) -> Callable[[Callable], Callable]:
+    """A decorator putting the table of ``codes`` (all when none; ``texts``: the command's own
+    meanings) in place of the line ``{exit_codes}`` of a command's docstring (put it under
+    the click decorators)."""
     def decorate(f: Callable) -> Callable:
         lines = []
         for line in (f.__doc__ or "").split("\n"):
             if line.strip() == "{exit_codes}":
                 indent = line[:len(line) - len(line.lstrip())]
-                table = exit_code_table(codes or tuple(c for c, _ in EXIT_CODES))
+                table = exit_code_table(codes or tuple(c for c, _ in EXIT_CODES), texts)
                 lines += [indent + row for row in table.split("\n")]
             else:
                 lines.append(line)
@@ -498,6 +529,8 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
                               + (f"order={kwargs.pop('order')}",
                                  f"views.enabled={kwargs.pop('views')}"))
         budget = kwargs.pop("time_budget")
+        if budget is not None and math.isinf(budget) and budget > 0:
+            budget = None  # inf: no limit, as without the option
         if budget is not None:
             if not budget > 0:
                 raise ValueError(f"--time-budget must be more than 0 seconds, got {budget:g}")
@@ -544,7 +577,7 @@ def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
               help="Also print the per-scale table, the timings and the files written (and the "
                    "traceback of an unexpected error).")
 @exit_codes_in_help(EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_INTERNAL_ERROR,
-                    EXIT_INTERRUPTED)
+                    EXIT_INTERRUPTED, texts=MATCH_EXIT_TEXT)
 def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optional[str],
                   quiet: bool, verbose: bool, max_pixels: int, **kwargs: Any) -> None:
     """Match LOW (low-resolution image) against HIGH (high-resolution image).
@@ -663,7 +696,7 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
               help="The traceback of an unexpected error of the batch itself (a pair's is in its "
                    "line).")
 @exit_codes_in_help(EXIT_MATCHED, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS, EXIT_INTERNAL_ERROR,
-                    EXIT_INTERRUPTED)
+                    EXIT_INTERRUPTED, texts=BATCH_EXIT_TEXT)
 def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, jobs: int,
                   scheduler: Optional[str], quiet: bool, verbose: bool, max_pixels: int,
                   **kwargs: Any) -> None:
@@ -776,9 +809,11 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
         if client is not None:
             client.close()
     if not quiet:
-        before = f" ({skipped} done before, {errors_before} of them errors)" if skipped else ""
-        click.echo(f"{len(todo)} pairs: {counts['matched']} matched, {counts['no match']} no "
-                   f"reliable match, {counts['error']} errors"
+        before = (f" ({skipped} done before, {errors_before} of them "
+                  f"{'an error' if errors_before == 1 else 'errors'})" if skipped else "")
+        click.echo(f"{len(todo)} {plural(len(todo), 'pair')}: {counts['matched']} matched, "
+                   f"{counts['no match']} no reliable match, {counts['error']} "
+                   f"{plural(counts['error'], 'error')}"
                    f"{f' ({internal} internal)' if internal else ''}{before}", err=True)
     if internal:
         sys.exit(EXIT_INTERNAL_ERROR)

@@ -380,6 +380,24 @@ def write_matches_csv(path: PathLike, result: MatchResult) -> None:
             w.writerow([f"{v:.3f}" for v in row])
 
 
+def told_apart(a: PathLike, b: PathLike) -> Tuple[str, str]:
+    """The shortest trailing parts of two paths that tell them apart (their file names, with
+    as many parent folders as needed: two sequences' img1.png are boat/img1.png and
+    graf/img1.png).
+
+    >>> told_apart("data/boat/img1.png", "data/graf/img1.png")
+    ('boat/img1.png', 'graf/img1.png')
+    >>> told_apart("x/low.png", "y/high.png")
+    ('low.png', 'high.png')
+    """
+    pa, pb = Path(a).resolve().parts, Path(b).resolve().parts
+    for k in range(1, max(len(pa), len(pb)) + 1):
+        na, nb = "/".join(pa[-k:]), "/".join(pb[-k:])
+        if na != nb:
+            return na, nb
+    return Path(a).name, Path(b).name  # the same file twice
+
+
 def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
                   low: np.ndarray, high: np.ndarray, result: MatchResult) -> Dict[str, Path]:
     """Write overlay.png, matches.png, scales.png and matches.csv into ``out_dir``.
@@ -393,8 +411,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
-    ov = overlay(low, high, result,
-                 footer=[f"low: {Path(low_path).name}   high: {Path(high_path).name}"])
+    low_name, high_name = told_apart(low_path, high_path)
+    ov = overlay(low, high, result, footer=[f"low: {low_name}   high: {high_name}"])
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, result))
     _write_png(paths["scales.png"], scale_plot(result))

@@ -409,7 +409,7 @@ def test_batch_resume_skips_done_pairs_and_cuts_a_torn_line(images, tmp_path):
     # everything done: a third run adds nothing, and still says a pair errored
     again = run("batch", pairs, "--output", out)
     assert again.exit_code == 3 and out.read_text().splitlines() == lines
-    assert "1 of them errors" in again.stderr
+    assert "1 of them an error" in again.stderr
 
 
 def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path):
@@ -427,7 +427,7 @@ def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path
 
     plain = run("batch", pairs, "--output", out)  # without the flag: the error line stays
     assert plain.exit_code == 3 and out.read_bytes() == b"".join(before)
-    assert "(3 done before, 1 of them errors)" in plain.stderr
+    assert "(3 done before, 1 of them an error)" in plain.stderr
 
     with open(out, "ab") as fh:
         fh.write(b'{"low": {"path": "x"}, "matc')  # a line torn by an interruption
@@ -440,7 +440,7 @@ def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path
     assert len(after) == 4 and new["high"]["path"] == str(later) and new["matched"] is True
     assert abs(new["resolution_ratio"] - RATIO) < 0.05
     assert "resuming: 2 of 3" in result.stderr and "retrying 1 pairs" in result.stderr
-    assert "1 pairs: 1 matched, 0 no reliable match, 0 errors (2 done before, 0 of them errors)" \
+    assert "1 pair: 1 matched, 0 no reliable match, 0 errors (2 done before, 0 of them errors)" \
         in result.stderr
     assert stat.S_IMODE(out.stat().st_mode) == 0o640
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
@@ -457,7 +457,7 @@ def test_retry_errors_keeps_exit_3_while_a_pair_still_fails(images, tmp_path):
     lines = out.read_text().splitlines()
     good = [x for x in first if '"error"' not in x]
     assert len(lines) == 2 and lines[0] == good[0] and "gone.png" in json.loads(lines[1])["error"]
-    assert "1 pairs: 0 matched, 0 no reliable match, 1 errors (1 done before, 0 of them errors)" \
+    assert "1 pair: 0 matched, 0 no reliable match, 1 error (1 done before, 0 of them errors)" \
         in result.stderr
 
 
@@ -749,7 +749,7 @@ def test_dask_local_cluster_same_lines_resume_and_progress(images, tmp_path):
         cv2.setNumThreads(threads)
     assert second.exit_code == 3, second.output
     assert "resuming: 2 of 3" in second.stderr
-    assert "1 pairs: 0 matched, 0 no reliable match, 1 errors" in second.stderr
+    assert "1 pair: 0 matched, 0 no reliable match, 1 error" in second.stderr
     by_key = {(x["low"]["path"], x["high"]["path"]): _comparable(x) for x in lines_of(out)}
     expected = {(x["low"]["path"], x["high"]["path"]): _comparable(x)
                 for x in lines_of_text(local.stdout)}

@@ -3,10 +3,11 @@ Ctrl-C (exit 130), no match (exit 1), the JSON contract, the demo (exit 0). Batc
 
 from __future__ import annotations
 
-import re
-
 import csv
 import json
+import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +76,21 @@ def test_help_shows_examples_and_exit_codes():
         assert opt in opts, opt
 
 
+def test_each_command_says_what_its_own_exit_codes_mean():
+    match_help = " ".join(run("match", "--help").output.split())
+    batch_help = " ".join(run("batch", "--help").output.split())
+    assert "0 matched 1 no reliable match" in match_help
+    assert "batch" not in match_help.split("Exit codes")[1]  # the batch's meanings stay there
+    assert "0 every pair has its line, none an error" in batch_help
+    assert "a pair's missing or bad image is its error line (exit 3)" in batch_help
+
+
+def test_python_dash_m_runs_the_command_line():
+    out = subprocess.run([sys.executable, "-m", "scalematch", "--version"], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == f"scalematch {__version__}"
+
+
 def test_set_takes_groups_of_tilts_for_the_view_passes():
     from scalematch.cli import build_config
 
@@ -99,6 +115,19 @@ def test_parse_scales():
     for bad in ("8-1", "a-b", "", "1-4:0", "2:3"):  # "0.5-2" parses; Config refuses 0.5
         with pytest.raises(ValueError):
             parse_scales(bad)
+    with pytest.raises(ValueError, match="'8-1' go down: write the range from the smaller "
+                                         "scale, 1-8"):
+        parse_scales("8-1")
+    with pytest.raises(ValueError, match="step of scales '1-4:0' must be more than 0"):
+        parse_scales("1-4:0")
+
+
+def test_time_budget_inf_is_no_limit(flat_pair):
+    result = run(*flat_pair, "--time-budget", "inf", "--json", "-", "-q")
+    assert result.exit_code == 1, result.output  # flat images: searched in full, no match
+    answer = json.loads(result.output)
+    assert answer["config"]["time_budget_s"] is None
+    assert answer["evidence"]["stopped"] != "time budget"
 
 
 # --------------------------------------------------------------------------- bad input: exit 2

@@ -175,3 +175,12 @@ def test_overlay_outlines_the_border_when_high_covers_all_of_low(raccoon):
     assert out[-20:-edge - 2, edge + 2:-edge - 2].mean() < 0.6 * low[-20:-edge - 2].mean()
     # inside, away from the border, no outline: the footprint's edges are all outside
     assert not mask[2 * edge:-2 * edge, 2 * edge:-2 * edge].any()
+
+
+def test_told_apart_names_two_files_of_the_same_name_by_their_folders():
+    from scalematch.render import told_apart
+
+    assert told_apart("data/boat/img1.png", "data/graf/img1.png") == ("boat/img1.png",
+                                                                      "graf/img1.png")
+    assert told_apart("a/low.png", "a/high.png") == ("low.png", "high.png")
+
