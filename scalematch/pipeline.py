@@ -34,7 +34,7 @@ from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.pixelcheck import pixel_check
-from .stages.probe import probe_scores, select_scales
+from .stages.probe import probe_scores, select_around, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
@@ -308,12 +308,15 @@ class Detected(NamedTuple):
     level: Optional[Level]  #: the level, when kept for the full pass
     #: every point described already (s = 1, shared with the other direction), or None
     full: Optional[Described] = None
+    #: not detected yet: the probe skipped this scale (``ViewParams.probe_every``)
+    pending: bool = False
 
 
 def detect_view(view: View, config: Config, whitening,
                 step: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
-                contrast: Optional[Contrast] = None) -> Tuple[Tuple[Detected, ...], bool]:
+                contrast: Optional[Contrast] = None,
+                every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``step()`` is called once per scale detected. The levels of a view of at most
@@ -321,16 +324,22 @@ def detect_view(view: View, config: Config, whitening,
     described as the coarser one (the other direction), whose points give this view's s = 1
     points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
     image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
+    ``every``: with the probe, only every ``every``-th scale is detected (the others are
+    ``pending``: :func:`finish_view` detects those it takes).
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
+    every = every if probing else 1
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
     n_probe = config.probe.points if probing else config.harris.max_points
     reuse = known is not None and view.is_identity and shares_first_level(config)
     detected = []
-    for level in scale_space(view.image, scales, **_space(config)):
+    for n, level in enumerate(scale_space(view.image, scales, **_space(config))):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
             detected.append(Detected(Keypoints.empty(level.s), None, None))
+        elif n % every:  # left to the full search, if it takes this scale
+            detected.append(Detected(Keypoints.empty(level.s), None, level if keep else None,
+                                     None, True))
         elif reuse and level.s == 1.0:  # found already: the coarser image of the other direction
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
@@ -350,19 +359,49 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
         scores = probe_scores([detected[i].probe for i in usable], low.described, config)
-        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
+        if any(d.pending for d in detected):  # the best probed and their neighbours, any
+            reach = config.views.probe_every
+            run = [i for i in select_around(scores, usable, config.probe.keep, len(detected),
+                                            reach) if i in usable or detected[i].pending]
+        else:
+            run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
         run, best = usable, math.inf
     return Probed(view, detected, tuple(usable), tuple(run), best, probing)
 
 
+def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
+                   contrast: Optional[Contrast] = None) -> Probed:
+    """``probed`` with the scales its probe left ``pending`` detected and probed too: the same
+    as a view detected and probed at every scale (:func:`detect_view` with ``every`` = 1)."""
+    pending = [i for i, d in enumerate(probed.detected) if d.pending]
+    if not pending:
+        return probed
+    view, detected = probed.view, list(probed.detected)
+    scales = sorted(config.scales)
+    keep = view.image.size <= KEEP_LEVELS_MAX_PX
+    if all(detected[i].level is not None for i in pending):
+        levels = [(i, detected[i].level) for i in pending]
+    else:  # the detection's cascade again, up to the largest scale pending
+        levels = [(i, level) for i, level in enumerate(scale_space(
+            view.image, scales[:pending[-1] + 1], **_space(config))) if i in pending]
+    for i, level in levels:
+        kp = _inside(view, detect_on_level(level, config.harris, contrast),
+                     config.views.edge_margin_px)
+        detected[i] = Detected(kp, _describe(level, _part(kp, slice(config.probe.points)),
+                                             config, whitening), level if keep else None)
+    return score_view(view, tuple(detected), probed.probing, low, config)
+
+
 def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
-                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+                step: Callable[[], None] = lambda: None,
+                contrast: Optional[Contrast] = None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
-    The probe's descriptors are kept: only the other points are described. ``step()`` is
-    called once per scale matched or skipped.
+    The probe's descriptors are kept: only the other points are described; a scale the probe
+    left ``pending`` is detected here (``contrast``: as for :func:`detect_view`). ``step()``
+    is called once per scale matched or skipped.
     """
     scales = sorted(config.scales)
     detected, run = probed.detected, probed.run
@@ -375,8 +414,12 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
 
     def one(item) -> ScaleOutcome:
         i, level = item
-        kp, desc, _, full = detected[i]
-        if full is not None:
+        kp, desc, _, full, pending = detected[i]
+        if pending:
+            kp = _inside(probed.view, detect_on_level(level, config.harris, contrast),
+                         config.views.edge_margin_px)
+            desc = _describe(level, kp, config, whitening)
+        elif full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
             rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
@@ -395,7 +438,8 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
         else:
             # skipped: the probe judged it hopeless (not: too small, or no points at all)
             row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n].keypoints), initial=0,
-                           kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
+                           kept=0, inliers=0, outlier_pct=100.0,
+                           skipped=n in probed.usable or detected[n].pending)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         step()
     return outcomes
@@ -422,10 +466,12 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
     # the detector adapts to the finer image's contrast (measured once, on the image itself,
     # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
 
+    every = config.views.probe_every if step.view_pass > 0 else 1
+
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, config.views)
         return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
-                                             memo.contrast(hi_img, cfg.harris)),
+                                             memo.contrast(hi_img, cfg.harris), every),
                           coarser[step.direction], cfg)
 
     keys = list(step.views)
@@ -434,10 +480,17 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
         coarser[step.direction], detected = thread_map(lambda job: job(), [
             lambda: describe_low(lo_img, cfg, whitening, memo.contrast(lo_img, cfg.harris_low)),
             lambda: detect_view(view, cfg, whitening, meter.tick, known,
-                                memo.contrast(hi_img, cfg.harris))])
+                                memo.contrast(hi_img, cfg.harris), every)])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
+    if every > 1:  # the views whose probe of some scales scores best are probed at them all
+        top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
+        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], cfg,
+                                                   whitening, memo.contrast(hi_img, cfg.harris)),
+                          top)
+        for k, p in zip(top, done):
+            probed[k] = p
     searches += len(probed)
     chosen = sorted(probed, key=lambda p: -p.score)
     if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
@@ -445,7 +498,8 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
                   if p.score >= config.views.min_probe_score]
     attempts: List[Attempt] = []
     for p in chosen:
-        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
+        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick,
+                                     memo.contrast(hi_img, cfg.harris)))
         low_feats = coarser[step.direction]
 
         def look(t, outcome, view=p.view) -> Look:

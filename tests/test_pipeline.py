@@ -451,3 +451,41 @@ def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
     r = match(low, high)
     assert r.matched and _error(r, pair) < 3.0
 
+
+
+def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_all(raccoon):
+    """ViewParams.probe_every = 2: a view's probe detects every other scale; completing it
+    (``complete_probe``: the views whose probe scores best) gives what a probe of every scale
+    gives: the same points and probe descriptors at each scale, the same scores."""
+    from scalematch.stages.views import tilt_view
+
+    config = Config()
+    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
+    whitening = None  # the default mode's gradient descriptors are not whitened
+    low = pipeline.describe_low(pair.low, config, whitening,
+                                pipeline.image_contrast(pair.low, config.harris_low.sigma))
+    contrast = pipeline.image_contrast(pair.high, config.harris.sigma)
+    view = tilt_view(pair.high, 4.0, 36.0, config.views)
+    every = pipeline.score_view(view, *pipeline.detect_view(view, config, whitening,
+                                                            contrast=contrast), low, config)
+    sampled = pipeline.score_view(view, *pipeline.detect_view(view, config, whitening,
+                                                              contrast=contrast, every=2),
+                                  low, config)
+    assert [d.pending for d in sampled.detected][:4] == [False, True, False, True]
+    done = pipeline.complete_probe(sampled, low, config, whitening, contrast)
+    assert done.run == every.run and done.score == every.score
+    for a, b in zip(done.detected, every.detected):
+        assert np.array_equal(a.keypoints.xy, b.keypoints.xy)
+        assert (a.probe is None) == (b.probe is None)
+        assert a.probe is None or np.array_equal(a.probe.desc, b.probe.desc)
+
+
+def test_probing_views_at_every_other_scale_keeps_a_tilt_of_4_answer(raccoon):
+    """A ratio-2 pair seen with a tilt of 4 (seed 0), solved by a view at t = 4: probing the
+    views at every other scale (the default) gives the transform of probing every scale."""
+    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
+    sampled = match(pair.low, pair.high)
+    every = match(pair.low, pair.high,
+                  replace(Config(), views=replace(ViewParams(), probe_every=1)))
+    assert sampled.matched and every.matched and sampled.evidence.view_tilt == 4.0
+    assert np.array_equal(sampled.transform, every.transform)

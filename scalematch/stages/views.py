@@ -57,6 +57,14 @@ class ViewParams:
     #: of a repeated facade gave a plain similarity of 6 wrong inliers at log10 NFA -12.6 on a
     #: tilted zoom pair (t = 2.83) where the views find the truth (docs/BENCHMARKS.md)
     confirm_below_inliers: int = 12
+    #: the probe of a view first detects and scores every N-th scale only (N = 1: each one);
+    #: the ``full_searches`` views that score best are then probed at every scale, so the views
+    #: matched in full are chosen as with N = 1 wherever those few include the right one.
+    #: Detection is most of a view's cost and most views are only probed. N = 2: a "no" 0.86x
+    #: as long, the tilted zoom pairs and Oxford solved as before (docs/PERFORMANCE.md
+    #: section 8); without the completion 3 tilted pairs of 104 were lost (the right view's
+    #: probe score fell from 7-12 to 4, under ``min_probe_score``, its best scale not probed)
+    probe_every: int = 2
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0
@@ -69,6 +77,7 @@ class ViewParams:
         for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
             in_range("views", name, getattr(self, name), lo=0)
         in_range("views", "full_searches", self.full_searches, lo=1, integer=True)
+        in_range("views", "probe_every", self.probe_every, lo=1, integer=True)
         in_range("views", "confirm_below_inliers", self.confirm_below_inliers, lo=0,
                  integer=True)
 
