@@ -266,6 +266,13 @@ def shares_first_level(config: Config) -> bool:
         low.max_points == 0 or low.max_points >= high.max_points)
 
 
+def _detect(view: View, level: Level, config: Config,
+            contrast: Optional[Contrast]) -> Keypoints:
+    """The points of one level of a view, away from its empty corners."""
+    return _inside(view, detect_on_level(level, config.harris, contrast),
+                   config.views.edge_margin_px)
+
+
 def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
     """The keypoints of a simulated view that lie away from its empty corners."""
     if view.inside_distance is None or len(kp) == 0:
@@ -344,8 +351,7 @@ def detect_view(view: View, config: Config, whitening,
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
         else:
-            kp = _inside(view, detect_on_level(level, config.harris, contrast),
-                         config.views.edge_margin_px)
+            kp = _detect(view, level, config, contrast)
             part = _part(kp, slice(config.probe.points)) if probing else kp
             detected.append(Detected(kp, _describe(level, part, config, whitening),
                                      level if keep else None))
@@ -387,8 +393,7 @@ def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
         levels = [(i, level) for i, level in enumerate(scale_space(
             view.image, scales[:pending[-1] + 1], **_space(config))) if i in pending]
     for i, level in levels:
-        kp = _inside(view, detect_on_level(level, config.harris, contrast),
-                     config.views.edge_margin_px)
+        kp = _detect(view, level, config, contrast)
         detected[i] = Detected(kp, _describe(level, _part(kp, slice(config.probe.points)),
                                              config, whitening), level if keep else None)
     return score_view(view, tuple(detected), probed.probing, low, config)
@@ -416,8 +421,7 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
         i, level = item
         kp, desc, _, full, pending = detected[i]
         if pending:
-            kp = _inside(probed.view, detect_on_level(level, config.harris, contrast),
-                         config.views.edge_margin_px)
+            kp = _detect(probed.view, level, config, contrast)
             desc = _describe(level, kp, config, whitening)
         elif full is not None:
             desc = full
@@ -463,10 +467,9 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
     known = coarser.get(step.direction.other)
+    every = config.views.probe_every if step.view_pass > 0 else 1  # the views' probe
     # the detector adapts to the finer image's contrast (measured once, on the image itself,
     # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
-
-    every = config.views.probe_every if step.view_pass > 0 else 1
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, config.views)
