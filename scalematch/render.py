@@ -134,12 +134,22 @@ def verdict(result: MatchResult) -> str:
 
     Matched: the model, ratio, rotation, inliers and best scale (to the per-scale table's three
     significant digits), a tilted view and a swapped order when so; the fundamental matrix has
-    no ratio. Not matched: the reason, and the best scale when there is one.
+    no ratio. Not matched: the reason, and the best scale when there is one and the reason
+    does not name the scale it is about already.
+
+    >>> from scalematch.result import MatchResult
+    >>> no = MatchResult(matched=False, model="similarity", best_scale=2.0,
+    ...                  reason="too few inliers: 3 at scale 2")
+    >>> verdict(no)
+    'no reliable match: too few inliers: 3 at scale 2'
+    >>> verdict(MatchResult(matched=False, model="similarity", best_scale=2.0, reason="ambiguous"))
+    'no reliable match: ambiguous, best scale 2'
     """
     best = f"best scale {result.best_scale:.3g}" if np.isfinite(result.best_scale) else ""
     if not result.matched:
         reason = result.reason or "the evidence is too weak"
-        return f"no reliable match: {reason}" + (f", {best}" if best else "")
+        named = "scale" in reason  # "... at scale 2", "(the best, at scale 1, ...)"
+        return f"no reliable match: {reason}" + (f", {best}" if best and not named else "")
     if not model_of(result.model).has_ratio:
         return f"matched ({result.model} matrix): {result.n_inliers} inliers, {best}"
     tilt = float(result.evidence.view_tilt)
