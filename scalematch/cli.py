@@ -12,8 +12,8 @@ import dataclasses
 import importlib
 import importlib.machinery
 import importlib.util
-import os
 import math
+import os
 import re
 import sys
 import traceback

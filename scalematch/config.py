@@ -140,8 +140,7 @@ class Config:
             in_range("", "scales", s, lo=1)
         in_range("", "min_footprint_px", self.min_footprint_px, lo=0)
         if self.time_budget_s is not None:
-            in_range("", "time_budget_s", self.time_budget_s, lo=0, lo_open=True,
-                     allow_inf=True)  # inf: no limit
+            in_range("", "time_budget_s", self.time_budget_s, lo=0, lo_open=True)
 
     @staticmethod
     def paper(**changes) -> "Config":

@@ -16,7 +16,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.pixelcheck import pixel_check
-from .stages.probe import probe_scores, select_around, select_scales
+from .stages.probe import probe_scores, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
@@ -332,7 +332,7 @@ def detect_view(view: View, config: Config, whitening,
     points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
     image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
     ``every``: with the probe, only every ``every``-th scale is detected (the others are
-    ``pending``: :func:`finish_view` detects those it takes).
+    ``pending`` until :func:`complete_probe`).
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
@@ -365,16 +365,23 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
         scores = probe_scores([detected[i].probe for i in usable], low.described, config)
-        if any(d.pending for d in detected):  # the best probed and their neighbours, any
-            reach = config.views.probe_every
-            run = [i for i in select_around(scores, usable, config.probe.keep, len(detected),
-                                            reach) if i in usable or detected[i].pending]
-        else:
-            run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
+        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
         run, best = usable, math.inf
     return Probed(view, detected, tuple(usable), tuple(run), best, probing)
+
+
+def _levels(view: View, detected: Sequence[Detected], wanted: Sequence[int],
+            config: Config) -> Tuple[Iterator[Tuple[int, Level]], bool]:
+    """(the levels ``wanted`` of a view as (index, level), in order; True when they were kept
+    by the detection) -- else the detection's cascade again, up to the largest one wanted, a
+    level at a time (bounded memory)."""
+    if all(detected[i].level is not None for i in wanted):
+        return ((i, detected[i].level) for i in wanted), True
+    scales = sorted(config.scales)
+    return ((i, level) for i, level in enumerate(scale_space(
+        view.image, scales[:wanted[-1] + 1], **_space(config))) if i in wanted), False
 
 
 def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
@@ -385,14 +392,8 @@ def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
     if not pending:
         return probed
     view, detected = probed.view, list(probed.detected)
-    scales = sorted(config.scales)
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
-    if all(detected[i].level is not None for i in pending):
-        levels = [(i, detected[i].level) for i in pending]
-    else:  # the detection's cascade again, up to the largest scale pending
-        levels = [(i, level) for i, level in enumerate(scale_space(
-            view.image, scales[:pending[-1] + 1], **_space(config))) if i in pending]
-    for i, level in levels:
+    for i, level in _levels(view, detected, pending, config)[0]:
         kp = _detect(view, level, config, contrast)
         detected[i] = Detected(kp, _describe(level, _part(kp, slice(config.probe.points)),
                                              config, whitening), level if keep else None)
@@ -400,30 +401,21 @@ def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
 
 
 def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
-                step: Callable[[], None] = lambda: None,
-                contrast: Optional[Contrast] = None) -> List[ScaleOutcome]:
+                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
-    The probe's descriptors are kept: only the other points are described; a scale the probe
-    left ``pending`` is detected here (``contrast``: as for :func:`detect_view`). ``step()``
-    is called once per scale matched or skipped.
+    The probe's descriptors are kept: only the other points are described. The view is probed
+    at every scale (none ``pending``: :func:`complete_probe`). ``step()`` is called once per
+    scale matched or skipped.
     """
     scales = sorted(config.scales)
     detected, run = probed.detected, probed.run
-    kept = all(detected[i].level is not None for i in run)
-    if kept:
-        levels = ((i, detected[i].level) for i in run)
-    else:  # the detection's cascade again, up to the largest scale run (bounded memory)
-        levels = ((i, level) for i, level in enumerate(scale_space(
-            probed.view.image, scales[:run[-1] + 1], **_space(config))) if i in run)
+    levels, kept = _levels(probed.view, detected, run, config)
 
     def one(item) -> ScaleOutcome:
         i, level = item
-        kp, desc, _, full, pending = detected[i]
-        if pending:
-            kp = _detect(probed.view, level, config, contrast)
-            desc = _describe(level, kp, config, whitening)
-        elif full is not None:
+        kp, desc, _, full, _ = detected[i]
+        if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
             rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
@@ -442,8 +434,7 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
         else:
             # skipped: the probe judged it hopeless (not: too small, or no points at all)
             row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n].keypoints), initial=0,
-                           kept=0, inliers=0, outlier_pct=100.0,
-                           skipped=n in probed.usable or detected[n].pending)
+                           kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         step()
     return outcomes
@@ -501,8 +492,9 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
                   if p.score >= config.views.min_probe_score]
     attempts: List[Attempt] = []
     for p in chosen:
-        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick,
-                                     memo.contrast(hi_img, cfg.harris)))
+        p = complete_probe(p, coarser[step.direction], cfg, whitening,  # done unless a tie
+                           memo.contrast(hi_img, cfg.harris))
+        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
         low_feats = coarser[step.direction]
 
         def look(t, outcome, view=p.view) -> Look:

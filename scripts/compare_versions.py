@@ -143,6 +143,14 @@ def main() -> None:
               f"{np.median(null_secs['new']) / np.median(null_secs['old']):.3f}")
         print(f"claims on the stored null runs: old {null_claims['old']}, "
               f"new {null_claims['new']}")
+    same = sum((a is None and b is None) or (a is not None and b is not None
+                                             and np.array_equal(a, b))
+               for a, b in zip(found["old"], found["new"]))
+    gaps = [mean_transfer_gap(a, b, p.high.shape) for a, b, (_, p, _) in
+            zip(found["old"], found["new"], jobs_list) if a is not None and b is not None]
+    gap_text = (f", mean transfer gap median {np.median(gaps):.4f} px, max {np.max(gaps):.4f} px"
+                if gaps else "")
+    print(f"answers: {same}/{len(jobs_list)} identical; both matched {len(gaps)}{gap_text}")
     if not pairs:
         return
     print("| version | " + " | ".join(f"x{r:g}" for r in ratios) + " | all | median error px "
@@ -158,13 +166,6 @@ def main() -> None:
     ratio = np.median([s for _, s, _, _ in rows["new"]]) / np.median(
         [s for _, s, _, _ in rows["old"]])
     print(f"median time new / old: {ratio:.2f}")
-    same = sum((a is None and b is None) or (a is not None and b is not None
-                                             and np.array_equal(a, b))
-               for a, b in zip(found["old"], found["new"]))
-    gaps = [mean_transfer_gap(a, b, p.high.shape) for a, b, (_, p, _) in
-            zip(found["old"], found["new"], jobs_list) if a is not None and b is not None]
-    print(f"answers: {same}/{len(jobs_list)} identical; both matched {len(gaps)}, mean transfer gap "
-          f"median {np.median(gaps):.4f} px, max {np.max(gaps):.4f} px")
 
 
 if __name__ == "__main__":

@@ -84,22 +84,6 @@ def _score(high: Described, low: Described, cand: Candidates, config) -> float:
     return best
 
 
-def select_around(scores: List[float], probed: List[int], keep: int, n: int,
-                  reach: int = 1) -> List[int]:
-    """Positions (among ``n`` scales) of the ``keep`` best-scoring ``probed`` scales (their
-    positions; ``scores`` in the same order) and of their immediate neighbours, probed or not:
-    the full search's scales when the probe saw only some of them (``ViewParams.probe_every``).
-
-    >>> select_around([0.0, 9.0, 5.0], [0, 2, 4], keep=1, n=5)
-    [1, 2, 3]
-    >>> select_around([3.0, 9.0], [0, 2], keep=2, n=3)
-    [0, 1, 2]
-    """
-    order = sorted(range(len(scores)), key=lambda j: (-scores[j], j))[:keep]
-    return sorted({k for j in order for k in range(probed[j] - reach, probed[j] + reach + 1)
-                   if 0 <= k < n})
-
-
 def select_scales(scores: List[float], keep: int) -> List[int]:
     """Indices of the ``keep`` best-scoring scales and their immediate neighbours.
 
