@@ -1,4 +1,4 @@
-"""The command line: a thin click layer over ``read_image``, ``match`` and ``write_outputs``.
+"""The command line: a thin click layer over ``read_reduced``, ``match`` and ``write_outputs``.
 
 ``scalematch LOW HIGH [options]`` runs the ``match`` command (the group routes any first argument
 that is not a command name to it); ``scalematch batch pairs.csv`` matches many pairs, one JSON
@@ -27,7 +27,7 @@ import numpy as np
 from . import __version__
 from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, ImageError, read_image, to_grey
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, read_reduced, to_grey
 from .result import MatchResult, dumps
 
 #: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
@@ -547,18 +547,19 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
     return config
 
 
-def _load(path: str, max_pixels: int) -> np.ndarray:
+def _load(path: str, max_pixels: int, at_least: Optional[int]) -> Decoded:
     try:
-        return read_image(path, max_pixels=max_pixels)
+        return read_reduced(path, at_least, max_pixels=max_pixels)
     except ImageError as exc:
         raise InputError(str(exc))
 
 
 def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
-               progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
+               progress: Optional[Callable[[int, int], None]] = None,
+               factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
     from .pipeline import match  # imported here so the CLI starts (and --help works) fast
 
-    return match(low, high, config, progress=progress)
+    return match(low, high, config, progress=progress, decoded_factors=factors)
 
 
 # --------------------------------------------------------------------------- match
@@ -606,8 +607,13 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
             check_not_an_input(out_dir / name, (low, high), "--out-dir", "folder")
     if json_path and json_path != "-":
         check_not_an_input(Path(json_path), (low, high), "--json")
-    low_img = _load(low, max_pixels)
-    high_img = _load(high, max_pixels)
+    from .working import decode_sides
+
+    # a JPEG far above its working size is decoded at 1/2, 1/4 or 1/8 of it (not below it)
+    low_side, high_side = decode_sides(config)
+    low_read, high_read = _load(low, max_pixels, low_side), _load(high, max_pixels, high_side)
+    low_img, high_img = low_read.image, high_read.image
+    factors = (float(low_read.factor), float(high_read.factor))
     if out_dir is not None:
         check_out_dir(out_dir)
     if json_path and json_path != "-":
@@ -623,9 +629,9 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
                 def progress(done: int, total: int) -> None:
                     bar.length = max(total, done)
                     bar.update(done - bar.pos)
-                result = _run_match(low_grey, high_grey, config, progress)
+                result = _run_match(low_grey, high_grey, config, progress, factors)
         else:
-            result = _run_match(low_grey, high_grey, config)
+            result = _run_match(low_grey, high_grey, config, factors=factors)
     except ImageError as exc:
         raise InputError(str(exc))
     except ValueError as exc:  # the pipeline refuses the input (e.g. an image too small)
@@ -634,7 +640,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
         raise InputError(str(exc))
 
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        text = result.to_json(low, high, low_grey.shape, high_grey.shape)
+        text = result.to_json(low, high, low_read.size[::-1], high_read.size[::-1])
         if json_path == "-":
             click.echo(text, nl=False)
         else:
@@ -644,7 +650,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
         from .render import write_outputs
 
         try:
-            written = write_outputs(out_dir, low, high, low_img, high_img, result)
+            written = write_outputs(out_dir, low, high, low_img, high_img, result, factors)
         except OSError as exc:
             raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
 

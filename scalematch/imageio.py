@@ -125,7 +125,7 @@ class Header(NamedTuple):
 
     size: Optional[Tuple[int, int]]  #: (width, height) px as stored, None when not recognised
     orientation: int  #: EXIF orientation 1..8 (1: as stored)
-    scan: int  #: JPEG: offset of the first scan (its pixel data), else -1
+    scan: int  #: JPEG: offset of the first scan (its pixel data); MPO: 0; else -1
 
 
 #: Pillow's default decompression-bomb guard, ``PIL.Image.MAX_IMAGE_PIXELS``: larger PNG files
@@ -183,6 +183,8 @@ def header(data: bytes) -> Header:
                 size = (int(im.size[0]), int(im.size[1]))
                 orientation = _orientation(im)
                 scan = int(im.tile[0][2]) if im.format == "JPEG" and im.tile else -1
+                if im.format == "MPO":  # JPEG images in a row (drones, some cameras): OpenCV
+                    scan = 0            # decodes the first; where its scan starts is not kept
         except Image.DecompressionBombError:
             limit = 2 * (Image.MAX_IMAGE_PIXELS or 0)
             raise ImageError(f"image is above Pillow's decompression-bomb limit of "
@@ -432,18 +434,55 @@ def _room_for(p: Path, size: Tuple[int, int]) -> None:
         raise MemoryError(f"{p}: no memory to decode the {size[0]}x{size[1]} image") from exc
 
 
-def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
-               min_side: int = MIN_SIDE_PX) -> np.ndarray:
-    """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
+#: Reduction factors of a JPEG decoded at a reduced size, largest first: libjpeg's DCT scaling
+#: (OpenCV's ``IMREAD_REDUCED_*`` modes, flag bits 64, 32, 16) decodes 1/8, 1/4 or 1/2 of each
+#: side directly, the pixel ``x`` of the reduced image standing for file pixels
+#: ``[f x, f x + f)``: centred at ``f x + (f - 1) / 2``, the map of a shrink by ``f``
+#: (:mod:`scalematch.working`). Measured on a 16 MP photo of ../shared (snowpeak_IMG_2282):
+#: equal to the full decode shrunk by ``cv2.INTER_AREA`` within 0.35 grey levels rms (the
+#: decoder's own rounding to 8 bits is 0.29), shifted by less than 0.001 px (phase
+#: correlation), at 1/2, 1/4 and 1/8 alike (docs/PERFORMANCE.md section 9).
+REDUCED_FLAGS = {8: cv2.IMREAD_REDUCED_GRAYSCALE_8, 4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
+                 2: cv2.IMREAD_REDUCED_GRAYSCALE_2}
+#: A reduced decode may fall this much short of the side asked for: the photos of 12 MP cameras
+#: and phones, 4000 and 4032 px, then decode at half size (2000 and 2016 px against a working
+#: size of 2048) -- the commonest size of photo, 2.3 % less resolution for half the decoding
+#: time and a quarter of the memory (docs/PERFORMANCE.md section 9: the answers measured)
+REDUCED_SLACK = 0.03
 
-    Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
-    a device or pipe, an empty, truncated or non-image file, a file larger than an image within
-    ``max_pixels`` can be, an image above ``max_pixels`` pixels (checked from the header before
-    decoding where the format allows) or with a side below ``min_side`` px. The file is read
-    within bounds (:func:`read_bytes`).
+
+class Decoded(NamedTuple):
+    """An image file as decoded, maybe at a reduced size (:func:`read_reduced`)."""
+
+    image: np.ndarray  #: as :func:`read_image` returns it, maybe ``factor`` times smaller
+    factor: int  #: file px per image px (1: full size); x_file = factor x + (factor - 1) / 2
+    size: Tuple[int, int]  #: (width, height) of the image in the file, orientation applied
+
+
+def reduction(head: Header, at_least: Optional[int]) -> int:
+    """The factor (1, 2, 4 or 8) at which a file of header ``head`` is decoded so that its longer
+    side stays at least ``at_least`` px (less ``REDUCED_SLACK``): the largest in
+    ``REDUCED_FLAGS`` that does, for a JPEG (``head.scan`` known) only; 1 for other formats, or
+    when ``at_least`` is None.
+
+    >>> jpeg = Header((4608, 3456), 1, 600)
+    >>> reduction(jpeg, 2048), reduction(jpeg, 1024), reduction(jpeg, 4000), reduction(jpeg, None)
+    (2, 4, 1, 1)
+    >>> reduction(Header((4000, 3000), 1, 600), 2048), reduction(Header((3840, 2160), 1, 600), 2048)
+    (2, 1)
+    >>> reduction(Header((4608, 3456), 1, -1), 1024)   # not a JPEG
+    1
     """
-    p = Path(path)
-    raw, head = read_bytes(p, max_pixels)
+    if at_least is None or head.size is None or head.scan < 0:
+        return 1
+    side = max(head.size)
+    return next((f for f in REDUCED_FLAGS if side / f >= at_least * (1.0 - REDUCED_SLACK)), 1)
+
+
+def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: int,
+            factor: int = 1) -> np.ndarray:
+    """The pixels of ``raw`` (the bytes of ``p``, header ``head``) decoded, EXIF orientation
+    applied; at ``1 / factor`` of each side for a JPEG (:func:`reduction`)."""
     size = head.size
     if not _size_ok(head, max_pixels):
         raise _too_many(p, size[0], size[1], max_pixels)
@@ -452,6 +491,8 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
                          "copy or download it again")
     # orientation is applied below from the header, the same way for every format and build
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
+    if factor > 1:
+        flags |= REDUCED_FLAGS[factor]
 
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
@@ -470,12 +511,58 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
         raise _corrupt(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
-    if max_pixels and w * h > max_pixels:
+    if max_pixels and w * h * factor * factor > max_pixels:
         raise _too_many(p, w, h, max_pixels)
-    if min(w, h) < min_side:
+    if min(w, h) * factor < min_side:
         raise ImageError(f"{p}: image is {w}x{h}, too small to match (each side needs at least "
                          f"{min_side} px); give a larger image")
     return img
+
+
+def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
+               min_side: int = MIN_SIDE_PX) -> np.ndarray:
+    """Decode ``path`` as stored (grey, BGR or BGRA; 8 or 16 bit), EXIF orientation applied.
+
+    Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
+    a device or pipe, an empty, truncated or non-image file, a file larger than an image within
+    ``max_pixels`` can be, an image above ``max_pixels`` pixels (checked from the header before
+    decoding where the format allows) or with a side below ``min_side`` px. The file is read
+    within bounds (:func:`read_bytes`).
+    """
+    p = Path(path)
+    raw, head = read_bytes(p, max_pixels)
+    return _decode(p, raw, head, max_pixels, min_side)
+
+
+def read_reduced(path: str | Path, at_least: Optional[int],
+                 max_pixels: int = DEFAULT_MAX_PIXELS, min_side: int = MIN_SIDE_PX) -> Decoded:
+    """Decode ``path`` as :func:`read_image` does, but a JPEG whose longer side is at least
+    twice ``at_least`` px at 1/2, 1/4 or 1/8 of its size (:func:`reduction`): the longer side
+    stays at least ``at_least`` (the working size: ``scalematch.working.decode_sides``), or
+    ``REDUCED_SLACK`` short of it.
+
+    A 16 MP camera JPEG against a 2048 px working size: decoded at half size, 0.05 s instead
+    of 0.1 s, and 12 MB instead of 48 MB of pixels (its grey copy: 16 MB instead of 64 MB).
+    ``Decoded.factor`` says how much smaller the image is than the file's; ``match`` takes it
+    (``decoded_factors``) and answers in the file's pixels.
+
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "big.jpg")
+    >>> cv2.imwrite(path, np.tile(np.arange(256, dtype=np.uint8), (600, 5)))
+    True
+    >>> d = read_reduced(path, at_least=300)
+    >>> d.image.shape, d.factor, d.size
+    ((150, 320), 4, (1280, 600))
+    """
+    p = Path(path)
+    raw, head = read_bytes(p, max_pixels)
+    factor = reduction(head, at_least)
+    img = _decode(p, raw, head, max_pixels, min_side, factor)
+    h, w = img.shape[:2]
+    if factor == 1:
+        return Decoded(img, 1, (w, h))
+    fw, fh = head.size  # as stored; orientations 5 to 8 turn it by a quarter
+    return Decoded(img, factor, (fw, fh) if head.orientation <= 4 else (fh, fw))
 
 
 def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,

@@ -57,7 +57,8 @@ KEEP_LEVELS_MAX_PX = 4_000_000
 
 
 def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
-          progress: Optional[Callable[[int, int], None]] = None) -> MatchResult:
+          progress: Optional[Callable[[int, int], None]] = None,
+          decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
     """Match a low-resolution image against a high-resolution one of the same scene.
 
     The search runs progressively and stops at the first reliable match (MODS, Mishkin et al.
@@ -84,6 +85,10 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     progress : callable, optional
         ``progress(done, total)`` as the search goes; ``total`` is the plan's length, and
         ``done`` reaches it when the search ends (early or not).
+    decoded_factors : (float, float)
+        Each image given is its file's image shrunk by this factor, centre-aligned: a JPEG
+        decoded at a reduced size (:func:`scalematch.imageio.read_reduced`, within the limits
+        of :func:`scalematch.working.decode_sides`). The answer is then in the files' pixels.
 
     Returns
     -------
@@ -95,7 +100,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     """
     t0 = time.perf_counter()
     # the one check at the door, before anything is shrunk: ValueError for what cannot match
-    work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config)
+    work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
+                           decoded_factors)
     cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
     whitening = cov.whitening() if cov is not None else None
     plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)

@@ -409,22 +409,33 @@ def told_apart(a: PathLike, b: PathLike) -> Tuple[str, str]:
 
 
 def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
-                  low: np.ndarray, high: np.ndarray, result: MatchResult) -> Dict[str, Path]:
+                  low: np.ndarray, high: np.ndarray, result: MatchResult,
+                  factors: Tuple[float, float] = (1.0, 1.0)) -> Dict[str, Path]:
     """Write overlay.png, matches.png, scales.png and matches.csv into ``out_dir``.
 
     Everything is written whether or not a match was found (the overlay then shows ``low`` with
     the reason, the CSV only its header). ``low_path``/``high_path`` name the inputs in the
-    pictures. Returns name -> path written. Raises ``OSError`` when ``out_dir`` is not writable.
+    pictures. ``factors``: ``low`` and ``high`` are their files' images shrunk by these (decoded
+    at a reduced size, :func:`scalematch.imageio.read_reduced`); the pictures are drawn on them,
+    the CSV stays in the files' pixels. Returns name -> path written. Raises ``OSError`` when
+    ``out_dir`` is not writable.
     """
+    from .working import in_decoded
+
+    drawn = in_decoded(result, *factors)
+    f_low, f_high = factors
     if result.order == "swapped":  # the pictures show the finer image on the coarser one
         low_path, high_path, low, high = high_path, low_path, high, low
+        f_low, f_high = f_high, f_low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
     low_name, high_name = told_apart(low_path, high_path)
-    ov = overlay(low, high, result, footer=[f"low: {low_name}   high: {high_name}"])
+    shown = "".join(f"   {name} drawn at 1/{f:g} size" for name, f in
+                    (("low", f_low), ("high", f_high)) if f != 1.0)
+    ov = overlay(low, high, drawn, footer=[f"low: {low_name}   high: {high_name}{shown}"])
     _write_png(paths["overlay.png"], ov)
-    _write_png(paths["matches.png"], matches_image(low, high, result))
+    _write_png(paths["matches.png"], matches_image(low, high, drawn))
     _write_png(paths["scales.png"], scale_plot(result))
     write_matches_csv(paths["matches.csv"], result)
     return paths

@@ -52,8 +52,10 @@ class WorkImages:
 
     low: np.ndarray = field(repr=False)  #: (H, W) float32, the first image given, working size
     high: np.ndarray = field(repr=False)  #: (H, W) float32, the second image given
-    f_low: float  #: ``low`` is the first image shrunk by this (1: full size)
-    f_high: float  #: ``high`` is the second image shrunk by this
+    #: ``low`` is the first image shrunk by this (1: full size); from the file's image when it
+    #: was decoded reduced (``decoded_factors``)
+    f_low: float
+    f_high: float  #: ``high`` is the second image shrunk by this (the same)
     scales: Dict[Direction, Tuple[float, ...]] = field(repr=False)  #: each direction's scales
 
 
@@ -63,17 +65,32 @@ def shown_scale(work: "WorkImages", direction: Direction) -> float:
     return work.f_high / work.f_low if direction is Direction.GIVEN else work.f_low / work.f_high
 
 
-def at_working_size(low: np.ndarray, high: np.ndarray, config) -> WorkImages:
+def decode_sides(config) -> Tuple[Optional[int], Optional[int]]:
+    """The longer side (px) the low and the high image may be decoded down to, at least
+    (``scalematch.imageio.read_reduced``): their working sizes; None (full size) for the high
+    image unless the order is automatic, as :func:`at_working_size` shrinks it."""
+    return config.low_max_side, config.high_max_side if config.order == "auto" else None
+
+
+def at_working_size(low: np.ndarray, high: np.ndarray, config,
+                    decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> WorkImages:
     """``low`` and ``high`` (checked float32 grey levels) at their working sizes.
 
     The high image is shrunk only with ``config.order == "auto"``: shrinking can make it the
-    coarser one, which only the automatic order then finds.
+    coarser one, which only the automatic order then finds. ``decoded_factors``: each image given is
+    already its original shrunk by this factor (a JPEG decoded at a reduced size, the same
+    centre-aligned map); the factors recorded are then from the originals.
     """
+    d_low, d_high = (float(f) for f in decoded_factors)
+    if d_high != 1.0 and config.order != "auto":
+        raise ValueError("the high image may be given reduced only with order 'auto' "
+                         "(decode_sides)")
     f_low = working_factor(low.shape, config.low_max_side)
     f_high = working_factor(high.shape, config.high_max_side) if config.order == "auto" else 1.0
+    t_low, t_high = f_low * d_low, f_high * d_high
     return WorkImages(shrink(low, f_low) if f_low > 1.0 else low,
-                      shrink(high, f_high) if f_high > 1.0 else high, f_low, f_high,
-                      direction_scales(config.scales, f_low, f_high))
+                      shrink(high, f_high) if f_high > 1.0 else high, t_low, t_high,
+                      direction_scales(config.scales, t_low, t_high))
 
 
 def direction_scales(scales: Sequence[float], f_low: float,
@@ -150,3 +167,28 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
                    rotation_deg=angle, translation=tr,
                    order=Direction.SWAPPED if swapped else Direction.GIVEN)
+
+
+def in_decoded(result: MatchResult, f_low: float, f_high: float) -> MatchResult:
+    """``result`` (in the files' pixels) with its transform and inliers in the pixels of the
+    images as decoded, ``f_low`` and ``f_high`` times smaller than the files' (a JPEG decoded
+    at a reduced size, :func:`scalematch.imageio.read_reduced`): what the pictures draw on
+    them. The ratio, angle, translation and table stay the files'.
+
+    >>> from scalematch.result import MatchResult
+    >>> r = MatchResult(matched=True, model="similarity",
+    ...                 transform=np.array([[0.25, 0, 100.0], [0, 0.25, 50.0]]),
+    ...                 inliers=np.array([[0.0, 0.0, 100.0, 50.0]]))
+    >>> d = in_decoded(r, 2.0, 1.0)   # the low image decoded at half size
+    >>> d.transform.round(3).tolist(), d.inliers.round(3).tolist()
+    ([[0.125, 0.0, 49.75], [0.0, 0.125, 24.75]], [[0.0, 0.0, 49.75, 24.75]])
+    """
+    if (f_low == 1.0 and f_high == 1.0) or not result.matched or result.transform is None:
+        return result
+    swapped = result.order == Direction.SWAPPED
+    f_fine, f_coarse = (f_low, f_high) if swapped else (f_high, f_low)
+    back_fine, back_coarse = invert(_to_original(f_fine)), invert(_to_original(f_coarse))
+    t = _transform_in_original(result.transform, result.model, back_fine, back_coarse)
+    inliers = np.asarray(result.inliers, np.float64).reshape(-1, 4)
+    inliers = np.hstack([apply(back_fine, inliers[:, :2]), apply(back_coarse, inliers[:, 2:4])])
+    return replace(result, transform=t, inliers=inliers)

@@ -263,12 +263,12 @@ def match_or_fail(pair: Pair, config: Config, max_pixels: int):
     reference: ``run_pool`` hands it to worker processes, which import this module."""
     global _OUT_OF_MEMORY
 
-    def match(low, high, cfg):
+    def match(low, high, cfg, **kwargs):
         global _OUT_OF_MEMORY
         if _OUT_OF_MEMORY or Path(pair.low).name.startswith("oom"):
             _OUT_OF_MEMORY = True
             raise MemoryError("Unable to allocate 1.00 GiB")
-        return real_match(low, high, cfg)
+        return real_match(low, high, cfg, **kwargs)
 
     _log(pair, "start")
     if Path(pair.low).name.startswith("exit1"):

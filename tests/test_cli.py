@@ -400,3 +400,28 @@ def test_out_dir_never_overwrites_an_input(tmp_path, flat_pair, name):
     assert "--out-dir" in last and "choose another folder" in last
     assert high.read_bytes() == flat_pair[1].read_bytes()
     assert sorted(p.name for p in folder.iterdir()) == [name]  # nothing else written
+
+
+@needs_pipeline
+def test_a_jpeg_above_twice_the_working_size_is_decoded_reduced(tmp_path):
+    """demo_low as a JPEG (419 px) with a working size of 200 px: decoded at half size (209 px
+    >= 200), the answer in the file's pixels, the same as the PNG's within a pixel; the JSON
+    names the file's size, the overlay is drawn on the image as decoded."""
+    low = tmp_path / "low.jpg"
+    cv2.imwrite(str(low), cv2.imread(str(DEMO_LOW)), [cv2.IMWRITE_JPEG_QUALITY, 95])
+    out = tmp_path / "out"
+    jpeg = run(low, DEMO_HIGH, "--working-size", "200", "--json", "-", "-q", "-o", out)
+    png = run(DEMO_LOW, DEMO_HIGH, "--working-size", "200", "--json", "-", "-q")
+    assert jpeg.exit_code == 0 and png.exit_code == 0, jpeg.output
+    a, b = json.loads(jpeg.stdout), json.loads(png.stdout)
+    assert (a["low"]["width"], a["low"]["height"]) == (419, 377)
+    assert a["evidence"]["low_working_factor"] == pytest.approx(419 / 200, rel=0.01)
+    corners = np.array([[[0.0, 0.0], [479.0, 0.0], [0.0, 359.0], [479.0, 359.0]]])
+    gap = np.linalg.norm(cv2.transform(corners, np.array(a["transform"]))
+                         - cv2.transform(corners, np.array(b["transform"])), axis=2)
+    assert gap.max() < 1.0
+    assert cv2.imread(str(out / "overlay.png")).shape[:2] == (189, 210)  # ceil(377 / 2), ...
+    rows = list(csv.reader(open(out / "matches.csv")))[1:]  # in the file's pixels
+    pts = np.array(rows, float)
+    fit = cv2.transform(pts[None, :, :2], np.array(a["transform"]))[0]
+    assert np.linalg.norm(fit - pts[:, 2:], axis=1).max() < 2.1 * 3.0 + 1e-6

@@ -13,7 +13,8 @@ import pytest
 
 from PIL import Image
 
-from scalematch.imageio import DEFAULT_MAX_PIXELS, ImageError, header, read_grey, read_image, to_bgr8
+from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, header, read_grey, read_image,
+                                read_reduced, to_bgr8, to_grey)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -377,3 +378,59 @@ def test_a_decode_out_of_memory_is_a_memory_error_not_a_corrupt_file(tmp_path, m
     monkeypatch.setattr(cv2, "imdecode", insufficient)
     with pytest.raises(MemoryError, match="no memory to decode"):
         read_image(big)
+
+
+#: a JPEG decoded at half size against the full decode shrunk by INTER_AREA, grey levels rms
+#: (measured 0.35 on a 16 MP photo; 8-bit rounding of the decoder's output alone is 0.29)
+REDUCED_RMS = 1.0
+#: the shift between the two, px of the reduced image (measured under 0.001)
+REDUCED_SHIFT_PX = 0.05
+
+
+def test_a_large_jpeg_is_decoded_reduced_as_if_shrunk():
+    """data/raccoon.jpg (1024x768) with a working size of 400 px: decoded at half size (512 px
+    >= 400, 256 px would be below), the pixels of the full decode shrunk by 2 (INTER_AREA, the
+    centre-aligned map the answer is mapped back with), not shifted."""
+    path = ROOT / "data" / "raccoon.jpg"
+    d = read_reduced(path, at_least=400)
+    assert d.factor == 2 and d.size == (1024, 768) and d.image.shape[:2] == (384, 512)
+    full = to_grey(read_image(path))
+    ref = cv2.resize(full, (512, 384), interpolation=cv2.INTER_AREA)
+    half = to_grey(d.image)
+    assert np.sqrt(np.mean((half - ref) ** 2)) < REDUCED_RMS
+    shift, _ = cv2.phaseCorrelate(ref.astype(np.float64), half.astype(np.float64))
+    assert np.hypot(*shift) < REDUCED_SHIFT_PX
+    # not above the working size: as read_image reads it
+    for at_least in (600, None):
+        same = read_reduced(path, at_least=at_least)
+        assert same.factor == 1 and same.size == (1024, 768)
+        np.testing.assert_array_equal(same.image, read_image(path))
+
+
+def test_only_jpeg_is_decoded_reduced_and_orientation_is_kept(tmp_path, bgr):
+    """A PNG is decoded in full whatever its size; a JPEG stored sideways (EXIF 6) is turned
+    upright at its reduced size too, and its size is the upright one."""
+    png = write(tmp_path / "a.png", cv2.imencode(".png", bgr)[1].tobytes())
+    d = read_reduced(png, at_least=40)
+    assert d.factor == 1 and d.image.shape == bgr.shape
+    plain = read_reduced(write(tmp_path / "p.jpg", jpeg_bytes(bgr)), at_least=60)
+    turned = read_reduced(write(tmp_path / "r.jpg", jpeg_bytes(bgr, 6)), at_least=60)
+    assert plain.factor == turned.factor == 2  # 160 px: 80 >= 60, 40 would be below
+    assert plain.size == (160, 120) and turned.size == (120, 160)
+    assert turned.image.shape[:2] == (80, 60)
+    np.testing.assert_array_equal(turned.image, np.rot90(plain.image, k=-1))
+
+
+def test_an_mpo_file_is_decoded_reduced_as_a_jpeg(tmp_path, bgr):
+    """MPO (drone and some camera photos: JPEG images in a row) is a JPEG to OpenCV, which
+    decodes the first image: at a reduced size too."""
+    first = Image.fromarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    data = io.BytesIO()
+    first.save(data, "MPO", save_all=True, append_images=[first.transpose(Image.FLIP_LEFT_RIGHT)])
+    path = write(tmp_path / "drone.jpg", data.getvalue())
+    assert header(data.getvalue()).scan >= 0
+    d = read_reduced(path, at_least=60)
+    assert d.factor == 2 and d.size == (160, 120) and d.image.shape[:2] == (60, 80)
+    full = to_grey(read_image(path))
+    ref = cv2.resize(full, (80, 60), interpolation=cv2.INTER_AREA)
+    assert np.sqrt(np.mean((to_grey(d.image) - ref) ** 2)) < REDUCED_RMS  # measured 0.35

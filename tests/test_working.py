@@ -13,7 +13,8 @@ from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_zoom_pair
 from scalematch.result import Direction
 from scalematch.stages.decision import mean_transfer_gap
-from scalematch.working import direction_scales, shrink, working_factor
+from scalematch.working import (at_working_size, decode_sides, direction_scales, in_decoded, shrink,
+                                working_factor)
 
 #: a match at the working size against the truth, original low px (a working pixel is f of them)
 ERROR_TOL_PX = 2.0
@@ -173,3 +174,39 @@ def test_the_reason_names_a_scale_of_the_table_at_working_size(raccoon):
     assert found, result.reason
     shown = {f"{row.s:.3g}" for row in result.scales}
     assert all(s in shown for s in found), (found, shown)
+
+
+@pytest.mark.parametrize("which", ["low", "high"])
+def test_an_image_decoded_reduced_gives_the_answer_in_the_files_pixels(raccoon, which):
+    """An image given already halved (as a JPEG decoded at half size: the same centre-aligned
+    map) with ``decoded_factors`` gives the answer of the full-size image, in its pixels: with a
+    working size of half its side the search sees the same array either way."""
+    pair = _pair_large(raccoon, 3.0, 4) if which == "high" else _pair(raccoon, 2.0, 5)
+    h, w = pair.low.shape  # even sides: halving is then exactly the map of a factor 2
+    pair = replace(pair, low=pair.low[:h // 2 * 2, :w // 2 * 2])
+    if which == "low":
+        config = Config(low_max_side=max(pair.low.shape) // 2)
+        factors, args = (2.0, 1.0), (shrink(pair.low, 2.0), pair.high)
+    else:
+        config = Config(high_max_side=max(pair.high.shape) // 2)
+        factors, args = (1.0, 2.0), (pair.low, shrink(pair.high, 2.0))
+    full = match(pair.low, pair.high, config)
+    result = match(*args, config, decoded_factors=factors)
+    _check(result, pair, full)
+    np.testing.assert_allclose(result.transform, full.transform, atol=1e-9)
+    assert (result.evidence.low_working_factor, result.evidence.high_working_factor) == \
+        (full.evidence.low_working_factor, full.evidence.high_working_factor) == factors
+    # drawn on the images as decoded: in_decoded maps the answer onto them
+    drawn = in_decoded(result, *factors)
+    up = {1.0: lambda p: p, 2.0: lambda p: 2 * p + 0.5}  # decoded px -> file px
+    corner = np.array([[[3.0, 5.0]]])
+    np.testing.assert_allclose(up[factors[0]](cv2.transform(corner, drawn.transform)),
+                               cv2.transform(up[factors[1]](corner), result.transform), atol=1e-9)
+
+
+def test_the_high_image_is_decoded_reduced_only_in_the_automatic_order():
+    assert decode_sides(Config()) == (2048, 2048)
+    assert decode_sides(Config(order="given")) == (2048, None)
+    with pytest.raises(ValueError, match="only with order 'auto'"):
+        at_working_size(np.zeros((64, 64), np.float32), np.zeros((64, 64), np.float32),
+                        Config(order="given"), decoded_factors=(1, 2))
