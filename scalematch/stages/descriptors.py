@@ -38,6 +38,7 @@ s, the same pixel size as the low image at s = 1, so one window size serves both
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import cv2
@@ -185,10 +186,6 @@ class Described:
 
 
 _REMAP_ROWS = 16384
-#: The contraction order of the histograms' spatial pooling: what ``optimize=True`` finds for
-#: every number of points (checked from 1 to 20 000), given so it is not searched at each call
-#: (0.7 s of 21 s on 34 null runs).
-_POOL_PATH = ["einsum_path", (0, 1), (0, 1)]
 
 
 def _gradients_at(image: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple:
@@ -222,21 +219,32 @@ def _turned(hist: np.ndarray, shift: int) -> np.ndarray:
     return np.concatenate([hist[:, 1:], hist[:, :1]], axis=1)
 
 
+@functools.lru_cache(maxsize=8)
+def _orientation_window(params: GradientParams):
+    """(ox, oy, weight) of the orientation window's samples, the same for every call with
+    ``params`` (worked out once: most calls describe a few dozen points, where building the
+    window was a tenth of the call)."""
+    step = params.orientation_step_px
+    r = int(np.ceil(params.orientation_radius_px))
+    oy, ox = np.mgrid[-r:r + 1:step, -r:r + 1:step]
+    disk = (ox ** 2 + oy ** 2) <= params.orientation_radius_px ** 2
+    ox, oy = ox[disk], oy[disk]
+    wgt = np.exp(-(ox ** 2 + oy ** 2) / (2 * params.orientation_sigma_px ** 2))
+    for a in (ox, oy, wgt):
+        a.setflags(write=False)
+    return ox, oy, wgt
+
+
 def dominant_orientations(image: np.ndarray, xy: np.ndarray, params: GradientParams):
     """Orientations (radians) at level points ``xy`` (N, 2): returns (rows (M,), angles (M,)).
 
     ``image`` is the level already smoothed by ``presmooth_px`` (enough for sampling gradients
     every ``orientation_step_px`` = 2 px).
     """
-    step = params.orientation_step_px
     n = xy.shape[0]
     if n == 0:
         return np.zeros(0, int), np.zeros(0)
-    r = int(np.ceil(params.orientation_radius_px))
-    oy, ox = np.mgrid[-r:r + 1:step, -r:r + 1:step]
-    disk = (ox ** 2 + oy ** 2) <= params.orientation_radius_px ** 2
-    ox, oy = ox[disk], oy[disk]
-    wgt = np.exp(-(ox ** 2 + oy ** 2) / (2 * params.orientation_sigma_px ** 2))
+    ox, oy, wgt = _orientation_window(params)
     h, w = image.shape
     cx = np.rint(xy[:, 0]).astype(int)
     cy = np.rint(xy[:, 1]).astype(int)
@@ -266,6 +274,28 @@ def dominant_orientations(image: np.ndarray, xy: np.ndarray, params: GradientPar
     return pr, angles
 
 
+@functools.lru_cache(maxsize=8)
+def _histogram_layout(params: GradientParams):
+    """What every call of :func:`gradient_histograms` with ``params`` shares, worked out once:
+    the sample grid in the keypoint frame (``uu`` x, ``vv`` y, one extra ring for the
+    gradients), the samples' Gaussian weight (ns, ns), and the spatial pooling as one matrix
+    (ns * ns, grid * grid): sample (y, x) gives cell (i, j) the weight ``pool[y, i] pool[x, j]``,
+    bilinear between cell centres (Lowe's trilinear weights with the orientation's)."""
+    g, spc = params.grid, params.samples_per_cell
+    ns = spc * g  # samples per side
+    step = params.cell_px / spc
+    u = (np.arange(ns + 2) - (ns + 1) / 2.0) * step
+    uu, vv = np.meshgrid(u, u)  # uu: x in keypoint frame, vv: y
+    centre = (np.arange(ns) - (ns - 1) / 2.0) / (ns / 2.0)
+    wgt = np.exp(-(centre[:, None] ** 2 + centre[None, :] ** 2) / (2 * 0.5 ** 2))
+    pos = (np.arange(ns) + 0.5) / spc - 0.5  # sample position in cell units
+    pool = np.clip(1.0 - np.abs(pos[:, None] - np.arange(g)[None, :]), 0.0, 1.0)
+    cells = np.kron(pool, pool).astype(np.float32)
+    for a in (uu, vv, wgt, cells):
+        a.setflags(write=False)
+    return uu, vv, wgt, cells
+
+
 def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
                         params: GradientParams) -> np.ndarray:
     """4x4x8 oriented gradient histograms (M, 128) at level points ``xy`` turned by ``angles``.
@@ -277,12 +307,8 @@ def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
     dim = g * g * nb
     if m == 0:
         return np.zeros((0, dim), np.float32)
-    spc = params.samples_per_cell
-    ns = spc * g  # samples per side
-    step = params.cell_px / spc
-    # sample grid (ns + 2) x (ns + 2) in the keypoint frame, centred, one extra ring for gradients
-    u = (np.arange(ns + 2) - (ns + 1) / 2.0) * step
-    uu, vv = np.meshgrid(u, u)  # uu: x in keypoint frame, vv: y
+    ns = params.samples_per_cell * g  # samples per side
+    uu, vv, wgt, cells = _histogram_layout(params)
     c, s = np.cos(angles)[:, None, None], np.sin(angles)[:, None, None]
     mapx = (xy[:, 0, None, None] + c * uu - s * vv).astype(np.float32)
     mapy = (xy[:, 1, None, None] + s * uu + c * vv).astype(np.float32)
@@ -298,25 +324,23 @@ def gradient_histograms(image: np.ndarray, xy: np.ndarray, angles: np.ndarray,
     dx = 0.5 * (patch[:, 1:-1, 2:] - patch[:, 1:-1, :-2])
     dy = 0.5 * (patch[:, 2:, 1:-1] - patch[:, :-2, 1:-1])
     mag = np.sqrt(dx * dx + dy * dy)
-    centre = (np.arange(ns) - (ns - 1) / 2.0) / (ns / 2.0)
-    wgt = np.exp(-(centre[:, None] ** 2 + centre[None, :] ** 2) / (2 * 0.5 ** 2))
     mag *= wgt[None]
     b = (np.arctan2(dy, dx) + np.pi) * (nb / (2 * np.pi))
     b0 = np.floor(b).astype(int)
     f = (b - b0).astype(np.float32)
     b0 %= nb
     b1 = (b0 + 1) % nb
-    # per-sample orientation histograms (M, ns, ns, nb), linear in angle
-    per = np.zeros((m, ns, ns, nb), np.float32)
-    flat = per.reshape(-1, nb)  # a view: one row per sample; b0 != b1, so no sum collides
-    samples = np.arange(flat.shape[0])
-    flat[samples, b0.ravel()] = (mag * (1 - f)).ravel()
-    flat[samples, b1.ravel()] = (mag * f).ravel()
-    # spatial pooling into g x g cells, bilinear between cell centres (Lowe's trilinear weights)
-    pos = (np.arange(ns) + 0.5) / spc - 0.5  # sample position in cell units
-    cell = np.arange(g)
-    pool = np.clip(1.0 - np.abs(pos[:, None] - cell[None, :]), 0.0, 1.0).astype(np.float32)
-    desc = np.einsum("myxb,yi,xj->mijb", per, pool, pool, optimize=_POOL_PATH).reshape(m, dim)
+    # per-sample orientation histograms (M, nb, ns * ns), linear in angle: sample k of point p
+    # puts its two shares into bins b0 and b1 (b0 != b1: no sum collides)
+    area = ns * ns
+    per = np.zeros((m, nb, area), np.float32)
+    flat = per.reshape(-1)  # a view
+    base = (np.arange(m)[:, None] * (nb * area) + np.arange(area)[None, :]).ravel()
+    flat[base + b0.reshape(-1) * area] = (mag * (1 - f)).ravel()
+    flat[base + b1.reshape(-1) * area] = (mag * f).ravel()
+    # spatial pooling into g x g cells: one product, (M nb, ns ns) x (ns ns, g g)
+    pooled = (per.reshape(m * nb, area) @ cells).reshape(m, nb, g * g)
+    desc = np.ascontiguousarray(pooled.transpose(0, 2, 1)).reshape(m, dim)
     desc /= np.linalg.norm(desc, axis=1, keepdims=True) + 1e-12
     np.minimum(desc, params.clip, out=desc)
     desc /= desc.sum(axis=1, keepdims=True) + 1e-12
