@@ -242,7 +242,7 @@ def summary(result: MatchResult) -> str:
     """The one-line verdict on stderr: :func:`render.verdict` (the captions' too) and the time."""
     from .render import verdict
 
-    return f"{verdict(result)}, {result.seconds:.1f} s"
+    return f"{verdict(result)}, {result.seconds:.2f} s"  # 0.04 s, not 0.0 s
 
 
 def scale_table(result: MatchResult) -> str:
@@ -441,7 +441,7 @@ def cli() -> None:
     """Match a low-resolution image against a high-resolution image of the same scene with
     unknown zoom (2x-16x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
 
-    Without a command name, the arguments go to the match command:
+    Without a command name, the arguments go to the match command.
 
     \b
     Examples:

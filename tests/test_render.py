@@ -11,7 +11,7 @@ import pytest
 from scalematch.config import Config
 from scalematch.geometry import apply, compose, footprint, similarity_parts
 from scalematch.lab.synthetic import zoom_warp
-from scalematch.render import OUTLINE, matches_image, overlay, scale_plot, write_outputs
+from scalematch.render import OUTLINE, matches_image, overlay, scale_plot, verdict, write_outputs
 from scalematch.result import MatchResult, ScaleRow
 
 RATIO, ANGLE = 3.0, 25.0
@@ -184,3 +184,16 @@ def test_told_apart_names_two_files_of_the_same_name_by_their_folders():
                                                                       "graf/img1.png")
     assert told_apart("a/low.png", "a/high.png") == ("low.png", "high.png")
 
+
+
+def test_the_verdict_calls_no_image_finer_near_a_ratio_of_1():
+    """Two crops of one photo match at ratio 1.000, either way round by chance: "the first
+    image is the finer one" would be false there; what the transform maps is said instead."""
+    def swapped(ratio):
+        return MatchResult(matched=True, model="similarity", resolution_ratio=ratio,
+                           rotation_deg=0.0, order="swapped", best_scale=1.0,
+                           transform=np.array([[1 / ratio, 0, 0], [0, 1 / ratio, 0.0]]),
+                           inliers=np.zeros((0, 4)))
+    assert verdict(swapped(1.0)).endswith(
+        "order swapped (the transform maps the first image into the second)")
+    assert verdict(swapped(3.0)).endswith("order swapped (the first image is the finer one)")
