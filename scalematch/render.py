@@ -25,7 +25,7 @@ import numpy as np
 from .chart import bar_chart
 from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
-from .result import MatchResult
+from .result import MatchResult, ScaleRow
 from .stages.estimator import model_of
 
 PathLike = Union[str, Path]
@@ -376,13 +376,27 @@ def _band(lines: Sequence[str], width: int) -> np.ndarray:
     return caption(band, lines)
 
 
+def scale_labels(rows: Sequence[ScaleRow]) -> list:
+    """The chart's label of each scale: three significant digits, as the table (a working size
+    makes scales such as 0.629961 and 10.0794), an asterisk when the probe skipped it.
+
+    >>> from scalematch.result import ScaleRow
+    >>> scale_labels([ScaleRow(s=0.629961, ratio=0.63, points=9, initial=4, kept=2, inliers=0,
+    ...                        outlier_pct=100.0),
+    ...               ScaleRow(s=10.0794, ratio=float("nan"), points=9, initial=0, kept=0,
+    ...                        inliers=0, outlier_pct=100.0, skipped=True)])
+    ['0.63', '10.1*']
+    """
+    return [f"{r.s:.3g}" + ("*" if r.skipped else "") for r in rows]
+
+
 def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
     """Bar chart of inliers against scale s, the winning scale highlighted.
 
     Scales the probe skipped as hopeless have no bar and an asterisk on their label.
     """
     rows = list(result.scales)
-    labels = [f"{r.s:g}*" if r.skipped else float(r.s) for r in rows]
+    labels = scale_labels(rows)
     values = [float("nan") if r.skipped else float(r.inliers) for r in rows]
     best = None
     if np.isfinite(result.best_scale) and rows:
