@@ -76,6 +76,10 @@ def test_working_size_gives_the_full_size_answer(raccoon, ratio, seed):
     fit = cv2.transform(small.inliers[None, :, :2], small.transform)[0]
     assert np.linalg.norm(fit - small.inliers[:, 2:], axis=1).max() <= f * 3.0 + 1e-6
     assert abs(small.best_scale / ratio - 1) < 0.3  # reported in the original pixels
+    # the evidence's figures in pixels too: the implied ratio and the footprint's area (low px^2)
+    assert small.evidence.implied_ratio == pytest.approx(full.evidence.implied_ratio, rel=0.02)
+    assert small.evidence.footprint_area_px == pytest.approx(full.evidence.footprint_area_px,
+                                                             rel=0.04)
 
 
 def test_working_size_in_the_swapped_order(raccoon):
