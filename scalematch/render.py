@@ -318,15 +318,15 @@ def size_label(width: int, height: int, factor: float) -> str:
     return f"{width}x{height}" + (f" (the file at 1/{factor:g})" if factor != 1.0 else "")
 
 
-def drawn_note(f_low: float, f_high: float) -> str:
-    """The overlay footer's note on the images drawn smaller than their files (1: as is; give
-    1 for an image the overlay does not show).
+def drawn_note(factor: float) -> str:
+    """The overlay footer's note when the low image is drawn smaller than its file: the overlay
+    has the size of the low image as decoded (the high one is warped onto it at that size, so
+    how it was decoded does not show).
 
-    >>> drawn_note(2.0, 1.0), drawn_note(1.0, 1.0)
-    ('   low drawn at 1/2 size', '')
+    >>> drawn_note(2.0), drawn_note(1.0)
+    ('   low drawn at 1/2 of its file size', '')
     """
-    return "".join(f"   {name} drawn at 1/{f:g} size"
-                   for name, f in (("low", f_low), ("high", f_high)) if f != 1.0)
+    return f"   low drawn at 1/{factor:g} of its file size" if factor != 1.0 else ""
 
 
 def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
@@ -472,9 +472,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
     low_name, high_name = told_apart(low_path, high_path)
-    warped = drawn.matched and model_of(drawn.model).has_ratio  # the overlay shows high too
-    shown = drawn_note(f_low, f_high if warped else 1.0)
-    ov = overlay(low, high, drawn, footer=[f"low: {low_name}   high: {high_name}{shown}"])
+    ov = overlay(low, high, drawn,
+                 footer=[f"low: {low_name}   high: {high_name}{drawn_note(f_low)}"])
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, drawn, factors=(f_low, f_high)))
     _write_png(paths["scales.png"], scale_plot(result))
