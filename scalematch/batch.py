@@ -39,10 +39,10 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
 from . import __version__
 from .config import Config
 from .errors import internal_error
-from .imageio import read_reduced, to_grey
+from .imageio import to_grey
 from .pipeline import match
 from .result import dumps, to_jsonable
-from .working import decode_sides
+from .working import read_pair
 
 #: Header names of the two path columns; a column named exactly so wins, else the one column
 #: whose name starts with it ("low_path", "high-res", ...). Any other columns are ignored.
@@ -377,12 +377,10 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
     """The batch line of ``pair``: the JSON of its match, or an error line; never raises."""
     t0 = time.perf_counter()
     try:
-        low_side, high_side = decode_sides(config)  # a large JPEG: decoded at 1/2 ... 1/8
-        low = read_reduced(pair.low_file, low_side, max_pixels=max_pixels)
-        high = read_reduced(pair.high_file, high_side, max_pixels=max_pixels)
+        low, high = read_pair(pair.low_file, pair.high_file, config, max_pixels)
         result = match(to_grey(low.image), to_grey(high.image), config,
                        decoded_factors=(low.factor, high.factor))
-        return result.to_dict(pair.low, pair.high, low.size[::-1], high.size[::-1])
+        return result.to_dict(pair.low, pair.high, low.shape, high.shape)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
         error, kind = str(exc), INPUT
     except Exception as exc:  # noqa: BLE001 (a pair must never stop the batch; MemoryError too)

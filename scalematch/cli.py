@@ -1,4 +1,4 @@
-"""The command line: a thin click layer over ``read_reduced``, ``match`` and ``write_outputs``.
+"""The command line: a thin click layer over ``read_pair``, ``match`` and ``write_outputs``.
 
 ``scalematch LOW HIGH [options]`` runs the ``match`` command (the group routes any first argument
 that is not a command name to it); ``scalematch batch pairs.csv`` matches many pairs, one JSON
@@ -27,7 +27,7 @@ import numpy as np
 from . import __version__
 from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, read_reduced, to_grey
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, to_grey
 from .result import MatchResult, dumps
 
 #: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
@@ -547,9 +547,11 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
     return config
 
 
-def _load(path: str, max_pixels: int, at_least: Optional[int]) -> Decoded:
+def _load(low: str, high: str, config: Config, max_pixels: int) -> Tuple[Decoded, Decoded]:
+    from .working import read_pair  # a JPEG far above its working size: decoded at 1/2 ... 1/8
+
     try:
-        return read_reduced(path, at_least, max_pixels=max_pixels)
+        return read_pair(low, high, config, max_pixels)
     except ImageError as exc:
         raise InputError(str(exc))
 
@@ -607,11 +609,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
             check_not_an_input(out_dir / name, (low, high), "--out-dir", "folder")
     if json_path and json_path != "-":
         check_not_an_input(Path(json_path), (low, high), "--json")
-    from .working import decode_sides
-
-    # a JPEG far above its working size is decoded at 1/2, 1/4 or 1/8 of it (not below it)
-    low_side, high_side = decode_sides(config)
-    low_read, high_read = _load(low, max_pixels, low_side), _load(high, max_pixels, high_side)
+    low_read, high_read = _load(low, high, config, max_pixels)
     low_img, high_img = low_read.image, high_read.image
     factors = (float(low_read.factor), float(high_read.factor))
     if out_dir is not None:
@@ -640,7 +638,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
         raise InputError(str(exc))
 
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        text = result.to_json(low, high, low_read.size[::-1], high_read.size[::-1])
+        text = result.to_json(low, high, low_read.shape, high_read.shape)
         if json_path == "-":
             click.echo(text, nl=False)
         else:

@@ -458,6 +458,11 @@ class Decoded(NamedTuple):
     factor: int  #: file px per image px (1: full size); x_file = factor x + (factor - 1) / 2
     size: Tuple[int, int]  #: (width, height) of the image in the file, orientation applied
 
+    @property
+    def shape(self) -> Tuple[int, int]:
+        """(height, width) of the image in the file: as ``MatchResult.to_dict`` takes it."""
+        return self.size[1], self.size[0]
+
 
 def reduction(head: Header, at_least: Optional[int]) -> int:
     """The factor (1, 2, 4 or 8) at which a file of header ``head`` is decoded so that its longer

@@ -27,6 +27,7 @@ from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
 from .stages.estimator import model_of
+from .working import in_decoded
 
 PathLike = Union[str, Path]
 
@@ -461,8 +462,6 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     the CSV stays in the files' pixels. Returns name -> path written. Raises ``OSError`` when
     ``out_dir`` is not writable.
     """
-    from .working import in_decoded
-
     drawn = in_decoded(result, *factors)
     f_low, f_high = factors
     if result.order == "swapped":  # the pictures show the finer image on the coarser one

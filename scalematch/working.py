@@ -30,6 +30,7 @@ import numpy as np
 
 from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarser, invert,
                        resize_map)
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, read_reduced
 from .result import Direction, MatchResult
 from .stages.estimator import model_of
 
@@ -136,6 +137,18 @@ def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
     return compose(s_coarse, compose(t, invert(s_fine)))
 
 
+def _mapped(result: MatchResult, s_low: np.ndarray,
+            s_high: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(transform, inliers) of a matched ``result`` with each image's pixels mapped by its map
+    (2x3: ``s_low`` for the first image given, ``s_high`` for the second), the finer and
+    coarser one as ``result.order`` says."""
+    swapped = result.order == Direction.SWAPPED
+    s_fine, s_coarse = (s_low, s_high) if swapped else (s_high, s_low)
+    t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
+    pts = np.asarray(result.inliers, np.float64).reshape(-1, 4)
+    return t, np.hstack([apply(s_fine, pts[:, :2]), apply(s_coarse, pts[:, 2:4])])
+
+
 def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
     """``result`` of a match on the images at their working sizes (``work``), in their
     original pixels.
@@ -158,11 +171,7 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
     if not result.matched:
         return out
     swapped = result.order == Direction.SWAPPED
-    f_fine, f_coarse = (f_low, f_high) if swapped else (f_high, f_low)
-    s_fine, s_coarse = _to_original(f_fine), _to_original(f_coarse)
-    t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
-    inliers = np.hstack([apply(s_fine, result.inliers[:, :2]),
-                         apply(s_coarse, result.inliers[:, 2:4])])
+    t, inliers = _mapped(result, _to_original(f_low), _to_original(f_high))
     if not model_of(result.model).has_ratio:
         return replace(out, transform=t, inliers=inliers)
     # the shrinking can make the finer working image the coarser original one
@@ -189,10 +198,17 @@ def in_decoded(result: MatchResult, f_low: float, f_high: float) -> MatchResult:
     """
     if (f_low == 1.0 and f_high == 1.0) or not result.matched or result.transform is None:
         return result
-    swapped = result.order == Direction.SWAPPED
-    f_fine, f_coarse = (f_low, f_high) if swapped else (f_high, f_low)
-    back_fine, back_coarse = invert(_to_original(f_fine)), invert(_to_original(f_coarse))
-    t = _transform_in_original(result.transform, result.model, back_fine, back_coarse)
-    inliers = np.asarray(result.inliers, np.float64).reshape(-1, 4)
-    inliers = np.hstack([apply(back_fine, inliers[:, :2]), apply(back_coarse, inliers[:, 2:4])])
+    t, inliers = _mapped(result, invert(_to_original(f_low)), invert(_to_original(f_high)))
     return replace(result, transform=t, inliers=inliers)
+
+
+def read_pair(low_path, high_path, config, max_pixels: int = DEFAULT_MAX_PIXELS
+              ) -> Tuple[Decoded, Decoded]:
+    """The two image files of a match as the command line reads them: a JPEG far above its
+    working size decoded at 1/2, 1/4 or 1/8 (:func:`decode_sides`,
+    :func:`scalematch.imageio.read_reduced`). ``match(to_grey(low.image), to_grey(high.image),
+    config, decoded_factors=(low.factor, high.factor))`` then answers in the files' pixels.
+    ``ImageError`` for a file that cannot be used."""
+    low_side, high_side = decode_sides(config)
+    return (read_reduced(low_path, low_side, max_pixels=max_pixels),
+            read_reduced(high_path, high_side, max_pixels=max_pixels))

@@ -13,7 +13,7 @@ pixel centres, :func:`scalematch.geometry.resize_map`):
   seeded place, enlarged 2x (INTER_CUBIC, PNG): ratio 2.
 
 Each pair is read and matched twice in this process, alternately: as before (``read_image``,
-the whole file decoded) and as the command line now reads it (``read_reduced``, the answer given
+the whole file decoded) and as the command line now reads it (``working.read_pair``, the answer given
 in the files' pixels through ``decoded_factors``). Prints a Markdown row per pair: the seconds
 (read + match), the error against the truth (mean over a grid, low px, EVALUATION.md) and the
 gap between the two answers (low px); then the medians.
@@ -35,11 +35,11 @@ sys.path.insert(0, str(ROOT))
 
 from scalematch import Config, match  # noqa: E402
 from scalematch.geometry import apply, as_matrix3, invert, resize_map  # noqa: E402
-from scalematch.imageio import read_bytes, read_image, read_reduced, reduction, to_grey  # noqa: E402
+from scalematch.imageio import read_bytes, read_image, reduction, to_grey  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import reprojection_error  # noqa: E402
 from scalematch.stages.decision import mean_transfer_gap  # noqa: E402
-from scalematch.working import decode_sides  # noqa: E402
+from scalematch.working import decode_sides, read_pair  # noqa: E402
 
 CROP = (1024, 768)  #: the region of the photo enlarged 2x into the high image of a "low" pair
 
@@ -68,8 +68,7 @@ def pairs(photo: Path, ratios, rng, folder: Path):
 def run(low_path: Path, high_path: Path, reduced: bool, config: Config):
     t0 = time.perf_counter()
     if reduced:
-        low_side, high_side = decode_sides(config)
-        lo, hi = read_reduced(low_path, low_side), read_reduced(high_path, high_side)
+        lo, hi = read_pair(low_path, high_path, config)
         result = match(to_grey(lo.image), to_grey(hi.image), config,
                        decoded_factors=(lo.factor, hi.factor))
         factors = (lo.factor, hi.factor)

@@ -274,9 +274,8 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
         implied = best.row.ratio * shown_scale
         implies = (f"implies a ratio of {implied:.3g}" if 1e-3 < implied < 1e3 else
                    "is degenerate: it implies no usable ratio")  # inf, 2.5e+19: no picture
-        return Decision(False, f"no scale found a transform consistent with its own scale (the "
-                        f"best, at scale "
-                        f"{best.row.s * shown_scale:.3g}, {implies})",
+        return Decision(False, f"no scale found a transform consistent with its own scale "
+                        f"(the best, at scale {best.row.s * shown_scale:.3g}, {implies})",
                         best.row.s, None, np.zeros((0, 4)), evidence)
     best = min(plausible, key=lambda o: (-o.row.inliers, closeness(o), o.row.s))
     est = best.estimate
