@@ -29,7 +29,8 @@ from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, ove
 from .stages.constraints import orientation_groups, semi_local_filter
 from .stages.decision import Look, final_checks, decide, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
-from .stages.detector import MIN_SIDE_PX, Contrast, Keypoints, detect_on_level, image_contrast
+from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
+                              gradients, image_contrast)
 from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
@@ -230,11 +231,12 @@ class LowFeatures:
 
 
 def describe_low(low: np.ndarray, config: Config, whitening,
-                 contrast: Optional[Contrast] = None) -> LowFeatures:
+                 contrast: Optional[Contrast] = None,
+                 grads: Optional[Gradients] = None) -> LowFeatures:
     """The coarser image's points at s = 1 (``contrast``: its own, for adaptive detection;
-    measured here when not given)."""
+    measured here when not given; ``grads``: its gradients, when measured with it)."""
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
-    kp = detect_on_level(level, config.harris_low, contrast)
+    kp = detect_on_level(level, config.harris_low, contrast, grads)
     return LowFeatures(low, _describe(level, kp, config, whitening), kp)
 
 
@@ -246,6 +248,8 @@ class Memo:
 
     coarser: Dict[Direction, LowFeatures] = field(default_factory=dict)
     _contrasts: Dict[Tuple[int, float], Contrast] = field(default_factory=dict, repr=False)
+    #: the gradients each contrast was measured from, until the image's s = 1 detection
+    _gradients: Dict[Tuple[int, float], Gradients] = field(default_factory=dict, repr=False)
     _locks: Dict[Tuple[int, float], threading.Lock] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -253,15 +257,24 @@ class Memo:
         """``image_contrast(image, params.sigma)`` once per image (None: not adaptive). Threads
         asking for the same image wait for the one measuring it; two images are measured side
         by side (the coarser image is described on a thread while the finer one is detected)."""
+        return self.measured(image, params, take=False)[0]
+
+    def measured(self, image: np.ndarray, params,
+                 take: bool = True) -> Tuple[Optional[Contrast], Optional[Gradients]]:
+        """(contrast, gradients): the image's contrast (:meth:`contrast`) and, the first time
+        they are taken (``take``), the gradients it was measured from, which the image's s = 1
+        Harris response shares (None after that, or when not adaptive)."""
         if not params.adaptive:
-            return None
+            return None, None
         key = (id(image), float(params.sigma))
         with self._lock:
             lock = self._locks.setdefault(key, threading.Lock())
         with lock:
             if key not in self._contrasts:
-                self._contrasts[key] = image_contrast(image, params.sigma)
-            return self._contrasts[key]
+                grads = gradients(image, params.sigma)
+                self._contrasts[key] = image_contrast(image, params.sigma, grads)
+                self._gradients[key] = grads
+            return self._contrasts[key], (self._gradients.pop(key, None) if take else None)
 
 
 def shares_first_level(config: Config) -> bool:
@@ -272,10 +285,10 @@ def shares_first_level(config: Config) -> bool:
         low.max_points == 0 or low.max_points >= high.max_points)
 
 
-def _detect(view: View, level: Level, config: Config,
-            contrast: Optional[Contrast]) -> Keypoints:
+def _detect(view: View, level: Level, config: Config, contrast: Optional[Contrast],
+            grads: Optional[Gradients] = None) -> Keypoints:
     """The points of one level of a view, away from its empty corners."""
-    return _inside(view, detect_on_level(level, config.harris, contrast),
+    return _inside(view, detect_on_level(level, config.harris, contrast, grads),
                    config.views.edge_margin_px)
 
 
@@ -329,7 +342,8 @@ def detect_view(view: View, config: Config, whitening,
                 step: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
                 contrast: Optional[Contrast] = None,
-                every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
+                every: int = 1,
+                grads: Optional[Gradients] = None) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``step()`` is called once per scale detected. The levels of a view of at most
@@ -338,7 +352,8 @@ def detect_view(view: View, config: Config, whitening,
     points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
     image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
     ``every``: with the probe, only every ``every``-th scale is detected (the others are
-    ``pending`` until :func:`complete_probe`).
+    ``pending`` until :func:`complete_probe`). ``grads``: the image's gradients at s = 1
+    (:meth:`Memo.measured`), used when ``view`` is the image itself.
     """
     scales = sorted(config.scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
@@ -357,7 +372,8 @@ def detect_view(view: View, config: Config, whitening,
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
         else:
-            kp = _detect(view, level, config, contrast)
+            first = grads if view.is_identity and level.s == 1.0 else None
+            kp = _detect(view, level, config, contrast, first)
             part = _part(kp, slice(config.probe.points)) if probing else kp
             detected.append(Detected(kp, _describe(level, part, config, whitening),
                                      level if keep else None))
@@ -474,13 +490,16 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
                                              memo.contrast(hi_img, cfg.harris), every),
                           coarser[step.direction], cfg)
 
+    def first_view(view: View):
+        contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
+        return detect_view(view, cfg, whitening, meter.tick, known, contrast, every, grads)
+
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
         view = tilt_view(hi_img, *keys[0], config.views)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, whitening, memo.contrast(lo_img, cfg.harris_low)),
-            lambda: detect_view(view, cfg, whitening, meter.tick, known,
-                                memo.contrast(hi_img, cfg.harris), every)])
+            lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low)),
+            lambda: first_view(view)])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)

@@ -190,3 +190,41 @@ def test_level_above_one_needs_the_contrast(raccoon):
         detect_on_level(level, ADAPTIVE)
     c = image_contrast(raccoon[:200, :200])
     assert len(detect_on_level(level, ADAPTIVE, c)) > 0
+
+
+def test_gradients_shared_with_the_contrast_give_the_same_points(raccoon):
+    """The s = 1 response from the contrast's gradients (measured once) is the one measured
+    anew, bit for bit, and the given gradients are left as they were."""
+    from scalematch.stages.detector import gradients, harris_response
+
+    img = np.ascontiguousarray(raccoon[50:450, 100:600], dtype=np.float32)
+    level = next(scale_space(img, (1.0,)))
+    grads = gradients(img, ADAPTIVE.sigma)
+    before = (grads.ix.copy(), grads.iy.copy())
+    assert image_contrast(img, ADAPTIVE.sigma, grads) == image_contrast(img, ADAPTIVE.sigma)
+    assert np.array_equal(harris_response(level, ADAPTIVE, grads),
+                          harris_response(level, ADAPTIVE))
+    shared = detect_on_level(level, ADAPTIVE, image_contrast(img), grads)
+    anew = detect_on_level(level, ADAPTIVE)
+    assert len(anew) > 100
+    assert np.array_equal(shared.xy, anew.xy) and np.array_equal(shared.response, anew.response)
+    assert np.array_equal(grads.ix, before[0]) and np.array_equal(grads.iy, before[1])
+    # gradients of another std (or image size) are not used: the level's own are measured
+    other = gradients(img, 1.5)
+    assert np.array_equal(harris_response(level, ADAPTIVE, other),
+                          harris_response(level, ADAPTIVE))
+
+
+def test_local_maxima_are_numpys_in_row_major_order(raccoon):
+    """OpenCV's comparison and scan give what (resp >= dilated) & (resp > t) and argwhere do."""
+    from scalematch.stages.detector import _local_maxima
+
+    resp = response_at(raccoon[:300, :400], 1.0)
+    t = float(np.percentile(resp, 98))
+    got = _local_maxima(resp, 2.0, t, 3.0)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    dil = cv2.dilate(resp, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=-np.inf)
+    mask = (resp >= dil) & (resp > t)
+    mask[:3, :] = mask[-3:, :] = mask[:, :3] = mask[:, -3:] = False
+    assert len(got) > 50 and np.array_equal(got, np.argwhere(mask))
+    assert _local_maxima(resp, 2.0, float(resp.max()) + 1, 3.0).shape == (0, 2)
