@@ -191,6 +191,11 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # after 1 s, so a "no" costs about that much; docs/NULLS-BUDGET.md measures it on the null
     # set (what a "no" then costs, and that no claim appears)
     "budget-1s": lambda: Config(time_budget_s=1.0),
+    # the default without tilted views (``--no-views``): the plain search in both orders only.
+    # A "no" at SIFT's speed for batches over archives of mostly unrelated pairs, at the cost
+    # of the tilted pairs only views solve (issue 16; docs/NULLS-NO-VIEWS.md, PERFORMANCE.md
+    # section 10)
+    "no-views": lambda: Config(views=ViewParams(enabled=False)),
     # the default searching for a homography (``--model homography``: Oxford, perspective
     # pairs), so that the null set can be run with it (docs/NULLS-HOMOGRAPHY.md)
     "homography": lambda: Config(model="homography"),

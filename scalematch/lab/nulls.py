@@ -428,7 +428,7 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
 
 
 #: The configurations a null set is run in (``Config.preset`` names)
-NULL_MODES = ("default", "paper", "steep", "budget-1s", "homography")
+NULL_MODES = ("default", "paper", "steep", "budget-1s", "homography", "no-views")
 
 
 def _config(mode: str, seed: int):
@@ -1033,8 +1033,8 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
         The pairs: ratios, the first ``photos`` photos (sorted by name; None: all), the seed.
     mode : str
         A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "steep",
-        "budget-1s" (the default with a 1 s time budget) or "homography" (the default searching
-        for a homography).
+        "budget-1s" (the default with a 1 s time budget), "homography" (the default searching
+        for a homography) or "no-views" (the default without tilted views, ``--no-views``).
     jobs : int
         Worker processes (1: this process).
     limit : int, optional
