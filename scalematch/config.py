@@ -155,6 +155,8 @@ class Config:
         (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
         >>> Config.preset("default-no-probe").probe.enabled
         False
+        >>> Config.preset("no-views").views.enabled  # as --no-views
+        False
         """
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; one of {', '.join(PRESETS)}")

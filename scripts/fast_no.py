@@ -1,0 +1,157 @@
+"""What ``--no-views`` buys and costs: the default search against the plain search alone (issue 16).
+
+Usage: python scripts/fast_no.py [--every 4] [--sets zoom,tilted,unrelated] [--big-rounds 3]
+
+The default search tries tilted views of the finer image when the plain search finds nothing,
+in both orders: that is most of the time of a "no". The preset ``no-views`` (``--no-views`` on
+the command line) searches the image itself in both orders only. In one process, alternately
+pair by pair (the order of the three turned each pair), this script runs the default, the
+preset and the SIFT reference (``scalematch.lab.baselines``, EVALUATION.md) on:
+
+* the stored null runs of ``scalematch lab nulls`` (every ``--every``-th pair of
+  ``bench-out/nulls-noviews/pairs-seed0`` or ``--nulls``, both orders): the time of a "no", and
+  any claim (false);
+* the sets of ``scalematch lab real-pairs`` named in ``--sets`` (every 3rd photo, seed 0):
+  pairs solved (grid error under 3 px), wrong claims, median time; SIFT fits each set's model
+  (a homography on tilted pairs), as in ``lab real-pairs``;
+
+then, as whole processes, the 12-16 MP unrelated pair of issue 16 (``scalematch A B -q`` with
+and without ``--no-views``, ``--big-rounds`` rounds alternately; seconds and peak memory from
+``/usr/bin/time`` when it exists). Prints Markdown tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
+
+from compare_versions import _stored_nulls  # noqa: E402
+from scalematch import Config, match  # noqa: E402
+from scalematch.lab.baselines import match_baseline  # noqa: E402
+from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
+from scalematch.lab.realpairs import PHOTO_STEP, canonical, pair_error, synthetic_sets  # noqa: E402
+from scalematch.lab.evaluation import is_success  # noqa: E402
+
+METHODS = ("default", "no-views", "sift")
+BIG_PAIR = ("snowpeak_IMG_2168.JPG", "monstree_IMG_1042.JPG")  # 4608 and 4032 px, unrelated
+
+
+def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity"):
+    """(transform high -> low or None, maps high to low, seconds); SIFT fits ``model``."""
+    t0 = time.perf_counter()
+    if method == "sift":
+        t = match_baseline(low, high, "sift", model=model).transform
+        return t, True, time.perf_counter() - t0
+    r = match(low, high, Config.preset(method))
+    return (r.transform if r.matched else None), r.order == "given", time.perf_counter() - t0
+
+
+def alternate(items, judge):
+    """Each item run by every method, the methods' order turned each item; rows per method."""
+    rows = {m: [] for m in METHODS}
+    for n, item in enumerate(items):
+        order = METHODS[n % 3:] + METHODS[:n % 3]
+        for m in order:
+            t, fwd, sec = run(m, item.low, item.high, getattr(item, "model", "similarity"))
+            rows[m].append((judge(item, t, fwd), sec))
+    return rows
+
+
+def nulls_table(folder: Path, every: int) -> str:
+    pairs = _stored_nulls(folder, every)
+
+    class Run:
+        def __init__(self, low, high):
+            self.low, self.high = low, high
+
+    runs = [Run(p.low, p.high) for p in pairs] + [Run(p.high, p.low) for p in pairs]
+    rows = alternate(runs, lambda item, t, fwd: t is not None)
+    out = [f"Null runs: every {every}th stored pair of {folder}, both orders ({len(runs)} runs)",
+           "", "| method | runs | claims (all false) | median s | 90th percentile s |",
+           "|---|---:|---:|---:|---:|"]
+    for m in METHODS:
+        secs = [s for _, s in rows[m]]
+        out.append(f"| {m} | {len(secs)} | {sum(c for c, _ in rows[m])} | "
+                   f"{np.median(secs):.3f} | {np.percentile(secs, 90):.3f} |")
+    return "\n".join(out)
+
+
+def sets_table(shared: Path, names) -> str:
+    sets = synthetic_sets(list_photos(shared)[::PHOTO_STEP], 0, wanted=names)
+    out = ["| set | method | pairs | solved | wrong claims | median s |",
+           "|---|---|---:|---:|---:|---:|"]
+    for name in names:
+        def judge(pair, t, fwd):
+            if pair.truth is None:
+                return (False, t is not None)
+            ok = t is not None and is_success(pair_error(pair, canonical(pair, t, fwd)))
+            return (ok, t is not None and not ok)
+
+        rows = alternate(sets[name], judge)
+        for m in METHODS:
+            rs = rows[m]
+            out.append(f"| {name} | {m} | {len(rs)} | {sum(r[0][0] for r in rs)} | "
+                       f"{sum(r[0][1] for r in rs)} | {np.median([s for _, s in rs]):.3f} |")
+    return "\n".join(out)
+
+
+def big_table(shared: Path, rounds: int) -> str:
+    a, b = (str(shared / "data" / "photos" / n) for n in BIG_PAIR)
+    exe = shutil.which("scalematch") or str(Path(sys.executable).parent / "scalematch")
+    timer = ["/usr/bin/time", "-f", "%e %M"] if Path("/usr/bin/time").exists() else []
+    res = {"default": [], "no-views": []}
+    for k in range(rounds):
+        for opt in (("default", "no-views") if k % 2 == 0 else ("no-views", "default")):
+            with tempfile.TemporaryDirectory() as out_dir:
+                cmd = timer + [exe, a, b, "-q", "--out-dir", out_dir]
+                cmd += ["--no-views"] if opt == "no-views" else []
+                t0 = time.perf_counter()
+                p = subprocess.run(cmd, capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            mem = p.stderr.strip().splitlines()[-1].split()[-1] if timer else "nan"
+            res[opt].append((wall, float(mem) / 1024, p.returncode))
+    out = [f"The unrelated pair {BIG_PAIR[0]} / {BIG_PAIR[1]}, `scalematch A B -q` as a whole "
+           f"process, {rounds} rounds alternately", "",
+           "| search | seconds | peak MB | exit |", "|---|---|---|---|"]
+    for opt, rs in res.items():
+        out.append(f"| {opt} | {', '.join(f'{w:.2f}' for w, _, _ in rs)} | "
+                   f"{', '.join(f'{m:.0f}' for _, m, _ in rs)} | "
+                   f"{', '.join(str(c) for _, _, c in rs)} |")
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--every", type=int, default=4)
+    ap.add_argument("--nulls", default=str(ROOT / "bench-out" / "nulls-noviews" / "pairs-seed0"))
+    ap.add_argument("--sets", default="zoom,tilted,unrelated")
+    ap.add_argument("--big-rounds", type=int, default=3)
+    a = ap.parse_args()
+    shared = find_shared()
+    if shared is None:
+        sys.exit("../shared is absent")
+    print(f"load average at the start {os.getloadavg()[0]:.2f}\n")
+    if a.big_rounds:
+        print(big_table(shared, a.big_rounds) + "\n")
+    if a.every:
+        print(nulls_table(Path(a.nulls), a.every) + "\n")
+    names = [s for s in a.sets.split(",") if s]
+    if names:
+        print(sets_table(shared, names) + "\n")
+    print(f"load average at the end {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
