@@ -330,9 +330,20 @@ def _subpixel(resp: np.ndarray, rc: np.ndarray) -> np.ndarray:
     return np.stack([np.clip(oy, -0.5, 0.5), np.clip(ox, -0.5, 0.5)], axis=1)
 
 
-def _first_level(level: Level) -> bool:
-    """True for the s = 1 image itself (no blur, no decimation)."""
-    return level.d == 1.0 and level.blur == 0.0 and level.s == 1.0
+def _level_contrast(level: Level, params: HarrisParams, contrast: Optional[Contrast],
+                    grads: Optional[Gradients]):
+    """(contrast, gradients) for detecting ``level``: the contrast measured here, from the
+    gradients, when adaptive detection needs it on the s = 1 image itself (no blur, no
+    decimation); gradients only for that image (None elsewhere)."""
+    first = level.d == 1.0 and level.blur == 0.0 and level.s == 1.0
+    grads = grads if first else None
+    if contrast is not None or not params.adaptive:
+        return contrast, grads
+    if not first:
+        raise ValueError(f"adaptive detection at s = {level.s:g} needs the image's contrast: "
+                         f"pass contrast=image_contrast(image) computed on the s = 1 image")
+    grads = gradients(level.image, params.sigma) if grads is None else grads
+    return image_contrast(level.image, params.sigma, grads), grads
 
 
 def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
@@ -349,15 +360,7 @@ def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
     border = params.border * level.s / level.d
     if min(h, w) <= 2 * int(np.ceil(border)) + 2:
         return Keypoints.empty(level.s)
-    if not _first_level(level):
-        grads = None
-    elif grads is None and contrast is None and params.adaptive:
-        grads = gradients(level.image, params.sigma)
-    if contrast is None and params.adaptive:
-        if grads is None:
-            raise ValueError(f"adaptive detection at s = {level.s:g} needs the image's contrast: "
-                             f"pass contrast=image_contrast(image) computed on the s = 1 image")
-        contrast = image_contrast(level.image, params.sigma, grads)
+    contrast, grads = _level_contrast(level, params, contrast, grads)
     resp = harris_response(level, params, grads)
     threshold = effective_threshold(params, contrast, level.s)
     if params.min_points > 0:  # every maximum above the noise floor, the budget picks from them
