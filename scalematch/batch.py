@@ -510,12 +510,15 @@ def _worker_main(conn: Any, parent_pid: int, task: Callable[..., Dict[str, Any]]
     while True:
         try:
             job = conn.recv()
-        except EOFError:
+        except (EOFError, OSError):  # the main process closed the pipe, or died (kill -9)
             return
         if job is None:
             return
         line = task(*job)
-        conn.send(line)
+        try:
+            conn.send(line)
+        except OSError:  # died while this pair was matched: nobody to tell (no traceback)
+            return
         if line.get("error_kind") == INTERNAL:
             return
 

@@ -576,6 +576,21 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     return matched[k], fits[k], checks[k]
 
 
+def searched(records: Sequence[StepRecord]) -> str:
+    """What the steps run searched, for a "no" (``24 searches: both orders, tilted views``).
+
+    >>> g = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
+    >>> searched([g, replace(g, direction=Direction.SWAPPED)])
+    'both orders'
+    >>> searched([g, replace(g, view_pass=1, views=5)])
+    'the order given, tilted views'
+    """
+    orders = {r.direction for r in records}
+    what = ["both orders" if len(orders) > 1 else
+            "the order given" if Direction.GIVEN in orders else "the other order"]
+    return ", ".join(what + (["tilted views"] if any(r.view_pass > 0 for r in records) else []))
+
+
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
                  timings: Dict[str, float], work: WorkImages) -> MatchResult:
@@ -599,7 +614,7 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                   config=config, evidence=evidence, search=records,
                   covariance_used=covariance_used)
     if winner is None:
-        more = f" ({searches} searches: both orders, tilted views)" if searches > 1 else ""
+        more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
         if stopped == "time budget":
             more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
                      f"{len(records)} of {len(plan)} steps")

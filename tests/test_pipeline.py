@@ -154,6 +154,11 @@ def test_unrelated_pair_is_no_reliable_match(raccoon):
         r = match(low, high, config)
         assert not r.matched and r.reason
         assert r.transform is None and r.inliers.shape == (0, 4)
+    # the reason says what was searched: views only when they ran
+    assert r.reason.endswith("searches: both orders, tilted views)"), r.reason
+    r = match(low, high, Config.preset("no-views"))
+    assert not r.matched and r.reason.endswith("(2 searches: both orders)"), r.reason
+    assert [(s.direction.value, s.view_pass) for s in r.search] == [("given", 0), ("swapped", 0)]
 
 
 def test_flat_pair_is_no_reliable_match():
