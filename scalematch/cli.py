@@ -46,8 +46,12 @@ EXIT_CODES = (
 )
 
 
+#: Width of an exit-code line in the help (its table is not rewrapped by click): click's
+#: 78 columns less the help's indent of 2
+EXIT_TEXT_WIDTH = 76
 #: What a code means for one command, where the whole table's line is about several.
-MATCH_EXIT_TEXT = {EXIT_MATCHED: "matched"}
+MATCH_EXIT_TEXT = {EXIT_MATCHED: "matched",
+                   EXIT_BAD_INPUT: "bad input or usage (image, path, output file, option value)"}
 BATCH_EXIT_TEXT = {
     EXIT_MATCHED: "every pair has its line, none an error",
     EXIT_BAD_INPUT: "bad usage (the CSV, an option value, the output file); a pair's missing or "
@@ -74,10 +78,17 @@ def exit_code_table(codes: Iterable[int] = tuple(c for c, _ in EXIT_CODES),
     130  interrupted (Ctrl-C)
     >>> print(exit_code_table((0,), MATCH_EXIT_TEXT))
       0  matched
+    >>> print(exit_code_table((2,), {2: "a meaning " * 9}))  # long ones wrap under themselves
+      2  a meaning a meaning a meaning a meaning a meaning a meaning a meaning
+         a meaning a meaning
     """
+    import textwrap
+
     wanted, texts = set(codes), texts or {}
-    return "\n".join(f"{code:>3}  {texts.get(code, text)}" for code, text in EXIT_CODES
-                     if code in wanted)
+    return "\n".join("\n".join(textwrap.wrap(texts.get(code, text), EXIT_TEXT_WIDTH,
+                                             initial_indent=f"{code:>3}  ",
+                                             subsequent_indent=" " * 5))
+                     for code, text in EXIT_CODES if code in wanted)
 
 #: Subcommands that live in other modules: name -> (module, attribute, line of the group's help).
 #: Loaded on first use and left out (not listed, "No such command") when the module is absent
