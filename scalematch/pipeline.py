@@ -25,7 +25,7 @@ from .geometry import answer_parts, finer_to_coarser
 from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
 from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
-                     probe_best, search_plan, skips, stop_reason, strongest)
+                     probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
 from .stages.decision import Look, final_checks, decide, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
@@ -574,21 +574,6 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
 
     k = max(range(len(matched)), key=fitness)
     return matched[k], fits[k], checks[k]
-
-
-def searched(records: Sequence[StepRecord]) -> str:
-    """What the steps run searched, for a "no" (``24 searches: both orders, tilted views``).
-
-    >>> g = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
-    >>> searched([g, replace(g, direction=Direction.SWAPPED)])
-    'both orders'
-    >>> searched([g, replace(g, view_pass=1, views=5)])
-    'the order given, tilted views'
-    """
-    orders = {r.direction for r in records}
-    what = ["both orders" if len(orders) > 1 else
-            "the order given" if Direction.GIVEN in orders else "the other order"]
-    return ", ".join(what + (["tilted views"] if any(r.view_pass > 0 for r in records) else []))
 
 
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],

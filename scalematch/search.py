@@ -17,7 +17,7 @@ from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .result import Direction, ScaleRow
+from .result import Direction, ScaleRow, StepRecord
 from .stages.decision import Decision
 from .stages.descriptors import Described
 from .stages.estimator import Estimate, model_of
@@ -183,3 +183,19 @@ def out_of_time(elapsed_s: float, steps_run: int, config) -> bool:
 def probe_best(probes: Sequence[float]) -> float:
     """The best of some probe scores (NaN when there are none)."""
     return max(probes) if len(probes) else math.nan
+
+
+def searched(records: Sequence[StepRecord]) -> str:
+    """What the steps run searched, for a "no" (``24 searches: both orders, tilted views``).
+
+    >>> from dataclasses import replace
+    >>> g = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
+    >>> searched([g, replace(g, direction=Direction.SWAPPED)])
+    'both orders'
+    >>> searched([g, replace(g, view_pass=1, views=5)])
+    'the order given, tilted views'
+    """
+    orders = {r.direction for r in records}
+    what = ["both orders" if len(orders) > 1 else
+            "the order given" if Direction.GIVEN in orders else "the other order"]
+    return ", ".join(what + (["tilted views"] if any(r.view_pass > 0 for r in records) else []))

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from compare_versions import _stored_nulls  # noqa: E402
+from compare_versions import _Stored, _stored_nulls  # noqa: E402
 from scalematch import Config, match  # noqa: E402
 from scalematch.lab.baselines import match_baseline  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
@@ -71,12 +71,7 @@ def alternate(items, judge):
 
 def nulls_table(folder: Path, every: int) -> str:
     pairs = _stored_nulls(folder, every)
-
-    class Run:
-        def __init__(self, low, high):
-            self.low, self.high = low, high
-
-    runs = [Run(p.low, p.high) for p in pairs] + [Run(p.high, p.low) for p in pairs]
+    runs = pairs + [_Stored(p.high, p.low) for p in pairs]  # both orders
     rows = alternate(runs, lambda item, t, fwd: t is not None)
     out = [f"Null runs: every {every}th stored pair of {folder}, both orders ({len(runs)} runs)",
            "", "| method | runs | claims (all false) | median s | 90th percentile s |",
