@@ -247,6 +247,9 @@ class Memo:
     images; the contrast alone is a full-image percentile)."""
 
     coarser: Dict[Direction, LowFeatures] = field(default_factory=dict)
+    #: each direction's finer image detected at every scale by its pass 0 (``Probed``), which
+    #: the views of the coarser image are probed and matched against
+    plain: Dict[Direction, "Probed"] = field(default_factory=dict)
     _contrasts: Dict[Tuple[int, float], Contrast] = field(default_factory=dict, repr=False)
     #: the gradients each contrast was measured from, until the image's s = 1 detection
     _gradients: Dict[Tuple[int, float], Gradients] = field(default_factory=dict, repr=False)
@@ -474,18 +477,42 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
     """
     t0 = time.perf_counter()
     cfg = replace(config, scales=step.scales)
-    lo_img, hi_img = step.direction.coarser_finer(work.low, work.high)
     start = meter.done
+    if step.side == "coarser":
+        candidates = probe_coarser_views(step, work, cfg, whitening, memo, meter)
+    else:
+        candidates = probe_finer_views(step, work, cfg, whitening, memo, meter)
+    if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
+        memo.plain[step.direction] = candidates[0][0]
+    attempts = match_chosen(step, candidates, work, cfg, whitening, memo, meter,
+                            searches + len(candidates))
+    meter.tick(start + step.cost - meter.done)  # the views the probe left out
+    record = StepRecord(step.direction, step.view_pass, len(candidates), len(attempts),
+                        probe_best([p.score for p, _, _ in candidates]),
+                        any(a.matched for a in attempts), step.side)
+    return attempts, record, time.perf_counter() - t0
+
+
+#: A view probed in a step: (the finer image's view probed, the coarser features it was
+#: probed against, the view of the coarser image they come from or None: the image itself)
+Candidate = Tuple["Probed", LowFeatures, Optional[View]]
+
+
+def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
+                      meter: Meter) -> List[Candidate]:
+    """Detect and probe each view of the finer image (at every scale) against the coarser
+    image, described once per direction (``memo.coarser``)."""
+    lo_img, hi_img = step.direction.coarser_finer(work.low, work.high)
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
     known = coarser.get(step.direction.other)
-    every = config.views.probe_every if step.view_pass > 0 else 1  # the views' probe
+    every = cfg.views.probe_every if step.view_pass > 0 else 1  # the views' probe
     # the detector adapts to the finer image's contrast (measured once, on the image itself,
     # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
 
     def probe(key) -> Probed:
-        view = tilt_view(hi_img, *key, config.views)
+        view = tilt_view(hi_img, *key, cfg.views)
         return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
                                              memo.contrast(hi_img, cfg.harris), every),
                           coarser[step.direction], cfg)
@@ -496,7 +523,7 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
-        view = tilt_view(hi_img, *keys[0], config.views)
+        view = tilt_view(hi_img, *keys[0], cfg.views)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
             lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low)),
             lambda: first_view(view)])
@@ -510,40 +537,87 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
                           top)
         for k, p in zip(top, done):
             probed[k] = p
-    searches += len(probed)
-    chosen = sorted(probed, key=lambda p: -p.score)
-    if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
-        chosen = [p for p in chosen[:step.full_searches]
-                  if p.score >= config.views.min_probe_score]
-    attempts: List[Attempt] = []
-    for p in chosen:
-        p = complete_probe(p, coarser[step.direction], cfg, whitening,  # done unless a tie
-                           memo.contrast(hi_img, cfg.harris))
-        outcomes = tuple(finish_view(p, coarser[step.direction], cfg, whitening, meter.tick))
-        low_feats = coarser[step.direction]
+    return [(p, coarser[step.direction], None) for p in probed]
 
-        def look(t, outcome, view=p.view) -> Look:
+
+def describe_coarser_view(view: View, config: Config, whitening,
+                          contrast: Optional[Contrast]) -> LowFeatures:
+    """A view of the coarser image described as the coarser image is (at s = 1,
+    ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
+    image's own (the detector adapts to it as for the image itself)."""
+    level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
+    kp = _inside(view, detect_on_level(level, config.harris_low, contrast),
+                 config.views.edge_margin_px)
+    return LowFeatures(view.image, _describe(level, kp, config, whitening), kp)
+
+
+def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
+                 memo: Memo) -> Probed:
+    """The finer image of ``direction`` detected at every scale, as its pass 0 did (kept in
+    ``memo.plain``; detected here when that step did not run, its score unset)."""
+    if direction not in memo.plain:
+        lo_img, hi_img = direction.coarser_finer(work.low, work.high)
+        view = tilt_view(hi_img, 1.0, 0.0)
+        detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
+            hi_img, cfg.harris), known=memo.coarser.get(direction.other))
+        memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
+    return memo.plain[direction]
+
+
+def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
+                        meter: Meter) -> List[Candidate]:
+    """Detect each view of the coarser image once (s = 1) and probe the finer image's own
+    scales (detected by pass 0) against it: a view of the coarser image costs one detection,
+    where a view of the finer image costs one per scale."""
+    lo_img = step.direction.coarser_finer(work.low, work.high)[0]
+    plain = plain_probed(step.direction, work, cfg, whitening, memo)
+    contrast = memo.contrast(lo_img, cfg.harris_low)
+
+    def probe(key) -> Candidate:
+        view = tilt_view(lo_img, *key, cfg.views)
+        feats = describe_coarser_view(view, cfg, whitening, contrast)
+        meter.tick()
+        return score_view(plain.view, plain.detected, plain.probing, feats, cfg), feats, view
+
+    return thread_map(probe, list(step.views))
+
+
+def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, cfg: Config,
+                 whitening, memo: Memo, meter: Meter, searches: int) -> List[Attempt]:
+    """Match in full the views the probe finds promising (of a pass of views: the
+    ``step.full_searches`` best, scoring at least ``views.min_probe_score``), and decide each."""
+    hi_img = step.direction.coarser_finer(work.low, work.high)[1]
+    chosen = sorted(candidates, key=lambda c: -c[0].score)
+    if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
+        chosen = [c for c in chosen[:step.full_searches]
+                  if c[0].score >= cfg.views.min_probe_score]
+    attempts: List[Attempt] = []
+    for p, low_feats, coarser_view in chosen:
+        p = complete_probe(p, low_feats, cfg, whitening,  # done unless a tie
+                           memo.contrast(hi_img, cfg.harris))
+        outcomes = tuple(finish_view(p, low_feats, cfg, whitening, meter.tick))
+
+        def look(t, outcome, view=p.view, low_feats=low_feats) -> Look:
             return look_again(t, outcome.described, low_feats.described, view.image,
                               low_feats.image, cfg)
 
-        verdict = decide(outcomes, lo_img.shape, p.view.image.shape, cfg, searches=searches,
-                         shown_scale=shown_scale(work, step.direction), look=look)
-        attempts.append(Attempt(step, p.view, p.score, outcomes, verdict))
-        if overwhelming(attempts[-1], config):
+        verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg,
+                         searches=searches, shown_scale=shown_scale(work, step.direction),
+                         look=look)
+        attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
+        if overwhelming(attempts[-1], cfg):
             break  # no other view of this step can do better
-    meter.tick(start + step.cost - meter.done)  # the views the probe left out
-    record = StepRecord(step.direction, step.view_pass, len(probed), len(attempts),
-                        probe_best([p.score for p in probed]), any(a.matched for a in attempts))
-    return attempts, record, time.perf_counter() - t0
+    return attempts
 
 
 def final_fit(attempt: Attempt, config: Config):
-    """(t, inliers, model): a matched attempt's transform refit in the finer image's pixels."""
+    """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
     best = attempt.winning_outcome()
-    fit = refit_in_high(attempt.view, attempt.verdict, best, config)
-    fit = richer_model(fit, attempt.view, best, config)
-    fit = pooled_refit(fit, attempt.view, attempt.outcomes, config)
-    return union_homography(fit, attempt.view, attempt.outcomes, config)
+    view, coarser = attempt.view, attempt.coarser_view
+    fit = refit_in_high(view, attempt.verdict, best, config, coarser)
+    fit = richer_model(fit, view, best, config, coarser)
+    fit = pooled_refit(fit, view, attempt.outcomes, config, coarser)
+    return union_homography(fit, view, attempt.outcomes, config, coarser)
 
 
 def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
@@ -590,8 +664,9 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     shown = winner or attempts[0]
     searches = sum(r.views for r in records)
     evidence = replace(shown.verdict.evidence, searches=searches,
-                       search_order=shown.step.direction, view_tilt=shown.view.tilt,
-                       view_longitude_deg=shown.view.longitude_deg, probe_score=shown.probe,
+                       search_order=shown.step.direction, view_tilt=shown.shown_view.tilt,
+                       view_longitude_deg=shown.shown_view.longitude_deg,
+                       view_of=shown.step.side, probe_score=shown.probe,
                        probe_best=probe_best([r.probe_best for r in records]),
                        steps_run=len(records), steps_planned=len(plan), stopped=stopped)
     common = dict(model=config.model, best_scale=shown.verdict.best_scale,

@@ -76,6 +76,7 @@ class Evidence:
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)
     view_longitude_deg: float = 0.0  #: its longitude, degrees
+    view_of: str = "finer"  #: which image that view is of: "finer" or "coarser"
     probe_score: float = math.nan  #: the probe's best score in the search shown
     probe_best: float = math.nan  #: the best probe score of every search made
     steps_run: int = 0  #: steps of the search plan run (``MatchResult.search``)
@@ -95,11 +96,14 @@ class StepRecord:
     full: int  #: views matched in full (the probe's choice)
     probe_best: float  #: the best probe score among its views
     matched: bool  #: a reliable match was found in this step
+    side: str = "finer"  #: whose views: "finer" or "coarser" (``search.Step.side``)
 
     @property
     def name(self) -> str:
-        """``given pass 0``: the key of the step's time in ``MatchResult.timings``."""
-        return f"{self.direction} pass {self.view_pass}"
+        """``given pass 0``: the key of the step's time in ``MatchResult.timings`` (``given
+        pass 1 coarser`` for a step of views of the coarser image)."""
+        return f"{self.direction} pass {self.view_pass}" + (
+            " coarser" if self.side == "coarser" else "")
 
 
 @dataclass(frozen=True)

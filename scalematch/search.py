@@ -1,9 +1,11 @@
 """The search as data: a plan of steps, what each step found, and the rule that stops the search.
 
 A match is searched for progressively (Mishkin, Matas & Perdoch 2015, "MODS"): first the
-finer image itself, then passes of simulated tilted views of it, each pass run only when the
-ones before found nothing; with the automatic order, each pass in both directions (which image
-is the coarser one). :func:`search_plan` writes that down as a tuple of :class:`Step`;
+finer image itself, then passes of simulated tilted views, each pass run only when the ones
+before found nothing; with the automatic order, each pass in both directions (which image is
+the coarser one). A pass views the finer image first, then the coarser one (issue 19: where
+the finer image is the oblique one, it is coarser than the other along one axis, and only a
+view of the coarser image brings the pair back within the scales searched). :func:`search_plan` writes that down as a tuple of :class:`Step`;
 :func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
 step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are
 pure functions of the configuration and of what the steps found (:class:`Attempt`).
@@ -26,6 +28,8 @@ from .stages.views import View, view_plan
 #: (tilt, longitude in degrees) of a view; (1, 0) is the finer image itself.
 ViewKey = Tuple[float, float]
 PLAIN: Tuple[ViewKey, ...] = ((1.0, 0.0),)
+#: Which image a step's views are of (``Step.side``).
+SIDES = ("finer", "coarser")
 
 #: Why a search stopped (``Evidence.stopped``).
 STOP_REASONS = {
@@ -37,18 +41,26 @@ STOP_REASONS = {
 
 @dataclass(frozen=True)
 class Step:
-    """One step of the plan: the views of one pass of the finer image, in one direction."""
+    """One step of the plan: the views of one pass of one image, in one direction."""
 
     direction: Direction  #: which image is taken as the coarser one
     view_pass: int  #: 0: the finer image itself; k >= 1: the k-th pass of tilted views
-    views: Tuple[ViewKey, ...]  #: the views of the finer image to probe
+    views: Tuple[ViewKey, ...]  #: the views to probe
     scales: Tuple[float, ...]  #: the scales of the finer image searched (this direction's)
     full_searches: int  #: at most this many views are matched in full
+    #: "finer": views of the finer image, each detected at every scale; "coarser": views of the
+    #: coarser image, each detected once (s = 1) and probed against the finer image's own
+    #: scales, detected by the direction's pass 0
+    side: str = "finer"
 
     @property
     def cost(self) -> int:
-        """Progress units: each view detected at each scale, each full search at each scale."""
-        return (len(self.views) + min(self.full_searches, len(self.views))) * len(self.scales)
+        """Progress units: each view detected at each scale (a coarser view: once), each full
+        search at each scale."""
+        full = min(self.full_searches, len(self.views)) * len(self.scales)
+        if self.side == "coarser":
+            return len(self.views) + full
+        return len(self.views) * len(self.scales) + full
 
 
 def within_reach(scales: Sequence[float], finer_side: Optional[float],
@@ -73,12 +85,16 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     direction's finer image, px, which bounds its scales (:func:`within_reach`, with
     ``config.min_footprint_px``). Pass 0 is the finer image itself; the passes
     of views (``config.views``) follow, for models with a ratio (a fundamental matrix has no
-    view to refit). With ``config.order == "auto"`` each pass runs the given direction first.
+    view to refit). With ``config.order == "auto"`` each pass runs the given direction first;
+    each pass of views runs the finer image's views (both directions), then, with
+    ``config.views.coarser``, the coarser image's.
 
     >>> from scalematch.config import Config
     >>> plan = search_plan(Config(), {Direction.GIVEN: (1.0, 2.0), Direction.SWAPPED: (1.0,)})
-    >>> [(str(s.direction), s.view_pass, len(s.views)) for s in plan]
-    [('given', 0, 1), ('swapped', 0, 1), ('given', 1, 5), ('swapped', 1, 5), ('given', 2, 10), ('swapped', 2, 10)]
+    >>> [(str(s.direction)[0], s.view_pass, s.side[0], len(s.views)) for s in plan]
+    ... # doctest: +NORMALIZE_WHITESPACE
+    [('g', 0, 'f', 1), ('s', 0, 'f', 1), ('g', 1, 'f', 5), ('s', 1, 'f', 5), ('g', 1, 'c', 5),
+     ('s', 1, 'c', 5), ('g', 2, 'f', 10), ('s', 2, 'f', 10), ('g', 2, 'c', 10), ('s', 2, 'c', 10)]
     """
     order = (Direction.GIVEN, Direction.SWAPPED) if config.order == "auto" else (Direction.GIVEN,)
     sides = finer_sides or {}
@@ -87,9 +103,11 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     directions = [d for d in order if scales[d]]
     passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
                         if model_of(config.model).has_ratio else [])
+    sides = ("finer", "coarser") if config.views.coarser else ("finer",)
     return tuple(Step(d, k, views, tuple(scales[d]),
-                      len(views) if k == 0 else config.views.full_searches)
-                 for k, views in enumerate(passes) for d in directions)
+                      len(views) if k == 0 else config.views.full_searches, side)
+                 for k, views in enumerate(passes) for side in (sides if k else ("finer",))
+                 for d in directions)
 
 
 @dataclass(frozen=True)
@@ -114,10 +132,18 @@ class Attempt:
     probe: float  #: the probe's best score for this view (inf when the probe is off)
     outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
     verdict: Decision = field(repr=False)
+    #: the view of the coarser image matched against (None: the coarser image itself); the
+    #: outcomes' and the verdict's coarser px are then this view's
+    coarser_view: Optional[View] = field(default=None, repr=False)
 
     @property
     def matched(self) -> bool:
         return self.verdict.matched
+
+    @property
+    def shown_view(self) -> View:
+        """The tilted view that found it: of the coarser image when there is one."""
+        return self.coarser_view if self.coarser_view is not None else self.view
 
     def winning_outcome(self) -> ScaleOutcome:
         """The outcome of the scale the decision chose."""
@@ -194,8 +220,14 @@ def searched(records: Sequence[StepRecord]) -> str:
     'both orders'
     >>> searched([g, replace(g, view_pass=1, views=5)])
     'the order given, tilted views'
+    >>> searched([g, replace(g, view_pass=1, views=5), replace(g, view_pass=1, side="coarser")])
+    'the order given, tilted views of both images'
     """
     orders = {r.direction for r in records}
     what = ["both orders" if len(orders) > 1 else
             "the order given" if Direction.GIVEN in orders else "the other order"]
-    return ", ".join(what + (["tilted views"] if any(r.view_pass > 0 for r in records) else []))
+    views = [r for r in records if r.view_pass > 0]
+    if views:
+        what.append("tilted views of both images" if any(r.side == "coarser" for r in views)
+                    else "tilted views")
+    return ", ".join(what)

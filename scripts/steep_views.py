@@ -1,6 +1,6 @@
 """Steep views (issue 19): tilted zoom pairs beyond t = 4, scalematch's view passes against SIFT.
 
-Usage: python scripts/steep_views.py [--tilts 5.66,8] [--ratios 2,4] [--photo-step 3]
+Usage: python scripts/steep_views.py [--tilts 6,8] [--ratios 2,4] [--photo-step 3]
        [--variants default,steep] [--swapped] [--out FILE.jsonl]
        python scripts/steep_views.py --kind perspective --tilts 4,8 [...]
 

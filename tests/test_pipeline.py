@@ -155,7 +155,7 @@ def test_unrelated_pair_is_no_reliable_match(raccoon):
         assert not r.matched and r.reason
         assert r.transform is None and r.inliers.shape == (0, 4)
     # the reason says what was searched: views only when they ran
-    assert r.reason.endswith("searches: both orders, tilted views)"), r.reason
+    assert r.reason.endswith("searches: both orders, tilted views of both images)"), r.reason
     r = match(low, high, Config.preset("no-views"))
     assert not r.matched and r.reason.endswith("(2 searches: both orders)"), r.reason
     assert [(s.direction.value, s.view_pass) for s in r.search] == [("given", 0), ("swapped", 0)]
@@ -246,22 +246,25 @@ def test_the_search_record_says_what_ran(raccoon):
     found = match(pair.low, pair.high)
     assert [(str(r.direction), r.view_pass, r.matched) for r in found.search] == [
         ("given", 0, True)]
-    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 6
+    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 10
     none = match(raccoon[:300, :400], raccoon[400:, 500:900])
     assert not none.matched and none.evidence.stopped == "plan done"
-    assert [r.view_pass for r in none.search] == [0, 0, 1, 1, 2, 2]
-    assert none.evidence.searches == sum(r.views for r in none.search) == 32
+    assert [(r.view_pass, r.side[0]) for r in none.search] == [
+        (0, "f"), (0, "f"), (1, "f"), (1, "f"), (1, "c"), (1, "c"), (2, "f"), (2, "f"),
+        (2, "c"), (2, "c")]
+    # each pass's views of the finer image, then as many of the coarser one (issue 19)
+    assert none.evidence.searches == sum(r.views for r in none.search) == 2 + 2 * 30
 
 
 def test_a_time_budget_stops_a_no_after_the_first_step_and_spares_a_plain_match(raccoon):
     """The budget is checked between steps, never before the first: a budget far smaller than
-    any step stops an unrelated pair after the given order's plain search (1 step of 6, the
+    any step stops an unrelated pair after the given order's plain search (1 step of 10, the
     reason says so), and a plain zoom pair, solved by that first step, still matches."""
     tiny = Config(time_budget_s=1e-6)
     none = match(raccoon[:300, :400], raccoon[400:, 500:900], tiny)
     assert not none.matched and none.evidence.stopped == "time budget"
     assert [(str(r.direction), r.view_pass) for r in none.search] == [("given", 0)]
-    assert "time budget of 1e-06 s ran out after 1 of 6 steps" in none.reason
+    assert "time budget of 1e-06 s ran out after 1 of 10 steps" in none.reason
     pair = _pair(raccoon, 3.0, 4)
     found = match(pair.low, pair.high, tiny)
     assert found.matched and _error(found, pair) < 1.0
@@ -390,6 +393,29 @@ def test_a_tilt_of_6_is_solved_by_a_view_at_6(raccoon):
     assert steep.matched, steep.reason
     assert steep.evidence.view_tilt == 6.0
     assert pair_error(truth, canonical(truth, steep.transform, steep.order == "given")) < 1.0
+
+
+def test_an_oblique_finer_image_is_solved_by_a_view_of_the_coarser_image(raccoon):
+    """Issue 19: the finer image seen obliquely (tilt 4) against a frontal coarser one at ratio 2:
+    directional ratios 2 and 0.5, so the finer image is the coarser one along one axis and no
+    scale (>= 1) of any view of it reaches the pair. A t = 4 view of the coarser image does:
+    within 1 px (measured 0.28 px), in either order; without the coarser image's views, no
+    match."""
+    from scalematch.lab.realpairs import Pair, canonical, pair_error
+    from scalematch.lab.synthetic import make_oblique_pair
+
+    pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(0), high_size=(160, 120))
+    truth = Pair("oblique", "raccoon", pair.low, pair.high, np.vstack([pair.truth, [0, 0, 1]]),
+                 False, "homography", 2.0, 4.0)
+    for low, high, given in ((pair.low, pair.high, True), (pair.high, pair.low, False)):
+        result = match(low, high)
+        assert result.matched, result.reason
+        assert result.evidence.view_of == "coarser" and result.evidence.view_tilt == 4.0
+        assert result.model == "affine"
+        maps_high_to_low = (result.order == "given") == given
+        assert pair_error(truth, canonical(truth, result.transform, maps_high_to_low)) < 1.0
+    off = match(pair.low, pair.high, Config(views=ViewParams(coarser=False)))
+    assert not off.matched
 
 
 def test_a_perspective_pair_is_answered_with_the_homography_of_every_scale(raccoon):

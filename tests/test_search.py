@@ -25,16 +25,29 @@ def attempt(step: Step, matched: bool, inliers: int = 50, lnfa: float = -30.0) -
 
 def test_the_plan_runs_each_pass_in_both_directions_given_first():
     plan = search_plan(Config(), BOTH)
-    assert [(s.direction, s.view_pass, len(s.views)) for s in plan] == [
-        (GIVEN, 0, 1), (SWAPPED, 0, 1), (GIVEN, 1, 5), (SWAPPED, 1, 5), (GIVEN, 2, 10),
-        (SWAPPED, 2, 10)]
+    assert [(s.direction, s.view_pass, s.side, len(s.views)) for s in plan] == [
+        (GIVEN, 0, "finer", 1), (SWAPPED, 0, "finer", 1),
+        (GIVEN, 1, "finer", 5), (SWAPPED, 1, "finer", 5),
+        (GIVEN, 1, "coarser", 5), (SWAPPED, 1, "coarser", 5),
+        (GIVEN, 2, "finer", 10), (SWAPPED, 2, "finer", 10),
+        (GIVEN, 2, "coarser", 10), (SWAPPED, 2, "coarser", 10)]
     assert plan[1].scales == (1.0, 2.0) and plan[0].scales == (1.0, 2.0, 4.0)
     # progress units: 1 view detected + 1 matched at 3 scales; 5 views + 3 full searches at 3
     assert plan[0].cost == 6 and plan[2].cost == (5 + 3) * 3
+    # a view of the coarser image is detected once (s = 1), then 3 full searches at 3 scales
+    assert plan[4].cost == 5 + 3 * 3
+    # the same views for both images in a pass
+    assert plan[4].views == plan[2].views and plan[8].views == plan[6].views
+
+
+def test_the_coarser_image_is_viewed_only_when_asked():
+    no_coarser = Config(views=ViewParams(coarser=False))
+    assert {s.side for s in search_plan(no_coarser, BOTH)} == {"finer"}
+    assert len(search_plan(no_coarser, BOTH)) == 6
 
 
 def test_the_plan_follows_the_order_the_views_and_the_model():
-    assert [s.direction for s in search_plan(Config(order="given"), BOTH)] == [GIVEN] * 3
+    assert [s.direction for s in search_plan(Config(order="given"), BOTH)] == [GIVEN] * 5
     no_views = Config(views=ViewParams(enabled=False))
     assert [s.view_pass for s in search_plan(no_views, BOTH)] == [0, 0]
     # a fundamental matrix has no ratio, so no view to refit: the images themselves only
@@ -71,8 +84,13 @@ def test_a_weak_plain_match_is_confirmed_by_the_first_pass_of_views():
     # the views find nothing in the given direction: the swapped views still run
     none = attempt(plan[2], False)
     assert stop_reason(plan[2], [weak, none], plan, config) is None
-    # ... and when the pass is over the weak match stands
-    assert stop_reason(plan[3], [weak, none, attempt(plan[3], False)], plan, config) == "matched"
+    # ... and the views of the coarser image, both directions; when the pass is over the weak
+    # match stands
+    seen = [weak, none] + [attempt(s, False) for s in plan[3:5]]
+    assert [stop_reason(s, seen[:k + 3], plan, config) for k, s in enumerate(plan[3:5])] == \
+        [None, None]
+    assert plan[5].side == "coarser" and plan[5].view_pass == 1
+    assert stop_reason(plan[5], seen + [attempt(plan[5], False)], plan, config) == "matched"
     # a view with stronger evidence wins
     strong = attempt(plan[2], True, inliers=60, lnfa=-80.0)
     assert stop_reason(plan[2], [weak, strong], plan, config) == "matched"

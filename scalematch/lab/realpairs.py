@@ -8,7 +8,10 @@ Sets, made once per run and given to every method (docs/EVALUATION-TILT.md):
   along a random direction, exact affine truth, ``synthetic.make_tilted_pair``);
 * ``zoom``: plain synthetic zoom pairs (EVALUATION.md), the reference of the sets above;
 * ``*-swapped``: every pair of ``zoom`` and ``tilted`` given in the other order (finer first);
-* ``unrelated``: the low image of one photo against the high image of another scene.
+* ``unrelated``: the low image of one photo against the high image of another scene;
+* ``steep``, ``perspective``, ``oblique`` (only when named, issue 19): tilted pairs at t = 6
+  and 8, perspective pairs, and pairs whose *finer* image is the oblique one
+  (``synthetic.make_oblique_pair``: directional ratios r and r / t, one of them below 1).
 
 Every transform is judged in one canonical direction, from the pair's finer image to its
 coarser image (for oxford: img1 -> imgN), by EVALUATION.md's grid error: a method that answers
@@ -40,8 +43,9 @@ from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
 from .datasets import find_shared, list_photos, scene_of
 from .evaluation import is_success, reprojection_error
-from .synthetic import (SPREADS, TILTS, make_perspective_pair, make_tilted_pair, pair_rng,
-                        pairs_from_photos, unrelated_from_pairs)
+from .synthetic import (OBLIQUE_CASES, SPREADS, TILTS, make_oblique_pair,
+                        make_perspective_pair, make_tilted_pair, pair_rng, pairs_from_photos,
+                        unrelated_from_pairs)
 
 #: Oxford sequences of the set: boat (zoom + rotation), graf and wall (viewpoint)
 OXFORD = ("boat", "graf", "wall")
@@ -159,20 +163,38 @@ def perspective_pairs(paths: Sequence[Path], ratios: Sequence[float], spreads: S
                         "spread", "spread")
 
 
+def oblique_pairs(paths: Sequence[Path], cases: Sequence[Tuple[float, float]],
+                  seed: int) -> List[Pair]:
+    """The oblique pairs of ``paths`` (``synthetic.make_oblique_pair``: the finer image seen
+    obliquely, exact affine truth), each photo at each (ratio, tilt) of ``cases``, drawn from
+    ``pair_rng(seed, "<photo> oblique <t>", ratio)``; ``Pair.tilt`` holds the tilt."""
+    from ..imageio import read_grey
+
+    out = []
+    for path in paths:
+        photo = read_grey(path)
+        for r, t in cases:
+            p = make_oblique_pair(photo, r, t, pair_rng(seed, f"{path.name} oblique {t}", r),
+                                  source=path.name)
+            out.append(Pair("oblique", f"{path.name} x{r:g} oblique t{t:g}", p.low, p.high,
+                            as_matrix3(p.truth), False, "homography", r, t))
+    return out
+
+
 def swap(pairs: Sequence[Pair], name: str) -> List[Pair]:
     """Every pair given in the other order (finer image first), in the set ``name``."""
     return [Pair(name, p.name, p.high, p.low, p.truth, True, p.model, p.ratio, p.tilt)
             for p in pairs]
 
 
-#: Tilts of the steep sets (issue 19; ``scripts/steep_views.py``): beyond the views' t = 4
-STEEP_TILTS = (5.66, 8.0)
+#: Tilts of the steep sets (issue 19: "extended to t = 6 and 8"; ``scripts/steep_views.py``)
+STEEP_TILTS = (6.0, 8.0)
 
 
 def synthetic_sets(paths: Sequence[Path], seed: int, log=lambda s: None,
                    wanted: Optional[Sequence[str]] = None) -> Dict[str, List[Pair]]:
     """The synthetic sets named in ``wanted`` (only those are made; None: those of
-    ``SET_ORDER``): zoom pairs, tilted pairs (t 1.41-4), steep ones (t 5.66 and 8), perspective
+    ``SET_ORDER``): zoom pairs, tilted pairs (t 1.41-4), steep ones (t 6 and 8), perspective
     ones (spreads 4 and 8), each also swapped, and unrelated pairs."""
     wanted = SET_ORDER if wanted is None else wanted
     out: Dict[str, List[Pair]] = {}
@@ -186,7 +208,8 @@ def synthetic_sets(paths: Sequence[Path], seed: int, log=lambda s: None,
                        ("steep", lambda: [replace(p, set="steep") for p in tilted_pairs(
                            paths, TILTED_RATIOS, STEEP_TILTS, seed)]),
                        ("perspective", lambda: perspective_pairs(paths, TILTED_RATIOS, SPREADS,
-                                                                 seed))):
+                                                                 seed)),
+                       ("oblique", lambda: oblique_pairs(paths, OBLIQUE_CASES, seed))):
         if {name, f"{name}-swapped"} & set(wanted):
             pairs = make()
             log(f"made {len(pairs)} {name} pairs")
@@ -307,11 +330,13 @@ def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
 
 SET_ORDER = ("oxford", "zoom", "zoom-swapped", "tilted", "tilted-swapped", "unrelated")
 #: Sets run only when named (``--sets``): slower, and beyond what the default search is built
-#: for (issue 19: tilts 5.66 and 8, perspective); docs/STEEP.md
-EXTRA_SETS = ("steep", "steep-swapped", "perspective", "perspective-swapped")
+#: for (issue 19: tilts 6 and 8, perspective, an oblique finer image); docs/STEEP.md
+EXTRA_SETS = ("steep", "steep-swapped", "perspective", "perspective-swapped", "oblique",
+              "oblique-swapped")
 #: The sets reported by tilt (or spread), with the values and the column label
 BY_TILT = (("tilted", TILTS, "t"), ("steep", STEEP_TILTS, "t"),
-           ("perspective", SPREADS, "spread"))
+           ("perspective", SPREADS, "spread"),
+           ("oblique", tuple(t for _, t in OBLIQUE_CASES), "t"))
 
 
 def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, int]]:
@@ -389,7 +414,7 @@ def write_section(doc: Path, text: str) -> None:
               help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
 @click.option("--sets", default=",".join(SET_ORDER), show_default=True,
               help="Comma-separated sets to run; also " + ", ".join(EXTRA_SETS)
-                   + " (tilts 5.66 and 8, and perspective pairs: docs/STEEP.md).")
+                   + " (tilts 6 and 8, perspective pairs and oblique finer images: docs/STEEP.md).")
 @click.option("--methods", default=",".join(METHODS), show_default=True)
 @click.option("--photo-step", type=click.IntRange(min=1), default=PHOTO_STEP, show_default=True,
               help="Use every N-th photo.")

@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Iterator, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from ..geometry import apply, compose, similarity_matrix
+from ..geometry import apply, compose, invert, similarity_matrix
 from ..stages.scalespace import CAMERA_BLUR_PX
 
 
@@ -212,6 +212,21 @@ def degrade(image: np.ndarray, gain: float, offset: float, noise_std: float,
     return np.clip(np.rint(out), 0, 255).astype(np.float32)
 
 
+def cut_low(canvas: np.ndarray, to_canvas: np.ndarray, high_wh: Tuple[int, int],
+            low_max: Tuple[int, int], gain: float, offset: float, noise_std: float,
+            rng: np.random.Generator) -> Tuple[np.ndarray, np.ndarray, Tuple[int, int]]:
+    """(low, truth 2x3 high px -> low px, window top-left): the window of at most ``low_max``
+    of ``canvas`` that holds the high image's footprint (``window_offset``), changed in grey
+    level and noise (``degrade``); ``to_canvas`` maps a high px to the canvas. ``rng`` draws
+    the window offset, then the noise."""
+    w, h = high_wh
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
+                                   low_max, rng)
+    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
+    return low, compose(_translation(-wx, -wy), to_canvas), (wx, wy)
+
+
 def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], ratio: float,
                         rng: np.random.Generator, low_max: Tuple[int, int] = LOW_MAX,
                         source: str = "") -> ZoomPair:
@@ -235,15 +250,11 @@ def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], rati
     offset = float(rng.uniform(*OFFSET_RANGE))
     noise_std = float(rng.uniform(*NOISE_STD_RANGE))
     canvas, warp = zoom_warp(photo, ratio, angle)
-    to_canvas = compose(warp, _translation(x, y))
-    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
-    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
-                                   low_max, rng)
-    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
-    truth = compose(_translation(-wx, -wy), to_canvas)
+    low, truth, window = cut_low(canvas, compose(warp, _translation(x, y)), (w, h), low_max,
+                                 gain, offset, noise_std, rng)
     return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
                     gain=gain, offset=offset, noise_std=noise_std, source=source,
-                    crop_xy=(x, y), window_xy=(wx, wy))
+                    crop_xy=(x, y), window_xy=window)
 
 
 def make_zoom_pair(photo: np.ndarray, ratio: float, rng: np.random.Generator,
@@ -458,15 +469,91 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
     offset = float(rng.uniform(*OFFSET_RANGE))
     noise_std = float(rng.uniform(*NOISE_STD_RANGE))
     canvas, warp = affine_warp(photo, tilted_linear(ratio, angle, tilt, longitude))
-    to_canvas = compose(warp, _translation(x, y))
+    low, truth, window = cut_low(canvas, compose(warp, _translation(x, y)), (w, h), low_max,
+                                 gain, offset, noise_std, rng)
+    return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
+                    gain=gain, offset=offset, noise_std=noise_std, source=source,
+                    crop_xy=(x, y), window_xy=window, tilt=float(tilt), longitude_deg=longitude)
+
+
+# --------------------------------------------------------------------------------------------
+# Oblique finer pairs (issue 19): the finer image is the one seen obliquely
+# --------------------------------------------------------------------------------------------
+
+#: (width, height) of the high crop of an oblique pair: its footprint in the low image is
+#: stretched by tilt / ratio along one axis (800 px for 400 px at tilt 4 and ratio 2), and must
+#: fit the low image's 1024x768 (EVALUATION.md step 2) at any rotation
+OBLIQUE_HIGH_SIZE = (400, 300)
+#: (ratio, tilt) of the oblique sets: directional ratios r and r / t, the smaller one 0.5 or
+#: 0.71 (a telephoto seen obliquely against a frontal wide shot: coarser than the wide shot
+#: along one axis)
+OBLIQUE_CASES = ((2.0, 2.83), (2.0, 4.0), (4.0, 5.66), (4.0, 8.0))
+#: Random crops of the oblique view tried, at most, to find ``N_CROP_CANDIDATES`` that lie
+#: wholly on the photo (the view's canvas has empty corners)
+OBLIQUE_CROP_TRIES = 400
+
+
+def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.random.Generator,
+                      high_size: Tuple[int, int] = OBLIQUE_HIGH_SIZE,
+                      low_max: Tuple[int, int] = LOW_MAX, source: str = "") -> ZoomPair:
+    """A zoom pair whose *finer* image sees the scene obliquely and the coarser one frontally.
+
+    The high image is a crop of the photo compressed by ``tilt`` along a random longitude phi
+    (``affine_warp`` of ``tilted_linear(1, 0, tilt, phi)``, blurred along that axis as a camera
+    would); the low image is the whole photo zoomed out by ``ratio`` and turned by theta, as in
+    ``make_zoom_pair`` (grey-level change, noise, a window of at most ``low_max``). The
+    directional ratios (high px per low px) are ``ratio`` and ``ratio / tilt``: below 1 the
+    finer image is coarser than the other along one axis, which only a view of the coarser image
+    undoes. The crop is the most textured (measured at the mean shrink ``ratio / sqrt(tilt)``) of
+    6 random crops lying wholly on the photo. ``truth`` is the exact 2x3 affine map high px ->
+    low px. ``rng`` draws, in order: phi, the crop positions, theta, gain, offset, noise std, the
+    window offset and the noise.
+
+    >>> img = np.random.default_rng(0).uniform(0, 255, (600, 800)).astype(np.float32)
+    >>> pair = make_oblique_pair(img, 2.0, 4.0, np.random.default_rng(1), high_size=(120, 90))
+    >>> sorted(np.round(1 / np.linalg.svd(pair.truth[:, :2])[1], 6).tolist())
+    [0.5, 2.0]
+    """
+    photo = np.asarray(photo, dtype=np.float32)
+    if not (ratio >= 1.0 and tilt >= 1.0):
+        raise ValueError(f"ratio and tilt must be >= 1, got {ratio}, {tilt}")
+    longitude = float(rng.uniform(*LONGITUDE_RANGE))
+    oblique, to_oblique = affine_warp(photo, tilted_linear(1.0, 0.0, tilt, longitude))
+    back = invert(to_oblique)
+    ph, pw = photo.shape
+    oh, ow = oblique.shape
+    w, h = min(int(high_size[0]), ow // 2), min(int(high_size[1]), oh // 2)
     corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
-    wx, wy, ww, wh = window_offset((canvas.shape[1], canvas.shape[0]), apply(to_canvas, corners),
-                                   low_max, rng)
-    low = degrade(canvas[wy:wy + wh, wx:wx + ww], gain, offset, noise_std, rng)
-    return ZoomPair(low=low, high=high, truth=compose(_translation(-wx, -wy), to_canvas),
-                    ratio=float(ratio), angle_deg=angle, gain=gain, offset=offset,
-                    noise_std=noise_std, source=source, crop_xy=(x, y), window_xy=(wx, wy),
-                    tilt=float(tilt), longitude_deg=longitude)
+    mx, my = int(BORDER_MARGIN_FRAC * pw), int(BORDER_MARGIN_FRAC * ph)
+    shrink = ratio / math.sqrt(tilt)
+    best, best_score, found = None, -math.inf, 0
+    for _ in range(OBLIQUE_CROP_TRIES):
+        x, y = int(rng.integers(0, ow - w + 1)), int(rng.integers(0, oh - h + 1))
+        on_photo = apply(back, corners + [x, y])
+        if (on_photo[:, 0].min() < mx or on_photo[:, 0].max() > pw - 1 - mx
+                or on_photo[:, 1].min() < my or on_photo[:, 1].max() > ph - 1 - my):
+            continue
+        score = texture_score(oblique[y:y + h, x:x + w], shrink)
+        if score > best_score:
+            best, best_score = (x, y), score
+        found += 1
+        if found == N_CROP_CANDIDATES:
+            break
+    if best is None:
+        raise ValueError(f"photo {pw}x{ph} seen at tilt {tilt:g} holds no {w}x{h} crop; use a "
+                         f"smaller high_size")
+    x, y = best
+    high = np.ascontiguousarray(oblique[y:y + h, x:x + w])
+    angle = float(rng.uniform(*ANGLE_RANGE))
+    gain = float(rng.uniform(*GAIN_RANGE))
+    offset = float(rng.uniform(*OFFSET_RANGE))
+    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    canvas, warp = zoom_warp(photo, ratio, angle)
+    low, truth, window = cut_low(canvas, compose(warp, compose(back, _translation(x, y))),
+                                 (w, h), low_max, gain, offset, noise_std, rng)
+    return ZoomPair(low=low, high=high, truth=truth, ratio=float(ratio), angle_deg=angle,
+                    gain=gain, offset=offset, noise_std=noise_std, source=source,
+                    crop_xy=(x, y), window_xy=window, tilt=float(tilt), longitude_deg=longitude)
 
 
 # --------------------------------------------------------------------------------------------

@@ -2,8 +2,9 @@
 
 Three refinements, in this order, each keeping the answer unless the evidence says otherwise:
 
-1. :func:`refit_in_high`: a match found on a simulated tilted view is refit in the finer
-   image's pixels (the view's similarity composed with the view's compression is an affine map).
+1. :func:`refit_in_high`: a match found on a simulated tilted view (of the finer image, or of
+   the coarser one) is refit in the images' own pixels (the view's similarity composed with the
+   view's compression is an affine map).
 2. :func:`richer_model`: a similarity that explains clearly fewer candidates than an affine map
    or a homography gives way to it (``ModelCheckParams``).
 3. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
@@ -12,7 +13,9 @@ Three refinements, in this order, each keeping the answer unless the evidence sa
    footprint at its own local ratio, so only the union sees the whole of it; issue 19).
 
 Each takes the winning scale's outcome (``best``: its candidates ``src`` -> ``dst``) or all the
-outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)``.
+outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)``. A search
+matched against a view of the coarser image (``coarser``, a :class:`View`; None: the image
+itself) has its ``dst`` in that view's pixels: each function maps them back first.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from ..checks import in_range, one_of
-from ..geometry import compose
+from ..geometry import compose, invert
 from .decision import Decision, folded
 from .estimator import MIN_SAMPLE, MODELS, estimate, model_of, refine, residuals
 from .matcher import distinct_pairs
@@ -72,33 +75,41 @@ class ModelCheckParams:
 Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)
 
 
-def refit_in_high(view: View, verdict: Decision, best, config) -> Refit:
-    """The winning view's match in finer-image pixels.
+def _back(view: Optional[View], xy: np.ndarray) -> np.ndarray:
+    """Points of a view (N, 2) in its image's pixels (None: the image itself)."""
+    return xy if view is None else to_high(view, xy)
 
-    The view's similarity composed with the view's compression is an affine map; it is refit
-    on the inliers mapped back to the finer image (an affine map, or a homography when that is
+
+def refit_in_high(view: View, verdict: Decision, best, config,
+                  coarser: Optional[View] = None) -> Refit:
+    """The winning view's match in the images' own pixels.
+
+    The view's similarity composed with the views' compressions is an affine map; it is refit
+    on the inliers mapped back to the images (an affine map, or a homography when that is
     the model asked for), so the answer is exact rather than limited to the sampled tilts.
     """
-    if view.is_identity:
+    if view.is_identity and coarser is None:
         return verdict.transform, verdict.inliers, config.model
     src = to_high(view, verdict.inliers[:, :2])
-    dst = verdict.inliers[:, 2:4]
+    dst = _back(coarser, verdict.inliers[:, 2:4])
     model = "homography" if config.model == "homography" else "affine"
     # every candidate of the winning scale, not only the view's similarity inliers: the sampled
     # tilt differs from the true one, so the similarity holds on part of the image only
-    cand_src = to_high(view, best.src)
-    est = estimate(model, cand_src, best.dst, config.ransac, seed=config.seed)
+    cand_src, cand_dst = to_high(view, best.src), _back(coarser, best.dst)
+    est = estimate(model, cand_src, cand_dst, config.ransac, seed=config.seed)
     if est.transform is not None and est.n_inliers >= len(src):
-        return est.transform, np.hstack([cand_src[est.inliers], best.dst[est.inliers]]), model
+        return est.transform, np.hstack([cand_src[est.inliers], cand_dst[est.inliers]]), model
     est = estimate(model, src, dst, config.ransac, seed=config.seed)
     if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
         composed = compose(verdict.transform, view.to_view)
+        if coarser is not None:
+            composed = compose(invert(coarser.to_view), composed)
         return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
     inl = est.inliers
     return est.transform, np.hstack([src[inl], dst[inl]]), model
 
 
-def richer_model(fit: Refit, view: View, best, config) -> Refit:
+def richer_model(fit: Refit, view: View, best, config, coarser: Optional[View] = None) -> Refit:
     """A richer model when the similarity explains too little of the winning scale.
 
     The candidates of the winning scale are refit with each of ``config.model_check.models``;
@@ -107,7 +118,7 @@ def richer_model(fit: Refit, view: View, best, config) -> Refit:
     """
     t, inliers, model = fit
     check = config.model_check
-    if not check.enabled or model != "similarity" or not view.is_identity:
+    if not check.enabled or model != "similarity" or not view.is_identity or coarser is not None:
         return fit
     k = len(inliers)
     for richer in check.models:
@@ -120,17 +131,19 @@ def richer_model(fit: Refit, view: View, best, config) -> Refit:
     return fit
 
 
-def _pooled(view: View, outcomes: Sequence) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+def _pooled(view: View, outcomes: Sequence,
+            coarser: Optional[View] = None) -> Optional[Tuple[np.ndarray, np.ndarray]]:
     """The distinct candidates (finer px, coarser px) of every scale matched in full, or None
     when fewer than two scales were."""
     done = [o for o in outcomes if o.estimate is not None and len(o.src)]
     if len(done) < 2:
         return None
     return distinct_pairs(to_high(view, np.vstack([o.src for o in done])),
-                          np.vstack([o.dst for o in done]))
+                          _back(coarser, np.vstack([o.dst for o in done])))
 
 
-def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
+def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config,
+                 coarser: Optional[View] = None) -> Refit:
     """``fit`` refined on the candidates of every scale matched in full.
 
     The neighbouring scales of a true match find the same transform (the paper's Table 1) from
@@ -140,7 +153,7 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
     scale (the pairs the decision counted) that the refined transform still explains.
     """
     t, inliers, model = fit
-    pool = _pooled(view, outcomes) if model_of(model).has_ratio else None
+    pool = _pooled(view, outcomes, coarser) if model_of(model).has_ratio else None
     if pool is None:
         return fit
     src, dst = pool
@@ -153,7 +166,8 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
     return est.transform, inliers[keep], model
 
 
-def union_homography(fit: Refit, view: View, outcomes: Sequence, config) -> Refit:
+def union_homography(fit: Refit, view: View, outcomes: Sequence, config,
+                     coarser: Optional[View] = None) -> Refit:
     """A homography fitted to the candidates of every scale matched in full, when it explains
     clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
     same pooled pairs count for both, so a plain zoom pair, where the similarity explains them
@@ -171,7 +185,7 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, config) -> Refi
     if (not check.enabled or not check.union or config.model != "similarity"
             or model == "homography" or "homography" not in check.models):
         return fit
-    pool = _pooled(view, outcomes)
+    pool = _pooled(view, outcomes, coarser)
     if pool is None:
         return fit
     src, dst = pool

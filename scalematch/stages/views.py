@@ -45,6 +45,11 @@ class ViewParams:
     longitude_step_deg: float = 72.0
     #: anti-aliasing blur along the compressed axis: c * sqrt(t^2 - 1) px (Morel & Yu: c = 0.8)
     antialias_c: float = 0.8
+    #: each pass also views the coarser image (after the finer one's views, both directions):
+    #: where the finer image is the oblique one (a telephoto seen obliquely against a frontal
+    #: wide shot) its directional ratios are r and r / t, and below 1 no scale searched reaches
+    #: them; a view of the coarser image compressed by t along that axis does (issue 19)
+    coarser: bool = True
     #: views of a pass matched in full: the ones whose probe scores best (the others are only
     #: detected and probed, which costs about half a search)
     full_searches: int = 3

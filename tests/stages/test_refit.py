@@ -79,3 +79,31 @@ def test_the_union_is_only_tried_for_a_similarity_with_the_model_check(config):
     outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
     fit = _similarity_on(outcomes[1], Config())
     assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes, config) is fit
+
+
+def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
+    """Issue 19: candidates found against a view of the coarser image (compressed by 4 at
+    longitude 30) are mapped back through the view and refit: the answer is the true affine map
+    from finer px to coarser px to 1e-3 px (the estimator works in float32), though the view's
+    own similarity could not hold it."""
+    from scalematch.geometry import compose
+    from scalematch.stages.decision import Decision
+    from scalematch.stages.refit import refit_in_high
+    from scalematch.stages.views import tilt_view
+
+    coarse = np.zeros((300, 400), np.float32)
+    view = tilt_view(coarse, 4.0, 30.0)
+    rng = np.random.default_rng(5)
+    truth = np.array([[0.9, -0.8, 120.0], [0.5, 1.2, 40.0]])  # finer px -> coarser px
+    src = rng.uniform(0, 200, (40, 2))
+    dst = apply(compose(view.to_view, truth), src)  # in the view's px
+    row = ScaleRow(s=1.0, ratio=1.0, points=40, initial=40, kept=40, inliers=40, outlier_pct=0.0)
+    est = Estimate("similarity", np.eye(3)[:2], np.ones(len(src), bool), np.zeros(len(src)))
+    best = ScaleOutcome(row, est, src, dst, len(src))
+    t_view = estimate("affine", src, dst, Config().ransac).transform
+    verdict = Decision(True, "", 1.0, t_view, np.hstack([src, dst]))
+    t, inliers, model = refit_in_high(identity_view(np.zeros((200, 200), np.float32)), verdict,
+                                      best, Config(), coarser=view)
+    assert model == "affine" and len(inliers) == 40
+    assert np.abs(apply(t, src) - apply(truth, src)).max() < 1e-3
+    assert np.abs(inliers[:, 2:4] - apply(truth, src)).max() < 1e-3
