@@ -482,8 +482,10 @@ def matching_options(f: Callable) -> Callable:
                           "first, then the other; the JSON says which). 'given': LOW is the "
                           "coarser image."),
         click.option("--views/--no-views", "views", default=True, show_default=True,
-                     help="When nothing matches, simulate tilted views of the finer image "
-                          "(oblique shots). They are most of the time of a \"no\": "
+                     help="When nothing matches, simulate tilted views of the finer image, "
+                          "then of the coarser one (oblique shots; the coarser one's views solve "
+                          "a finer image seen more obliquely than its zoom). They are most of "
+                          "the time of a \"no\": "
                           "--no-views answers it 2-5x sooner (for archives of mostly unrelated "
                           "pairs) but misses pairs only a tilted view solves."),
         click.option("--time-budget", type=float, default=None, metavar="SECONDS",

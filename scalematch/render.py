@@ -157,7 +157,8 @@ def verdict(result: MatchResult) -> str:
     if not model_of(result.model).has_ratio:
         return f"matched ({result.model} matrix): {result.n_inliers} inliers, {best}"
     tilt = float(result.evidence.view_tilt)
-    view = (f", seen tilted by {tilt:g} at {result.evidence.view_longitude_deg:g} deg"
+    whose = " (the coarser image)" if result.evidence.view_of == "coarser" else ""
+    view = (f", seen tilted by {tilt:g} at {result.evidence.view_longitude_deg:g} deg{whose}"
             if tilt > 1.0 else "")
     order = ""
     if result.order == "swapped":  # near a ratio of 1 neither image is finer: say what maps

@@ -3,10 +3,15 @@
 Usage: python scripts/steep_views.py [--tilts 6,8] [--ratios 2,4] [--photo-step 3]
        [--variants default,steep] [--swapped] [--out FILE.jsonl]
        python scripts/steep_views.py --kind perspective --tilts 4,8 [...]
+       python scripts/steep_views.py --kind oblique --variants default,no-coarser --swapped
+       python scripts/steep_views.py --kind oxford --variants homography,default --swapped
 
 ``--kind perspective``: the perspective zoom pairs instead (``lab.realpairs.perspective_pairs``:
 the local ratio spans [ratio, ratio x spread] over the footprint, exact homography truth); the
-``--tilts`` are then the spreads.
+``--tilts`` are then the spreads. ``--kind oblique``: the pairs whose finer image is the oblique
+one (``lab.realpairs.oblique_pairs`` at ``synthetic.OBLIQUE_CASES``; ``--tilts`` and ``--ratios``
+are not used). ``--kind oxford``: graf 1->5 and 1->6, wall 1->6 (``OXFORD_PAIRS``; with
+``--swapped`` also 5->1, 6->1), the published homographies as truth.
 
 The pairs are ``lab.realpairs``' tilted set (``synthetic.make_tilted_pair``: the same seed, the
 same photos, every 3rd of ../shared/data/photos, exact affine truth, EVALUATION-TILT.md) at
@@ -36,8 +41,11 @@ import cv2  # noqa: E402
 from scalematch import Config, match  # noqa: E402
 from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
-from scalematch.lab.realpairs import (STEEP_TILTS, canonical, pair_error,  # noqa: E402
-                                      perspective_pairs, run_sift, swap, tilted_pairs)
+from scalematch.lab.realpairs import (STEEP_TILTS, canonical, oblique_pairs,  # noqa: E402
+                                      oxford_pairs, pair_error, perspective_pairs, run_sift,
+                                      swap, tilted_pairs)
+from scalematch.lab.synthetic import OBLIQUE_CASES  # noqa: E402
+from scalematch.stages.views import ViewParams  # noqa: E402
 
 #: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
 #: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
@@ -48,13 +56,27 @@ VARIANTS = {
     "homography": Config(model="homography"),
     # the default with a time budget of 1 s: what the budget costs on pairs that have an answer
     "budget-1s": Config.preset("budget-1s"),
+    # the default without the views of the coarser image (before issue 19's item 2)
+    "no-coarser": Config(views=ViewParams(coarser=False)),
 }
 
+#: The Oxford pairs of issue 19 ("graf 1->5 and 1->6, wall 1->6, both directions")
+OXFORD_PAIRS = ("graf 1->5", "graf 1->6", "wall 1->6")
 
-def make_pairs(paths, tilts, ratios, seed, swapped, kind="tilted"):
-    """``lab.realpairs``' tilted pairs at these tilts (perspective pairs at these spreads), and
-    with ``swapped`` each one swapped."""
-    if kind == "perspective":
+
+def make_pairs(paths, tilts, ratios, seed, swapped, kind="tilted", shared=None):
+    """``lab.realpairs``' tilted pairs at these tilts (perspective pairs at these spreads,
+    oblique pairs, the Oxford pairs of ``OXFORD_PAIRS``), and with ``swapped`` each one
+    swapped (Oxford: its N->1 pair)."""
+    if kind == "oxford":
+        every = oxford_pairs(shared)
+        names = [n for n in OXFORD_PAIRS] + (
+            [f"{n.split()[0]} {n.split()[1][::-1].replace('>-', '->')}" for n in OXFORD_PAIRS]
+            if swapped else [])
+        return [p for n in names for p in every if p.name == n]
+    if kind == "oblique":
+        pairs = oblique_pairs(paths, OBLIQUE_CASES, seed)
+    elif kind == "perspective":
         pairs = perspective_pairs(paths, ratios, tilts, seed)
     else:
         pairs = tilted_pairs(paths, ratios, tilts, seed)
@@ -87,7 +109,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variants", default="default,steep")
     ap.add_argument("--swapped", action="store_true")
-    ap.add_argument("--kind", choices=("tilted", "perspective"), default="tilted")
+    ap.add_argument("--kind", choices=("tilted", "perspective", "oblique", "oxford"),
+                    default="tilted")
     ap.add_argument("--out", default="bench-out/steep/rows.jsonl")
     args = ap.parse_args()
     cv2.setNumThreads(1)
@@ -98,7 +121,9 @@ def main() -> None:
     if shared is None:
         sys.exit("../shared is absent: this script needs its photos")
     paths = list_photos(shared)[::args.photo_step]
-    pairs = make_pairs(paths, tilts, ratios, args.seed, args.swapped, args.kind)
+    pairs = make_pairs(paths, tilts, ratios, args.seed, args.swapped, args.kind, shared)
+    if args.kind == "oblique":
+        tilts = sorted({t for _, t in OBLIQUE_CASES})
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rows = [json.loads(x) for x in out.read_text().splitlines()] if out.exists() else []
@@ -121,6 +146,17 @@ def main() -> None:
                 print(f"{pair.set:15s} {pair.name:55s} {method:8s} "
                       f"{'ok ' if row['success'] else ('BAD' if row['wrong_claim'] else '-  ')} "
                       f"{res['seconds']:6.2f} s", flush=True)
+    if args.kind == "oxford":  # a row per pair: its error, px, per method
+        print("\n| pair | " + " | ".join([*variants, "sift"]) + " |")
+        print("|---|" + "---:|" * (len(variants) + 1))
+        for p in pairs:
+            cells = []
+            for m in [*variants, "sift"]:
+                r = next((r for r in rows if r["pair"] == p.name and r["method"] == m), None)
+                cells.append("-" if r is None else "no match" if not r["matched"] else
+                             f"{r['error_px']:.2f} px" + ("" if r["success"] else " (wrong)"))
+            print(f"| {p.name} | " + " | ".join(cells) + " |")
+        return
     what = "spread" if args.kind == "perspective" else "tilt"
     print(f"\n| set | method | {what} | solved | wrong claims | median s |")
     print("|---|---|---:|---:|---:|---:|")

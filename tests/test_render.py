@@ -197,3 +197,19 @@ def test_the_verdict_calls_no_image_finer_near_a_ratio_of_1():
     assert verdict(swapped(1.0)).endswith(
         "order swapped (the transform maps the first image into the second)")
     assert verdict(swapped(3.0)).endswith("order swapped (the first image is the finer one)")
+
+
+def test_the_verdict_says_which_image_the_tilted_view_was_of():
+    """Issue 19: a match found on a view of the coarser image says so; one on a view of the
+    finer image says only the tilt, as before."""
+    from scalematch.result import Evidence
+
+    def found(view_of):
+        return MatchResult(matched=True, model="affine", resolution_ratio=1.0, rotation_deg=0.0,
+                           best_scale=2.0, transform=np.array([[1.0, 0, 0], [0, 1.0, 0]]),
+                           inliers=np.zeros((0, 4)),
+                           evidence=Evidence(view_tilt=4.0, view_longitude_deg=36.0,
+                                             view_of=view_of))
+    assert verdict(found("coarser")).endswith(
+        "seen tilted by 4 at 36 deg (the coarser image)")
+    assert verdict(found("finer")).endswith("seen tilted by 4 at 36 deg")

@@ -61,7 +61,7 @@ UNRELATED = 50
 #: a pair on this machine's 2 cores, issue 9)
 ASIFT_PAIRS = 3
 #: the sets ASIFT is tried on: where viewpoint is the difficulty
-ASIFT_SETS = ("oxford", "tilted")
+ASIFT_SETS = ("oxford", "tilted", "steep", "oblique")
 #: seconds ASIFT may take on one pair before it counts as a failure ("timed out"): one boat
 #: pair (850x680 px) took 467 s with one OpenCV thread on an otherwise idle core here
 ASIFT_TIMEOUT_S = 600.0
