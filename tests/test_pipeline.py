@@ -399,12 +399,12 @@ def test_an_oblique_finer_image_is_solved_by_a_view_of_the_coarser_image(raccoon
     """Issue 19: the finer image seen obliquely (tilt 4) against a frontal coarser one at ratio 2:
     directional ratios 2 and 0.5, so the finer image is the coarser one along one axis and no
     scale (>= 1) of any view of it reaches the pair. A t = 4 view of the coarser image does:
-    within 1 px (measured 0.28 px), in either order; without the coarser image's views, no
+    within 1 px (measured 0.25 px), in either order; without the coarser image's views, no
     match."""
     from scalematch.lab.realpairs import Pair, canonical, pair_error
     from scalematch.lab.synthetic import make_oblique_pair
 
-    pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(0), high_size=(160, 120))
+    pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(2), high_size=(160, 120))
     truth = Pair("oblique", "raccoon", pair.low, pair.high, np.vstack([pair.truth, [0, 0, 1]]),
                  False, "homography", 2.0, 4.0)
     for low, high, given in ((pair.low, pair.high, True), (pair.high, pair.low, False)):

@@ -480,10 +480,13 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
 # Oblique finer pairs (issue 19): the finer image is the one seen obliquely
 # --------------------------------------------------------------------------------------------
 
-#: (width, height) of the high crop of an oblique pair: its footprint in the low image is
-#: stretched by tilt / ratio along one axis (800 px for 400 px at tilt 4 and ratio 2), and must
-#: fit the low image's 1024x768 (EVALUATION.md step 2) at any rotation
+#: (width, height) of the high crop of an oblique pair, at most: its footprint in the low image
+#: is stretched by tilt / ratio along one axis and must fit the low image's 1024x768
+#: (EVALUATION.md step 2) at any rotation (``oblique_high_size``)
 OBLIQUE_HIGH_SIZE = (400, 300)
+#: Longest footprint of an oblique pair's crop in the low image, px: within the 768 px side of
+#: ``LOW_MAX`` with room for the window's rounding
+OBLIQUE_MAX_FOOTPRINT_PX = 740.0
 #: (ratio, tilt) of the oblique sets: directional ratios r and r / t, the smaller one 0.5 or
 #: 0.71 (a telephoto seen obliquely against a frontal wide shot: coarser than the wide shot
 #: along one axis)
@@ -491,22 +494,67 @@ OBLIQUE_CASES = ((2.0, 2.83), (2.0, 4.0), (4.0, 5.66), (4.0, 8.0))
 #: Random crops of the oblique view tried, at most, to find ``N_CROP_CANDIDATES`` that lie
 #: wholly on the photo (the view's canvas has empty corners)
 OBLIQUE_CROP_TRIES = 400
+#: ... and where none does, the crop is made 0.8x smaller, at most this many times (a steep
+#: view of a wide photo across its short side is narrow: 281 px for 2250 px at tilt 8)
+OBLIQUE_CROP_SHRINKS = 3
+#: ... down to this side, px: twice the descriptor's 16 px window
+OBLIQUE_MIN_CROP_PX = 32
+
+
+def oblique_high_size(ratio: float, tilt: float) -> Tuple[int, int]:
+    """(w, h) of an oblique pair's crop: ``OBLIQUE_HIGH_SIZE``, shrunk so that its diagonal
+    stretched by ``tilt / ratio`` (the longest its footprint can be, at any rotation) stays
+    within ``OBLIQUE_MAX_FOOTPRINT_PX``.
+
+    >>> oblique_high_size(2.0, 2.83), oblique_high_size(2.0, 4.0)
+    ((400, 300), (296, 222))
+    """
+    w, h = OBLIQUE_HIGH_SIZE
+    k = min(1.0, OBLIQUE_MAX_FOOTPRINT_PX / (math.hypot(w, h) * max(tilt / ratio, 1.0)))
+    return int(w * k), int(h * k)
+
+
+def _crop_on_photo(view: np.ndarray, back: np.ndarray, photo_wh: Tuple[int, int],
+                   size: Tuple[int, int], shrink: float,
+                   rng: np.random.Generator) -> Optional[Tuple[int, int]]:
+    """(x, y) of the most textured (``texture_score`` at ``shrink``) of ``N_CROP_CANDIDATES``
+    random crops of ``size`` of ``view`` whose corners ``back`` maps onto the photo, away from
+    its border; None when ``OBLIQUE_CROP_TRIES`` draws find none."""
+    (pw, ph), (w, h) = photo_wh, size
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
+    mx, my = int(BORDER_MARGIN_FRAC * pw), int(BORDER_MARGIN_FRAC * ph)
+    best, best_score, found = None, -math.inf, 0
+    for _ in range(OBLIQUE_CROP_TRIES):
+        x = int(rng.integers(0, view.shape[1] - w + 1))
+        y = int(rng.integers(0, view.shape[0] - h + 1))
+        on_photo = apply(back, corners + [x, y])
+        if (on_photo[:, 0].min() < mx or on_photo[:, 0].max() > pw - 1 - mx
+                or on_photo[:, 1].min() < my or on_photo[:, 1].max() > ph - 1 - my):
+            continue
+        score = texture_score(view[y:y + h, x:x + w], shrink)
+        if score > best_score:
+            best, best_score = (x, y), score
+        found += 1
+        if found == N_CROP_CANDIDATES:
+            break
+    return best
 
 
 def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.random.Generator,
-                      high_size: Tuple[int, int] = OBLIQUE_HIGH_SIZE,
+                      high_size: Optional[Tuple[int, int]] = None,
                       low_max: Tuple[int, int] = LOW_MAX, source: str = "") -> ZoomPair:
     """A zoom pair whose *finer* image sees the scene obliquely and the coarser one frontally.
 
-    The high image is a crop of the photo compressed by ``tilt`` along a random longitude phi
-    (``affine_warp`` of ``tilted_linear(1, 0, tilt, phi)``, blurred along that axis as a camera
-    would); the low image is the whole photo zoomed out by ``ratio`` and turned by theta, as in
+    The high image is a crop of the photo turned by a random longitude phi and compressed by
+    ``tilt`` along x (``affine_warp`` of ``tilted_linear(1, phi, tilt, phi)``, blurred along that
+    axis as a camera would); the low image is the whole photo zoomed out by ``ratio`` and turned by theta, as in
     ``make_zoom_pair`` (grey-level change, noise, a window of at most ``low_max``). The
     directional ratios (high px per low px) are ``ratio`` and ``ratio / tilt``: below 1 the
     finer image is coarser than the other along one axis, which only a view of the coarser image
     undoes. The crop is the most textured (measured at the mean shrink ``ratio / sqrt(tilt)``) of
-    6 random crops lying wholly on the photo. ``truth`` is the exact 2x3 affine map high px ->
-    low px. ``rng`` draws, in order: phi, the crop positions, theta, gain, offset, noise std, the
+    6 random crops lying wholly on the photo, of ``high_size`` (None: ``oblique_high_size``;
+    0.8x smaller, up to ``OBLIQUE_CROP_SHRINKS`` times, where the view holds none).
+    ``truth`` is the exact 2x3 affine map high px -> low px. ``rng`` draws, in order: phi, the crop positions, theta, gain, offset, noise std, the
     window offset and the noise.
 
     >>> img = np.random.default_rng(0).uniform(0, 255, (600, 800)).astype(np.float32)
@@ -517,32 +565,29 @@ def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rand
     photo = np.asarray(photo, dtype=np.float32)
     if not (ratio >= 1.0 and tilt >= 1.0):
         raise ValueError(f"ratio and tilt must be >= 1, got {ratio}, {tilt}")
+    high_size = high_size or oblique_high_size(ratio, tilt)
     longitude = float(rng.uniform(*LONGITUDE_RANGE))
-    oblique, to_oblique = affine_warp(photo, tilted_linear(1.0, 0.0, tilt, longitude))
+    # the photo turned by phi, then compressed along x: the oblique camera's frame is aligned
+    # with its compression (a thin slanted band would hold no crop of a steep view)
+    oblique, to_oblique = affine_warp(photo, tilted_linear(1.0, longitude, tilt, longitude))
     back = invert(to_oblique)
     ph, pw = photo.shape
     oh, ow = oblique.shape
     w, h = min(int(high_size[0]), ow // 2), min(int(high_size[1]), oh // 2)
-    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
-    mx, my = int(BORDER_MARGIN_FRAC * pw), int(BORDER_MARGIN_FRAC * ph)
     shrink = ratio / math.sqrt(tilt)
-    best, best_score, found = None, -math.inf, 0
-    for _ in range(OBLIQUE_CROP_TRIES):
-        x, y = int(rng.integers(0, ow - w + 1)), int(rng.integers(0, oh - h + 1))
-        on_photo = apply(back, corners + [x, y])
-        if (on_photo[:, 0].min() < mx or on_photo[:, 0].max() > pw - 1 - mx
-                or on_photo[:, 1].min() < my or on_photo[:, 1].max() > ph - 1 - my):
-            continue
-        score = texture_score(oblique[y:y + h, x:x + w], shrink)
-        if score > best_score:
-            best, best_score = (x, y), score
-        found += 1
-        if found == N_CROP_CANDIDATES:
+    best = None
+    for _ in range(OBLIQUE_CROP_SHRINKS + 1):  # a smaller crop where the view is too narrow
+        if min(w, h) < OBLIQUE_MIN_CROP_PX:
             break
+        best = _crop_on_photo(oblique, back, (pw, ph), (w, h), shrink, rng)
+        if best is not None:
+            break
+        w, h = int(w * 0.8), int(h * 0.8)
     if best is None:
         raise ValueError(f"photo {pw}x{ph} seen at tilt {tilt:g} holds no {w}x{h} crop; use a "
                          f"smaller high_size")
     x, y = best
+    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
     high = np.ascontiguousarray(oblique[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
     gain = float(rng.uniform(*GAIN_RANGE))

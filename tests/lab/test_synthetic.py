@@ -187,5 +187,5 @@ def test_an_oblique_pair_says_when_the_photo_holds_no_crop(raccoon):
     from scalematch.lab.synthetic import make_oblique_pair
 
     with pytest.raises(ValueError, match="holds no"):
-        make_oblique_pair(raccoon[:200, :200], 2.0, 8.0, np.random.default_rng(0),
+        make_oblique_pair(raccoon[:100, :100], 2.0, 8.0, np.random.default_rng(0),
                           high_size=(180, 180))
