@@ -175,11 +175,31 @@ def _inside_fraction(t, high_shape, low_shape) -> float:
     return float(ok.mean())
 
 
-def folded(t: np.ndarray) -> bool:
-    """True when the transform's linear part flips orientation (negative determinant)."""
+def folded(t: np.ndarray, high_shape=None) -> bool:
+    """True when the transform turns the high image over (a mirror image) somewhere on it.
+
+    A 2x3 map: its linear part's determinant is not positive. A homography H: its Jacobian at
+    a pixel p has the determinant ``det(H) / w(p)^3`` (``w`` the third coordinate of H p), so it
+    keeps the orientation over the image (``high_shape``; None: at its origin only) when ``w``
+    has one sign at every corner (the horizon w = 0 does not cross the image: ``w`` is affine)
+    and ``det(H)`` has that sign too. (The top-left 2x2 block is that Jacobian only when H is
+    affine: a steep perspective map 0.7 px from the truth was called folded, issue 19.)
+
+    >>> folded(np.array([[1.0, 0, 0], [0, -1.0, 0]]))  # a mirror
+    True
+    >>> h = np.array([[0.3, 0.0, 0.0], [0.0, 0.3, 0.0], [-1e-3, 0.0, 1.0]])  # w = 1 - x / 1000
+    >>> folded(h, (480, 640)), folded(h, (480, 1280)), folded(-h, (480, 640))
+    (False, True, False)
+    """
     t = np.asarray(t, np.float64)
-    a = t[:2, :2] / t[2, 2] if t.shape == (3, 3) else t[:2, :2]
-    return float(np.linalg.det(a)) <= 0.0
+    if t.shape == (2, 3):
+        return float(np.linalg.det(t[:, :2])) <= 0.0
+    h, w = (1, 1) if high_shape is None else high_shape[:2]
+    corners = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], np.float64)
+    depth = corners @ t[2]
+    if not (np.all(depth > 0) or np.all(depth < 0)):
+        return True  # the horizon crosses the image
+    return float(np.linalg.det(t)) * float(np.sign(depth[0])) <= 0.0
 
 
 def chance_probability(threshold_px: float, low_shape, model: str, oriented: bool,
@@ -326,7 +346,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     inside = _inside_fraction(t, high_shape, low_shape)
     evidence = replace(evidence, implied_ratio=best.row.ratio, footprint_area_px=area,
                        footprint_inside=inside)
-    if folded(t):
+    if folded(t, high_shape):
         return no("the transform folds the high image over (a mirror image): not a view of it")
     if area < params.min_area_px:
         return no(f"the high image would cover only {area:.0f} px^2 of the low image")

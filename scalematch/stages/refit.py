@@ -123,7 +123,7 @@ def richer_model(fit: Refit, view: View, best, config, coarser: Optional[View] =
     k = len(inliers)
     for richer in check.models:
         est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
-        if est.transform is None or folded(est.transform):
+        if est.transform is None or folded(est.transform, view.source_shape):
             continue
         if check.clearly_more(est.n_inliers, k):
             inl = est.inliers
@@ -159,7 +159,7 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config,
     src, dst = pool
     before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
     est = refine(model, t, src, dst, config.ransac)
-    if est.n_inliers < before or folded(est.transform):
+    if est.n_inliers < before or folded(est.transform, view.source_shape):
         return fit
     keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
         config.ransac.threshold_px
@@ -193,7 +193,7 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, config,
     if not check.clearly_more(len(src), before):
         return fit  # no homography could explain enough more: the fit is not tried (same answer)
     est = estimate("homography", src, dst, config.ransac, seed=config.seed)
-    if est.transform is None or folded(est.transform):
+    if est.transform is None or folded(est.transform, view.source_shape):
         return fit
     if check.clearly_more(est.n_inliers, before):
         inl = est.inliers

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -98,6 +98,8 @@ class View:
     #: (h', w') float32 distance (view px) to the nearest pixel outside the high image, or None
     #: when every pixel of the view shows the high image
     inside_distance: object = field(default=None, repr=False)
+    #: (h, w) of the image viewed (None: unknown), where a map found through the view must hold
+    source_shape: Optional[Tuple[int, int]] = None
 
     @property
     def is_identity(self) -> bool:
@@ -121,7 +123,8 @@ def view_plan(params: ViewParams) -> List[List[Tuple[float, float]]]:
 
 
 def identity_view(high: np.ndarray) -> View:
-    return View(1.0, 0.0, high, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+    return View(1.0, 0.0, high, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+                source_shape=tuple(high.shape[:2]))
 
 
 def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
@@ -152,7 +155,7 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     inside = cv2.resize(inside, (nw, ch), interpolation=cv2.INTER_NEAREST)
     to_view = compose(resize_map(nw / cw, 1.0), turn)
     dist = cv2.distanceTransform(inside, cv2.DIST_L2, 3)
-    return View(float(tilt), float(longitude_deg), img, to_view, dist)
+    return View(float(tilt), float(longitude_deg), img, to_view, dist, (h, w))
 
 
 def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:

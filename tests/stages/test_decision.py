@@ -168,3 +168,25 @@ def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
     verdict = decide(outcomes, (768, 1024), (480, 640), Config(), look=_look(grown=0, margin=0.3))
     assert verdict.matched and verdict.inliers.shape == (5, 4)
     assert np.allclose(verdict.transform, t)
+
+
+def test_a_perspective_map_is_folded_only_where_it_turns_the_image_over(raccoon):
+    """Issue 19: whether a homography folds the high image cannot depend on where the coarser
+    image's origin is. The exact truth of a perspective pair (local ratio 2 to 16) shifted by
+    (-3000, 2000) coarser px is the same map up to a translation: not folded, though its
+    top-left 2x2 block (the old test) has a negative determinant there. Mirrored, or with the
+    horizon (w = 0) moved into the image, it is folded."""
+    from scalematch.lab.synthetic import make_perspective_pair
+    from scalematch.stages.decision import folded
+
+    pair = make_perspective_pair(raccoon, 2.0, 8.0, np.random.default_rng(1))
+    shifted = np.array([[1.0, 0.0, -3000.0], [0.0, 1.0, 2000.0], [0.0, 0.0, 1.0]]) @ pair.truth
+    shifted /= shifted[2, 2]
+    assert np.linalg.det(shifted[:2, :2]) < 0  # what the old test read as a mirror
+    for h in (pair.truth, shifted, -shifted):
+        assert not folded(h, pair.high.shape)
+    assert folded(shifted @ np.diag([-1.0, 1.0, 1.0]), pair.high.shape)
+    hh, ww = pair.high.shape
+    horizon = pair.truth.copy()
+    horizon[2] = [2.0 / ww, 0.0, -1.0]  # w = 2x / W - 1: zero across the middle of the image
+    assert folded(horizon, pair.high.shape)
