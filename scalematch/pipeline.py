@@ -556,7 +556,7 @@ def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
     """The finer image of ``direction`` detected at every scale, as its pass 0 did (kept in
     ``memo.plain``; detected here when that step did not run, its score unset)."""
     if direction not in memo.plain:
-        lo_img, hi_img = direction.coarser_finer(work.low, work.high)
+        hi_img = direction.coarser_finer(work.low, work.high)[1]
         view = tilt_view(hi_img, 1.0, 0.0)
         detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
             hi_img, cfg.harris), known=memo.coarser.get(direction.other))
