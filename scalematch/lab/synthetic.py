@@ -203,6 +203,13 @@ def window_offset(canvas_wh: Tuple[int, int], footprint: np.ndarray, low_max: Tu
     return out[0], out[1], ww, wh
 
 
+def grey_change(rng: np.random.Generator) -> Tuple[float, float, float]:
+    """(gain, offset, noise std) of a low image's grey-level change (EVALUATION.md step 2),
+    drawn in that order from ``GAIN_RANGE``, ``OFFSET_RANGE`` and ``NOISE_STD_RANGE``."""
+    return (float(rng.uniform(*GAIN_RANGE)), float(rng.uniform(*OFFSET_RANGE)),
+            float(rng.uniform(*NOISE_STD_RANGE)))
+
+
 def degrade(image: np.ndarray, gain: float, offset: float, noise_std: float,
             rng: np.random.Generator) -> np.ndarray:
     """gain * image + offset + N(0, noise_std^2), rounded and clipped to 0..255, float32."""
@@ -246,9 +253,7 @@ def zoom_pair_from_crop(photo: np.ndarray, crop: Tuple[int, int, int, int], rati
     x, y, w, h = (int(v) for v in crop)
     high = np.ascontiguousarray(photo[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
-    gain = float(rng.uniform(*GAIN_RANGE))
-    offset = float(rng.uniform(*OFFSET_RANGE))
-    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    gain, offset, noise_std = grey_change(rng)
     canvas, warp = zoom_warp(photo, ratio, angle)
     low, truth, window = cut_low(canvas, compose(warp, _translation(x, y)), (w, h), low_max,
                                  gain, offset, noise_std, rng)
@@ -465,9 +470,7 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
     high = np.ascontiguousarray(photo[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
     longitude = float(rng.uniform(*LONGITUDE_RANGE))
-    gain = float(rng.uniform(*GAIN_RANGE))
-    offset = float(rng.uniform(*OFFSET_RANGE))
-    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    gain, offset, noise_std = grey_change(rng)
     canvas, warp = affine_warp(photo, tilted_linear(ratio, angle, tilt, longitude))
     low, truth, window = cut_low(canvas, compose(warp, _translation(x, y)), (w, h), low_max,
                                  gain, offset, noise_std, rng)
@@ -590,9 +593,7 @@ def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rand
     corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
     high = np.ascontiguousarray(oblique[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
-    gain = float(rng.uniform(*GAIN_RANGE))
-    offset = float(rng.uniform(*OFFSET_RANGE))
-    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    gain, offset, noise_std = grey_change(rng)
     canvas, warp = zoom_warp(photo, ratio, angle)
     low, truth, window = cut_low(canvas, compose(warp, compose(back, _translation(x, y))),
                                  (w, h), low_max, gain, offset, noise_std, rng)
@@ -719,9 +720,7 @@ def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
     high = np.ascontiguousarray(photo[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
     direction = float(rng.uniform(0.0, 360.0))
-    gain = float(rng.uniform(*GAIN_RANGE))
-    offset = float(rng.uniform(*OFFSET_RANGE))
-    noise_std = float(rng.uniform(*NOISE_STD_RANGE))
+    gain, offset, noise_std = grey_change(rng)
     hom, g, r_c = perspective_homography(ratio, spread, angle, direction, crop)
     c = np.array([x + (w - 1) / 2.0, y + (h - 1) / 2.0])
     ph, pw = photo.shape
