@@ -39,7 +39,7 @@ from .stages.probe import probe_scores, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, keep_inside, tilt_view
+from .stages.views import View, identity_view, keep_inside, tilt_view
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
@@ -557,7 +557,7 @@ def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
     ``memo.plain``; detected here when that step did not run, its score unset)."""
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(work.low, work.high)[1]
-        view = tilt_view(hi_img, 1.0, 0.0)
+        view = identity_view(hi_img)
         detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
             hi_img, cfg.harris), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
@@ -615,7 +615,7 @@ def final_fit(attempt: Attempt, config: Config):
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
     fit = refit_in_high(view, attempt.verdict, best, config, coarser)
-    fit = richer_model(fit, view, best, config, coarser)
+    fit = richer_model(fit, view, best, config)  # a fit through a coarser view is affine already
     fit = pooled_refit(fit, view, attempt.outcomes, config, coarser)
     return union_homography(fit, view, attempt.outcomes, config, coarser)
 

@@ -5,7 +5,8 @@ finer image itself, then passes of simulated tilted views, each pass run only wh
 before found nothing; with the automatic order, each pass in both directions (which image is
 the coarser one). A pass views the finer image first, then the coarser one (issue 19: where
 the finer image is the oblique one, it is coarser than the other along one axis, and only a
-view of the coarser image brings the pair back within the scales searched). :func:`search_plan` writes that down as a tuple of :class:`Step`;
+view of the coarser image brings the pair back within the scales searched).
+:func:`search_plan` writes that down as a tuple of :class:`Step`;
 :func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
 step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are
 pure functions of the configuration and of what the steps found (:class:`Attempt`).
@@ -103,10 +104,10 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     directions = [d for d in order if scales[d]]
     passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
                         if model_of(config.model).has_ratio else [])
-    sides = ("finer", "coarser") if config.views.coarser else ("finer",)
+    sides = SIDES if config.views.coarser else SIDES[:1]
     return tuple(Step(d, k, views, tuple(scales[d]),
                       len(views) if k == 0 else config.views.full_searches, side)
-                 for k, views in enumerate(passes) for side in (sides if k else ("finer",))
+                 for k, views in enumerate(passes) for side in (sides if k else SIDES[:1])
                  for d in directions)
 
 

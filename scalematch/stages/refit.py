@@ -109,7 +109,7 @@ def refit_in_high(view: View, verdict: Decision, best, config,
     return est.transform, np.hstack([src[inl], dst[inl]]), model
 
 
-def richer_model(fit: Refit, view: View, best, config, coarser: Optional[View] = None) -> Refit:
+def richer_model(fit: Refit, view: View, best, config) -> Refit:
     """A richer model when the similarity explains too little of the winning scale.
 
     The candidates of the winning scale are refit with each of ``config.model_check.models``;
@@ -118,7 +118,7 @@ def richer_model(fit: Refit, view: View, best, config, coarser: Optional[View] =
     """
     t, inliers, model = fit
     check = config.model_check
-    if not check.enabled or model != "similarity" or not view.is_identity or coarser is not None:
+    if not check.enabled or model != "similarity" or not view.is_identity:
         return fit
     k = len(inliers)
     for richer in check.models:
