@@ -53,6 +53,10 @@ OUTLINE_PER_PX = 1.0 / 300
 #: Below this ratio the verdict does not call either image the finer one (5 %: a ratio found at
 #: 1.000 either way round, EXIF-turned crops of one photo, was reported swapped by chance)
 NEAR_ONE_RATIO = 1.05
+#: Caption strips that would cover more than this share of the overlay's height go in bands
+#: above and below the picture instead: on a 296x222 low image (an oblique pair's coarser crop)
+#: the strips covered 70 % of it, on the 1024x768 benchmark images they cover 39 %
+MAX_CAPTION_SHARE = 0.5
 #: The files ``write_outputs`` writes into its folder.
 OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
@@ -99,18 +103,25 @@ def text_style(width: int) -> Tuple[float, int, int]:
     return scale, max(1, int(round(scale * 1.2))), max(6, int(round(6 * scale)))
 
 
+def _layout(lines: Sequence[str], width: int) -> Tuple[list, int, int]:
+    """(``lines`` wrapped at ``width`` px, their line step px, the strip's height px)."""
+    scale, thick, margin = text_style(width)
+    lines = [part for s in lines if s for part in _wrap(s, scale, thick, width - 2 * margin)]
+    (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
+    step = th + base + margin
+    return lines, step, (step * len(lines) + margin) if lines else 0
+
+
 def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.ndarray:
     """Draw ``lines`` of white text on a translucent dark strip inside ``image`` (in place),
     the text scaled with the picture (:func:`text_style`), wrapped at its width."""
     h, w = image.shape[:2]
-    lines = [s for s in lines if s]
+    lines, step, strip = _layout(lines, w)
     if not lines:
         return image
     scale, thick, margin = text_style(w)
-    lines = [part for s in lines for part in _wrap(s, scale, thick, w - 2 * margin)]
-    (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
-    step = th + base + margin
-    strip = min(step * len(lines) + margin, h)
+    (_, th), _ = cv2.getTextSize("Ag", FONT, scale, thick)
+    strip = min(strip, h)
     y0 = 0 if where == "top" else h - strip
     region = image[y0:y0 + strip]
     region[:] = (region * 0.35).astype(np.uint8)
@@ -228,7 +239,8 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
 
     Returns
     -------
-    (H, W, 3) uint8 array, BGR
+    (H, W, 3) uint8 array, BGR; (H + bands, W, 3) when the captions would cover more than
+    ``MAX_CAPTION_SHARE`` of the picture: they are then drawn in bands above and below it
     """
     low_bgr = to_bgr8(low)
     hh, ww = low_bgr.shape[:2]
@@ -266,11 +278,16 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
             cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
                        cv2.LINE_AA, shift=4)
         lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
-    caption(out, lines)
-    caption(out, footer, where="bottom")
+    strips = _layout(lines, ww)[2] + _layout(footer, ww)[2]
+    inside = strips <= MAX_CAPTION_SHARE * hh
+    if inside:
+        caption(out, lines)
+        caption(out, footer, where="bottom")
     if outline is not None:  # after the caption: its dark strip must not hide the outline
         cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
-    return out
+    if inside:
+        return out
+    return np.vstack([_band(lines, ww), out] + ([_band(footer, ww)] if any(footer) else []))
 
 
 def clip_polygon(points: np.ndarray, box: Tuple[float, float, float, float]) -> np.ndarray:
@@ -371,10 +388,8 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
 
 def _band(lines: Sequence[str], width: int) -> np.ndarray:
     """A dark strip ``width`` px wide holding ``lines`` of caption (to stack above a picture)."""
-    scale, thick, margin = text_style(width)
-    lines = [part for s in lines for part in _wrap(s, scale, thick, width - 2 * margin)]
-    (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
-    band = np.full(((th + base + margin) * len(lines) + 2 * margin, width, 3), 40, np.uint8)
+    lines, step, strip = _layout(lines, width)
+    band = np.full((strip + text_style(width)[2], width, 3), 40, np.uint8)
     return caption(band, lines)
 
 

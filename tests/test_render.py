@@ -149,32 +149,63 @@ def test_write_outputs(tmp_path, pair):
     assert paths["matches.csv"].read_text().strip() == "x_high,y_high,x_low,y_low"
 
 
-def test_overlay_outlines_the_border_when_high_covers_all_of_low(raccoon):
-    """high (the whole photo) covers more than the whole low image (a 400x300 crop of it,
-    shrunk by 2): the footprint runs beyond the picture on every side, so its outline follows
-    the picture's edges, all the way round, over the caption strips too (drawn before them, the
-    strips' dimming hid the outline's top and bottom parts)."""
-    x0, y0, f = 300, 200, 2.0
-    low = cv2.resize(raccoon[y0:y0 + 300, x0:x0 + 400], (200, 150), interpolation=cv2.INTER_AREA)
+def border_pair(raccoon, x0, y0, w, h, f):
+    """(low, t): low a w x h crop of the photo at (x0, y0) shrunk by f; t maps the whole photo
+    (the high image) onto it, so its footprint runs beyond every side of low."""
+    low = cv2.resize(raccoon[y0:y0 + h, x0:x0 + w], (round(w / f), round(h / f)),
+                     interpolation=cv2.INTER_AREA)
     # high px -> low px, centre convention: x_low = (x_high + 0.5 - x0) / f - 0.5
     t = np.array([[1 / f, 0, (0.5 - x0) / f - 0.5], [0, 1 / f, (0.5 - y0) / f - 0.5]])
     corners = footprint(t, raccoon.shape)
-    assert corners[:, 0].min() < 0 and corners[:, 0].max() > 200  # beyond every side
-    assert corners[:, 1].min() < 0 and corners[:, 1].max() > 150
-    out = overlay(low, raccoon, make_result(t, high_shape=raccoon.shape),
-                  footer=["low: low.png   high: high.png"])  # as write_outputs draws it
-    mask = outline_mask(out)
-    edge = 3  # px from the border the outline (2 px thick, inside the picture) is looked for
+    assert corners[:, 0].min() < 0 and corners[:, 0].max() > low.shape[1]  # beyond every side
+    assert corners[:, 1].min() < 0 and corners[:, 1].max() > low.shape[0]
+    return low, t
+
+
+def assert_outlined_all_round(mask: np.ndarray, edge: int = 3) -> None:
+    """The outline (2 px thick, inside the picture) runs along all four sides of ``mask``
+    (within ``edge`` px of the border) and nowhere inside."""
     sides = {"left": mask[:, :edge].any(axis=1), "right": mask[:, -edge:].any(axis=1),
              "top": mask[:edge].any(axis=0), "bottom": mask[-edge:].any(axis=0)}
     for side, hit in sides.items():
         assert hit.mean() > 0.97, (side, hit.mean())  # all along (round corners aside)
+    assert not mask[2 * edge:-2 * edge, 2 * edge:-2 * edge].any()
+
+
+def test_overlay_outlines_the_border_when_high_covers_all_of_low(raccoon):
+    """high (the whole photo) covers more than the whole low image (an 800x600 crop of it,
+    shrunk by 2): the footprint runs beyond the picture on every side, so its outline follows
+    the picture's edges, all the way round, over the caption strips too (drawn before them, the
+    strips' dimming hid the outline's top and bottom parts)."""
+    low, t = border_pair(raccoon, 100, 100, 800, 600, 2.0)
+    out = overlay(low, raccoon, make_result(t, high_shape=raccoon.shape),
+                  footer=["low: low.png   high: high.png"])  # as write_outputs draws it
+    assert out.shape == low.shape + (3,)  # the captions fit inside the picture
+    edge = 3
+    assert_outlined_all_round(outline_mask(out), edge)
     # the caption strips are there (dark behind their text), under the outline's top and
     # bottom parts
     assert out[edge + 2:20, edge + 2:-edge - 2].mean() < 0.6 * low[edge + 2:20].mean()
     assert out[-20:-edge - 2, edge + 2:-edge - 2].mean() < 0.6 * low[-20:-edge - 2].mean()
-    # inside, away from the border, no outline: the footprint's edges are all outside
-    assert not mask[2 * edge:-2 * edge, 2 * edge:-2 * edge].any()
+
+
+def test_the_captions_of_a_small_overlay_go_above_and_below_the_picture(raccoon):
+    """On a 200x150 low image the caption strips would cover more than half of the picture
+    (MAX_CAPTION_SHARE): they are bands above and below it, and the whole picture shows: its
+    blue channel (low, where the high image covers it all) is low itself, outlined all round."""
+    low, t = border_pair(raccoon, 300, 200, 400, 300, 2.0)
+    out = overlay(low, raccoon, make_result(t, high_shape=raccoon.shape),
+                  footer=["low: low.png   high: high.png"])
+    h = low.shape[0]
+    assert out.shape[1] == low.shape[1] and out.shape[0] > h
+    # where the picture sits: the offset at which the blue channel is low (the outline aside)
+    gaps = [np.mean(np.abs(out[k + 8:k + h - 8, 8:-8, 0].astype(float) - low[8:-8, 8:-8]))
+            for k in range(out.shape[0] - h + 1)]
+    top = int(np.argmin(gaps))
+    assert gaps[top] < 1.0  # the picture undimmed: no strip over it
+    assert top > 20 and out.shape[0] - h - top > 10  # a band above (3 lines), one below
+    assert_outlined_all_round(outline_mask(out[top:top + h]))
+    assert not outline_mask(out[:top]).any()  # the bands hold text only
 
 
 def test_told_apart_names_two_files_of_the_same_name_by_their_folders():
