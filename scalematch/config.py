@@ -18,7 +18,7 @@ from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.matcher import MatcherParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
-from .stages.views import STEEP_PASSES, ViewParams
+from .stages.views import TILT4_PASSES, ViewParams
 
 #: Names of the models the robust estimator can fit (the records: ``stages.estimator.MODELS``).
 MODELS = tuple(_MODEL_RECORDS)
@@ -185,10 +185,10 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     "default-no-probe": lambda: Config(probe=ProbeParams(enabled=False)),
     # the default on 15 scales 1-11.3 (quarter octaves)
     "default-quarter-octaves": lambda: Config(scales=geometric_scales(1.0, 12.0, 4)),
-    # the default with a third pass of steeper views (tilts 6 and 8), run only when the passes
-    # at t = 2 and 4 found nothing (issue 19; docs/STEEP.md: tilted zoom pairs at t = 5.66
-    # and 8 solved, the null set's claims and the time a "no" then takes)
-    "steep": lambda: Config(views=ViewParams(passes=STEEP_PASSES)),
+    # the default without its third pass of views (t = 6 and 8): tilts up to about 6 solved, a
+    # "no" about 2.3x sooner (issue 19; docs/STEEP.md section 11). The default until the third
+    # pass joined it (it was then the ``steep`` preset)
+    "tilt-4": lambda: Config(views=ViewParams(passes=TILT4_PASSES)),
     # the default with a time budget of 1 s (issues 16 and 19): no step of the plan starts
     # after 1 s, so a "no" costs about that much; docs/NULLS-BUDGET.md measures it on the null
     # set (what a "no" then costs, and that no claim appears)

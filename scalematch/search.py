@@ -88,27 +88,46 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     of views (``config.views``) follow, for models with a ratio (a fundamental matrix has no
     view to refit). With ``config.order == "auto"`` each pass runs the given direction first;
     each pass of views runs the finer image's views (both directions), then, with
-    ``config.views.coarser``, the coarser image's.
+    ``config.views.coarser``, the coarser image's (:func:`coarser_viewed`).
 
     >>> from scalematch.config import Config
     >>> plan = search_plan(Config(), {Direction.GIVEN: (1.0, 2.0), Direction.SWAPPED: (1.0,)})
     >>> [(str(s.direction)[0], s.view_pass, s.side[0], len(s.views)) for s in plan]
     ... # doctest: +NORMALIZE_WHITESPACE
     [('g', 0, 'f', 1), ('s', 0, 'f', 1), ('g', 1, 'f', 5), ('s', 1, 'f', 5), ('g', 1, 'c', 5),
-     ('s', 1, 'c', 5), ('g', 2, 'f', 10), ('s', 2, 'f', 10), ('g', 2, 'c', 10), ('s', 2, 'c', 10)]
+     ('s', 1, 'c', 5), ('g', 2, 'f', 10), ('s', 2, 'f', 10), ('g', 2, 'c', 10), ('s', 2, 'c', 10),
+     ('g', 3, 'f', 35), ('s', 3, 'f', 35), ('g', 3, 'c', 35), ('s', 3, 'c', 35)]
     """
     order = (Direction.GIVEN, Direction.SWAPPED) if config.order == "auto" else (Direction.GIVEN,)
-    sides = finer_sides or {}
-    scales = {d: within_reach(scales.get(d, ()), sides.get(d), config.min_footprint_px)
+    known = finer_sides or {}
+    scales = {d: within_reach(scales.get(d, ()), known.get(d), config.min_footprint_px)
               for d in order}
     directions = [d for d in order if scales[d]]
     passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
                         if model_of(config.model).has_ratio else [])
+    viewed = {"finer": directions,
+              "coarser": coarser_viewed(directions, known, config.views.coarser_directions)}
     sides = SIDES if config.views.coarser else SIDES[:1]
     return tuple(Step(d, k, views, tuple(scales[d]),
                       len(views) if k == 0 else config.views.full_searches, side)
                  for k, views in enumerate(passes) for side in (sides if k else SIDES[:1])
-                 for d in directions)
+                 for d in viewed[side])
+
+
+def coarser_viewed(directions: Sequence[Direction], finer_sides: Mapping[Direction, float],
+                   how: str) -> Tuple[Direction, ...]:
+    """The directions whose coarser image is viewed (``ViewParams.coarser_directions``): all of
+    ``directions`` for "both"; for "one", the direction whose coarser image (the other
+    direction's finer one, longer side ``finer_sides``) is the smaller, the first on a tie or
+    when the sides are unknown.
+
+    >>> coarser_viewed([Direction.GIVEN, Direction.SWAPPED],
+    ...                {Direction.GIVEN: 400, Direction.SWAPPED: 1024}, "one")
+    (<Direction.SWAPPED: 'swapped'>,)
+    """
+    if how == "both" or len(directions) < 2:
+        return tuple(directions)
+    return (min(directions, key=lambda d: finer_sides.get(d.other, 0)),)
 
 
 @dataclass(frozen=True)

@@ -51,13 +51,18 @@ from scalematch.stages.views import ViewParams  # noqa: E402
 #: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
 VARIANTS = {
     "default": Config(),
-    "steep": Config.preset("steep"),
+    # the default without its third pass (t = 6 and 8): the default before issue 19's closing
+    "tilt-4": Config.preset("tilt-4"),
     # what a user who knows the pair is seen in perspective would ask for
     "homography": Config(model="homography"),
     # the default with a time budget of 1 s: what the budget costs on pairs that have an answer
     "budget-1s": Config.preset("budget-1s"),
     # the default without the views of the coarser image (before issue 19's item 2)
     "no-coarser": Config(views=ViewParams(coarser=False)),
+    # a third pass of tilt 8 alone (a sampling ratio of 2: 2, 4, 8), 20 views instead of 35
+    "steep8": Config(views=ViewParams(passes=((2.0,), (4.0,), (8.0,)))),
+    # the coarser image's views in one direction only (the smaller coarser image's)
+    "coarser-one": Config(views=ViewParams(coarser_directions="one")),
 }
 
 #: The Oxford pairs of issue 19 ("graf 1->5 and 1->6, wall 1->6, both directions")
@@ -89,7 +94,11 @@ def run_variant(name, pair):
     secs = time.perf_counter() - t0
     est = canonical(pair, r.transform if r.matched else None, r.order == "given")
     return {"matched": bool(r.matched), "seconds": secs, "error_px": pair_error(pair, est),
-            "view_tilt": r.evidence.view_tilt, "inliers": r.n_inliers, "reason": r.reason}
+            "view_tilt": r.evidence.view_tilt, "view_of": r.evidence.view_of, "order": r.order,
+            "inliers": r.n_inliers, "reason": r.reason,
+            # each step run: pass, side, direction, its views' best probe score, matched
+            "steps": [[s.view_pass, s.side, str(s.direction), s.probe_best, s.matched]
+                      for s in r.search]}
 
 
 def run_peer(pair):

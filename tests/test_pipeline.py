@@ -246,25 +246,25 @@ def test_the_search_record_says_what_ran(raccoon):
     found = match(pair.low, pair.high)
     assert [(str(r.direction), r.view_pass, r.matched) for r in found.search] == [
         ("given", 0, True)]
-    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 10
+    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 14
     none = match(raccoon[:300, :400], raccoon[400:, 500:900])
     assert not none.matched and none.evidence.stopped == "plan done"
     assert [(r.view_pass, r.side[0]) for r in none.search] == [
         (0, "f"), (0, "f"), (1, "f"), (1, "f"), (1, "c"), (1, "c"), (2, "f"), (2, "f"),
-        (2, "c"), (2, "c")]
+        (2, "c"), (2, "c"), (3, "f"), (3, "f"), (3, "c"), (3, "c")]
     # each pass's views of the finer image, then as many of the coarser one (issue 19)
-    assert none.evidence.searches == sum(r.views for r in none.search) == 2 + 2 * 30
+    assert none.evidence.searches == sum(r.views for r in none.search) == 2 + 4 * (5 + 10 + 35)
 
 
 def test_a_time_budget_stops_a_no_after_the_first_step_and_spares_a_plain_match(raccoon):
     """The budget is checked between steps, never before the first: a budget far smaller than
-    any step stops an unrelated pair after the given order's plain search (1 step of 10, the
+    any step stops an unrelated pair after the given order's plain search (1 step of 14, the
     reason says so), and a plain zoom pair, solved by that first step, still matches."""
     tiny = Config(time_budget_s=1e-6)
     none = match(raccoon[:300, :400], raccoon[400:, 500:900], tiny)
     assert not none.matched and none.evidence.stopped == "time budget"
     assert [(str(r.direction), r.view_pass) for r in none.search] == [("given", 0)]
-    assert "time budget of 1e-06 s ran out after 1 of 10 steps" in none.reason
+    assert "time budget of 1e-06 s ran out after 1 of 14 steps" in none.reason
     pair = _pair(raccoon, 3.0, 4)
     found = match(pair.low, pair.high, tiny)
     assert found.matched and _error(found, pair) < 1.0
@@ -364,16 +364,15 @@ def test_plain_zoom_pairs_keep_the_similarity(raccoon, ratio, seed):
 
 def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
     """Issue 19: a zoom pair at ratio 2 seen with a tilt of 8 (directional ratios 2 and 16):
-    today's views (t = 2, 4) find nothing; the ``steep`` preset's third pass (t = 6, 8) solves
-    it with a view at t = 8, within 1 px (measured 0.26 px)."""
+    the views at t = 2 and 4 (the ``tilt-4`` preset) find nothing; the default's third pass
+    (t = 6, 8) solves it with a view at t = 8, within 1 px (measured 0.26 px)."""
     from scalematch.lab.realpairs import Pair, canonical, pair_error
 
     pair = make_tilted_pair(raccoon, 2.0, 8.0, np.random.default_rng(1))
     truth = Pair("tilted", "raccoon t8", pair.low, pair.high, np.vstack([pair.truth, [0, 0, 1]]),
                  False, "homography", 2.0, 8.0)
-    plain = match(pair.low, pair.high)
-    assert not plain.matched
-    steep = match(pair.low, pair.high, Config.preset("steep"))
+    assert not match(pair.low, pair.high, Config.preset("tilt-4")).matched
+    steep = match(pair.low, pair.high)
     assert steep.matched, steep.reason
     assert steep.evidence.view_tilt == 8.0
     assert pair_error(truth, canonical(truth, steep.transform, steep.order == "given")) < 1.0
@@ -381,15 +380,15 @@ def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
 
 def test_a_tilt_of_6_is_solved_by_a_view_at_6(raccoon):
     """Issue 19: a zoom pair at ratio 2 seen with a tilt of 6 (directional ratios 2 and 12,
-    seed 2): today's views (t = 2, 4) find nothing; the ``steep`` preset solves it with a view
-    at t = 6, within 1 px (measured 0.14 px)."""
+    seed 2): the views at t = 2 and 4 (the ``tilt-4`` preset) find nothing; the default's third
+    pass solves it with a view at t = 6, within 1 px (measured 0.14 px)."""
     from scalematch.lab.realpairs import Pair, canonical, pair_error
 
     pair = make_tilted_pair(raccoon, 2.0, 6.0, np.random.default_rng(2))
     truth = Pair("tilted", "raccoon t6", pair.low, pair.high, np.vstack([pair.truth, [0, 0, 1]]),
                  False, "homography", 2.0, 6.0)
-    assert not match(pair.low, pair.high).matched
-    steep = match(pair.low, pair.high, Config.preset("steep"))
+    assert not match(pair.low, pair.high, Config.preset("tilt-4")).matched
+    steep = match(pair.low, pair.high)
     assert steep.matched, steep.reason
     assert steep.evidence.view_tilt == 6.0
     assert pair_error(truth, canonical(truth, steep.transform, steep.order == "given")) < 1.0

@@ -30,7 +30,9 @@ def test_the_plan_runs_each_pass_in_both_directions_given_first():
         (GIVEN, 1, "finer", 5), (SWAPPED, 1, "finer", 5),
         (GIVEN, 1, "coarser", 5), (SWAPPED, 1, "coarser", 5),
         (GIVEN, 2, "finer", 10), (SWAPPED, 2, "finer", 10),
-        (GIVEN, 2, "coarser", 10), (SWAPPED, 2, "coarser", 10)]
+        (GIVEN, 2, "coarser", 10), (SWAPPED, 2, "coarser", 10),
+        (GIVEN, 3, "finer", 35), (SWAPPED, 3, "finer", 35),
+        (GIVEN, 3, "coarser", 35), (SWAPPED, 3, "coarser", 35)]
     assert plan[1].scales == (1.0, 2.0) and plan[0].scales == (1.0, 2.0, 4.0)
     # progress units: 1 view detected + 1 matched at 3 scales; 5 views + 3 full searches at 3
     assert plan[0].cost == 6 and plan[2].cost == (5 + 3) * 3
@@ -43,11 +45,33 @@ def test_the_plan_runs_each_pass_in_both_directions_given_first():
 def test_the_coarser_image_is_viewed_only_when_asked():
     no_coarser = Config(views=ViewParams(coarser=False))
     assert {s.side for s in search_plan(no_coarser, BOTH)} == {"finer"}
-    assert len(search_plan(no_coarser, BOTH)) == 6
+    assert len(search_plan(no_coarser, BOTH)) == 8
+
+
+def test_one_direction_views_the_smaller_coarser_image():
+    """``coarser_directions="one"``: both directions' views of the coarser image reach the same
+    pairs (docs/STEEP.md section 11), so only the smaller coarser image, cheaper, is viewed."""
+    def viewed(views, finer_sides, order="auto"):
+        config = Config(order=order, views=views)
+        return [(s.direction, s.view_pass) for s in search_plan(config, BOTH, finer_sides)
+                if s.side == "coarser"]
+    one = ViewParams(coarser_directions="one")
+    # the given direction's finer image is the small one (400 px): the swapped direction's
+    # coarser image is then that small image, viewed in the swapped direction
+    small_high = {GIVEN: 400, SWAPPED: 1024}
+    passes = (1, 2, 3)
+    assert viewed(one, small_high) == [(SWAPPED, k) for k in passes]
+    assert viewed(one, {GIVEN: 1024, SWAPPED: 400}) == [(GIVEN, k) for k in passes]
+    assert viewed(one, {GIVEN: 800, SWAPPED: 800}) == [(GIVEN, k) for k in passes]  # a tie
+    # the default views both; with one direction searched, its coarser image is viewed
+    assert viewed(ViewParams(), small_high) == [(d, k) for k in passes for d in (GIVEN, SWAPPED)]
+    assert viewed(one, small_high, order="given") == [(GIVEN, k) for k in passes]
+    with pytest.raises(ValueError, match="coarser_directions"):
+        ViewParams(coarser_directions="either")
 
 
 def test_the_plan_follows_the_order_the_views_and_the_model():
-    assert [s.direction for s in search_plan(Config(order="given"), BOTH)] == [GIVEN] * 5
+    assert [s.direction for s in search_plan(Config(order="given"), BOTH)] == [GIVEN] * 7
     no_views = Config(views=ViewParams(enabled=False))
     assert [s.view_pass for s in search_plan(no_views, BOTH)] == [0, 0]
     # a fundamental matrix has no ratio, so no view to refit: the images themselves only

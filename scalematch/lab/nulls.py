@@ -428,7 +428,7 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
 
 
 #: The configurations a null set is run in (``Config.preset`` names)
-NULL_MODES = ("default", "paper", "steep", "budget-1s", "homography", "no-views")
+NULL_MODES = ("default", "paper", "tilt-4", "budget-1s", "homography", "no-views")
 
 
 def _config(mode: str, seed: int):
@@ -1032,7 +1032,8 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     ratios, photos, seed
         The pairs: ratios, the first ``photos`` photos (sorted by name; None: all), the seed.
     mode : str
-        A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "steep",
+        A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "tilt-4"
+        (the default without its views at tilts 6 and 8),
         "budget-1s" (the default with a 1 s time budget), "homography" (the default searching
         for a homography) or "no-views" (the default without tilted views, ``--no-views``).
     jobs : int
@@ -1240,8 +1241,9 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
 @click.option("--seed", type=int, default=0, show_default=True, help="The one seed of the run.")
 @click.option("--mode", type=click.Choice(NULL_MODES), default="default",
               show_default=True, help="scalematch's configuration (a preset: paper is "
-              "Config.paper(), steep the default with views at tilts 6 and 8, budget-1s the "
-              "default with --time-budget 1, homography the default with --model homography).")
+              "Config.paper(), tilt-4 the default without its views at tilts 6 and 8, budget-1s "
+              "the default with --time-budget 1, homography the default with --model "
+              "homography, no-views the default with --no-views).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (more than 1: one OpenCV thread each).")
 @click.option("--limit", type=click.IntRange(min=1), default=None,

@@ -22,13 +22,20 @@ from typing import List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
 
 
-#: The passes of the ``steep`` preset (issue 19): today's two, then tilts 6 and 8 together
-#: (longitude steps 72/t: 15 and 20 views), as far as MODS's steepest view synthesis (t = 8)
-STEEP_PASSES: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,), (6.0, 8.0))
+#: The passes of views (issue 19): t = 2, then 4, then 6 and 8 together (longitude steps 72/t:
+#: 5, 10, then 15 + 20 views), as far as MODS's steepest view synthesis (t = 8). Each pass runs
+#: only when every earlier one found nothing, so only a "no" pays for all of them
+#: (docs/STEEP.md section 11: 2.3x the time of a "no" with t = 2 and 4 only)
+PASSES: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,), (6.0, 8.0))
+#: The passes before issue 19's third one (the ``tilt-4`` preset): tilts up to about 6 solved
+TILT4_PASSES: Tuple[Tuple[float, ...], ...] = PASSES[:2]
+#: ``ViewParams.coarser_directions``: the coarser image's views in one direction of the search
+#: (the one whose coarser image is the smaller), or in both
+COARSER_DIRECTIONS = ("one", "both")
 
 
 @dataclass(frozen=True)
@@ -39,8 +46,9 @@ class ViewParams:
     #: passes of tilts, each run only when every earlier pass found nothing. Morel & Yu sample
     #: t = sqrt(2)^k; the gradient descriptor tolerates a tilt of about 2 on its own (measured
     #: on tilted zoom pairs, docs/BENCHMARKS.md), so views at t = 2 then 4 (a sampling ratio of
-    #: 2) cover tilts up to about 6 with 15 views instead of 27.
-    passes: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,))
+    #: 2) cover tilts up to about 6 with 15 views instead of 27; t = 6 and 8 reach 8 and more
+    #: (docs/STEEP.md: 92 % of the pairs at t = 6 and at t = 8, ratio 2, both orders)
+    passes: Tuple[Tuple[float, ...], ...] = PASSES
     #: longitude step at tilt t is ``longitude_step_deg / t`` over [0, 180) (Morel & Yu: 72)
     longitude_step_deg: float = 72.0
     #: anti-aliasing blur along the compressed axis: c * sqrt(t^2 - 1) px (Morel & Yu: c = 0.8)
@@ -50,6 +58,13 @@ class ViewParams:
     #: wide shot) its directional ratios are r and r / t, and below 1 no scale searched reaches
     #: them; a view of the coarser image compressed by t along that axis does (issue 19)
     coarser: bool = True
+    #: ... in "both" directions of the automatic order, or in "one": the one whose coarser
+    #: image is the smaller (shorter longer side; the given one on a tie), cheaper to detect.
+    #: Both reach the same pairs in principle (a pair whose finer image maps with singular
+    #: values s1 > 1 > s2: the given direction's views of tilt s1 / s2 at scale s1, the other's
+    #: at 1 / s2; docs/STEEP.md section 11), but not always in practice: "one" made a "no"
+    #: 0.84x as long (122 null runs) and solved 74 of the oblique set's 104 runs, "both" 80
+    coarser_directions: str = "both"
     #: views of a pass matched in full: the ones whose probe scores best (the others are only
     #: detected and probed, which costs about half a search)
     full_searches: int = 3
@@ -78,6 +93,7 @@ class ViewParams:
         for tilts in self.passes:
             for t in tilts:
                 in_range("views", "passes", t, lo=1)
+        one_of("views", "coarser_directions", self.coarser_directions, COARSER_DIRECTIONS)
         in_range("views", "longitude_step_deg", self.longitude_step_deg, lo=0, lo_open=True)
         for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
             in_range("views", name, getattr(self, name), lo=0)

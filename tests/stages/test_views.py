@@ -13,12 +13,13 @@ from scalematch.stages.views import (ViewParams, keep_inside, longitudes, tilt_v
 
 
 def test_longitudes_follow_morel_and_yu_sampling():
-    # step 72/t degrees over [0, 180): t = 2 -> 36 deg (5 views), t = 4 -> 18 deg (10 views)
+    # step 72/t degrees over [0, 180): t = 2 -> 36 deg (5 views), t = 4 -> 18 deg (10 views),
+    # t = 6 -> 12 deg (15), t = 8 -> 9 deg (20), the last two in one pass
     assert longitudes(2.0, 72.0) == pytest.approx([0, 36, 72, 108, 144])
     assert len(longitudes(4.0, 72.0)) == 10
     assert longitudes(1.0, 72.0) == [0.0]
     plan = view_plan(ViewParams())
-    assert [len(p) for p in plan] == [5, 10]
+    assert [len(p) for p in plan] == [5, 10, 15 + 20]
     assert view_plan(ViewParams(enabled=False)) == []
 
 
