@@ -209,17 +209,20 @@ def _coerce(text: str, current: Any, path: str) -> Any:
     return text
 
 
-def set_path(config: Any, path: str, value: Any) -> Any:
-    """A copy of the (nested, frozen) dataclass ``config`` with ``path`` ("a.b.c") set."""
+def set_path(config: Any, path: str, value: Any, whole: Optional[str] = None) -> Any:
+    """A copy of the (nested, frozen) dataclass ``config`` with ``path`` ("a.b.c") set
+    (``whole``: the path as the user wrote it, for the messages; ``path`` by default)."""
+    whole = whole or path
     head, _, rest = path.partition(".")
     if not dataclasses.is_dataclass(config) or head not in {f.name for f in dataclasses.fields(config)}:
         names = ", ".join(f.name for f in dataclasses.fields(config)) \
             if dataclasses.is_dataclass(config) else ""
-        raise ValueError(f"no parameter {path!r} (known here: {names})")
+        raise ValueError(f"no parameter {whole!r} (known here: {names})")
     if rest:
-        return dataclasses.replace(config, **{head: set_path(getattr(config, head), rest, value)})
+        return dataclasses.replace(config, **{head: set_path(getattr(config, head), rest, value,
+                                                             whole)})
     if isinstance(value, str):
-        value = _coerce(value, getattr(config, head), path)
+        value = _coerce(value, getattr(config, head), whole)
     return dataclasses.replace(config, **{head: value})
 
 

@@ -96,7 +96,7 @@ def test_set_takes_groups_of_tilts_for_the_view_passes():
 
     config = build_config("default", None, None, None, {}, ["views.passes=2;4;6,8"])
     assert config.views.passes == ((2.0,), (4.0,), (6.0, 8.0))
-    with pytest.raises(ValueError, match="passes needs a tuple value"):
+    with pytest.raises(ValueError, match="views.passes needs a tuple value"):
         build_config("default", None, None, None, {}, ["views.passes=2;x"])
     with pytest.raises(ValueError, match="views.passes"):
         build_config("default", None, None, None, {}, ["views.passes=2;0.5"])  # a tilt < 1
@@ -166,7 +166,7 @@ def _bad_input(tmp_path: Path, case: str):
     if case == "bad_scales":
         return [good, good, "--scales", "8-1"], "scales"
     if case == "bad_set":
-        return [good, good, "--set", "harris.nope=3"], "no parameter"
+        return [good, good, "--set", "harris.nope=3"], "no parameter 'harris.nope'"
     if case == "bad_set_value":
         return [good, good, "--set", "harris.threshold=abc"], "float"
     if case == "constant":
