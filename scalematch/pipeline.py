@@ -34,12 +34,13 @@ from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detec
 from .stages.estimator import estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
+from .stages.nodata import distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
 from .stages.probe import probe_scores, select_scales
 from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homography
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, identity_view, keep_inside, tilt_view
+from .stages.views import View, identity_view, tilt_view, valid_in
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
@@ -232,11 +233,14 @@ class LowFeatures:
 
 def describe_low(low: np.ndarray, config: Config, whitening,
                  contrast: Optional[Contrast] = None,
-                 grads: Optional[Gradients] = None) -> LowFeatures:
+                 grads: Optional[Gradients] = None,
+                 inside: Optional[np.ndarray] = None) -> LowFeatures:
     """The coarser image's points at s = 1 (``contrast``: its own, for adaptive detection;
-    measured here when not given; ``grads``: its gradients, when measured with it)."""
+    measured here when not given; ``grads``: its gradients, when measured with it; ``inside``:
+    the distance to its no-data region, :func:`stages.nodata.distance_inside`)."""
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
-    kp = detect_on_level(level, config.harris_low, contrast, grads)
+    kp = detect_on_level(level, config.harris_low, contrast, grads, inside,
+                         config.views.edge_margin_px)
     return LowFeatures(low, _describe(level, kp, config, whitening), kp)
 
 
@@ -290,17 +294,9 @@ def shares_first_level(config: Config) -> bool:
 
 def _detect(view: View, level: Level, config: Config, contrast: Optional[Contrast],
             grads: Optional[Gradients] = None) -> Keypoints:
-    """The points of one level of a view, away from its empty corners."""
-    return _inside(view, detect_on_level(level, config.harris, contrast, grads),
-                   config.views.edge_margin_px)
-
-
-def _inside(view: View, kp: Keypoints, margin_px: float) -> Keypoints:
-    """The keypoints of a simulated view that lie away from its empty corners."""
-    if view.inside_distance is None or len(kp) == 0:
-        return kp
-    ok = keep_inside(view, kp.xy, margin_px * kp.s)
-    return Keypoints(s=kp.s, xy=kp.xy[ok], response=kp.response[ok])
+    """The points of one level of a view, away from its empty corners and no-data regions."""
+    return detect_on_level(level, config.harris, contrast, grads, view.inside_distance,
+                           config.views.edge_margin_px)
 
 
 @dataclass(frozen=True)
@@ -502,7 +498,8 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo
                       meter: Meter) -> List[Candidate]:
     """Detect and probe each view of the finer image (at every scale) against the coarser
     image, described once per direction (``memo.coarser``)."""
-    lo_img, hi_img = step.direction.coarser_finer(work.low, work.high)
+    lo_img, hi_img = work.coarser_finer(step.direction)
+    lo_valid, hi_valid = work.valid(step.direction)
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
@@ -512,7 +509,7 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo
     # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
 
     def probe(key) -> Probed:
-        view = tilt_view(hi_img, *key, cfg.views)
+        view = tilt_view(hi_img, *key, cfg.views, hi_valid)
         return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
                                              memo.contrast(hi_img, cfg.harris), every),
                           coarser[step.direction], cfg)
@@ -523,9 +520,10 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
-        view = tilt_view(hi_img, *keys[0], cfg.views)
+        view = tilt_view(hi_img, *keys[0], cfg.views, hi_valid)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low)),
+            lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low),
+                                 distance_inside(lo_valid)),
             lambda: first_view(view)])
         probed.append(score_view(view, *detected, coarser[step.direction], cfg))
         keys = keys[1:]
@@ -546,8 +544,8 @@ def describe_coarser_view(view: View, config: Config, whitening,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
     image's own (the detector adapts to it as for the image itself)."""
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    kp = _inside(view, detect_on_level(level, config.harris_low, contrast),
-                 config.views.edge_margin_px)
+    kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
+                         config.views.edge_margin_px)
     return LowFeatures(view.image, _describe(level, kp, config, whitening), kp)
 
 
@@ -557,7 +555,7 @@ def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
     ``memo.plain``; detected here when that step did not run, its score unset)."""
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(work.low, work.high)[1]
-        view = identity_view(hi_img)
+        view = identity_view(hi_img, work.valid(direction)[1])
         detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
             hi_img, cfg.harris), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
@@ -574,7 +572,7 @@ def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, whitening, me
     contrast = memo.contrast(lo_img, cfg.harris_low)
 
     def probe(key) -> Candidate:
-        view = tilt_view(lo_img, *key, cfg.views)
+        view = tilt_view(lo_img, *key, cfg.views, work.valid(step.direction)[0])
         feats = describe_coarser_view(view, cfg, whitening, contrast)
         meter.tick()
         return score_view(plain.view, plain.detected, plain.probing, feats, cfg), feats, view
@@ -597,9 +595,13 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
                            memo.contrast(hi_img, cfg.harris))
         outcomes = tuple(finish_view(p, low_feats, cfg, whitening, meter.tick))
 
-        def look(t, outcome, view=p.view, low_feats=low_feats) -> Look:
-            return look_again(t, outcome.described, low_feats.described, view.image,
-                              low_feats.image, cfg)
+        coarser_shown = (valid_in(coarser_view) if coarser_view is not None
+                         else work.valid(step.direction)[0])
+
+        def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
+            return look_again(t, outcome.described, low_feats.described,
+                              with_nan(view.image, valid_in(view)),
+                              with_nan(low_feats.image, valid), cfg)
 
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg,
                          searches=searches, shown_scale=shown_scale(work, step.direction),
@@ -638,7 +640,7 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
         winner = strongest(attempts)
         return winner, (final_fit(winner, config) if winner is not None else None), None
     fits = [final_fit(a, config) for a in matched]
-    checks = [pixel_check(*a.step.direction.coarser_finer(work.low, work.high), fit[0])
+    checks = [pixel_check(*work.shown(a.step.direction), fit[0])
               for a, fit in zip(matched, fits)]
 
     def fitness(k: int) -> Tuple[float, float]:
@@ -682,9 +684,9 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     t, inliers, model = final
     has_ratio = model_of(model).has_ratio
     if has_ratio:
-        coarse, fine = winner.step.direction.coarser_finer(work.low, work.high)
+        coarse, fine = work.shown(winner.step.direction)
         common["evidence"], reason = final_checks(coarse, fine, t, evidence, config.decision,
-                                                  near)
+                                                  near, vouched=inliers[:, :2])
         if reason:
             return MatchResult(matched=False, reason=reason, **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,

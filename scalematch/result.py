@@ -72,6 +72,16 @@ class Evidence:
     #: of the search's: the map reported, an affine map or a homography where the view is tilted
     final_ncc: float = math.nan
     final_margin: float = math.nan
+    #: what judged the match unique: "geometry" (log10 NFA beyond
+    #: ``decision.max_log_nfa_geometry``, no second transform) or "pixels" (the tests above)
+    judged_by: str = ""
+    #: the strongest other transform among the winner's candidates
+    #: (``stages.decision.second_transform``): a repeated structure shows as one of the same
+    #: scale and angle, shifted, with comparable support
+    second_inliers: int = 0
+    second_log10_nfa: float = math.inf
+    second_gap_px: float = math.nan  #: its mean distance from the winner's map, px
+    second_alike: bool = False  #: the same scale and angle as the winner's
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

@@ -33,6 +33,7 @@ from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarse
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, read_reduced
 from .result import Direction, MatchResult
 from .stages.estimator import model_of
+from .stages.nodata import valid_mask, with_nan
 
 
 def working_factor(shape: Tuple[int, ...], max_side: Optional[int]) -> float:
@@ -58,6 +59,25 @@ class WorkImages:
     f_low: float
     f_high: float  #: ``high`` is the second image shrunk by this (the same)
     scales: Dict[Direction, Tuple[float, ...]] = field(repr=False)  #: each direction's scales
+    #: where each image shows the scene (:func:`scalematch.stages.nodata.valid_mask` at working
+    #: size; None: everywhere)
+    low_valid: Optional[np.ndarray] = field(default=None, repr=False)
+    high_valid: Optional[np.ndarray] = field(default=None, repr=False)
+
+    def coarser_finer(self, direction: Direction) -> Tuple[np.ndarray, np.ndarray]:
+        """(coarser, finer) images of ``direction``."""
+        return direction.coarser_finer(self.low, self.high)
+
+    def valid(self, direction: Direction) -> Tuple[Optional[np.ndarray], Optional[np.ndarray]]:
+        """(coarser, finer) valid masks of ``direction`` (None: the image shows the scene
+        everywhere)."""
+        return direction.coarser_finer(self.low_valid, self.high_valid)
+
+    def shown(self, direction: Direction) -> Tuple[np.ndarray, np.ndarray]:
+        """(coarser, finer) images of ``direction`` with NaN where they show no scene, for the
+        pixel tests (:func:`scalematch.stages.nodata.with_nan`)."""
+        (lo, hi), (lv, hv) = self.coarser_finer(direction), self.valid(direction)
+        return with_nan(lo, lv), with_nan(hi, hv)
 
 
 def shown_scale(work: "WorkImages", direction: Direction) -> float:
@@ -89,9 +109,10 @@ def at_working_size(low: np.ndarray, high: np.ndarray, config,
     f_low = working_factor(low.shape, config.low_max_side)
     f_high = working_factor(high.shape, config.high_max_side) if config.order == "auto" else 1.0
     t_low, t_high = f_low * d_low, f_high * d_high
-    return WorkImages(shrink(low, f_low) if f_low > 1.0 else low,
-                      shrink(high, f_high) if f_high > 1.0 else high, t_low, t_high,
-                      direction_scales(config.scales, t_low, t_high))
+    low = shrink(low, f_low) if f_low > 1.0 else low
+    high = shrink(high, f_high) if f_high > 1.0 else high
+    return WorkImages(low, high, t_low, t_high, direction_scales(config.scales, t_low, t_high),
+                      valid_mask(low), valid_mask(high))
 
 
 def direction_scales(scales: Sequence[float], f_low: float,

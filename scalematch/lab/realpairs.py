@@ -228,6 +228,88 @@ def synthetic_sets(paths: Sequence[Path], seed: int, log=lambda s: None,
 # Methods: (pair) -> (transform or None, maps_high_to_low, info)
 # --------------------------------------------------------------------------------------------
 
+#: Ratios of the realistic sets (EVALUATION.md: "at ratios 2 to 8")
+REALISTIC_RATIOS = (2.0, 3.0, 4.0, 6.0, 8.0)
+#: Null pairs of each realistic null set (and as many swapped)
+REALISTIC_NULLS = 100
+#: The Oxford sequences of the realistic set: blur (bikes, trees), light (leuven), JPEG (ubc),
+#: zoom + rotation (boat) and viewpoint (graf, wall), img1 against img2..img6 shrunk by these
+OXFORD_ZOOM_SEQUENCES = ("bikes", "trees", "leuven", "ubc", "boat", "graf", "wall")
+OXFORD_ZOOM_SHRINKS = (2.0, 4.0, 8.0)
+
+
+def realistic_sets(paths: Sequence[Path], seed: int, wanted: Sequence[str],
+                   log=lambda s: None) -> Dict[str, List[Pair]]:
+    """The sets of pairs with what real photographs bring (``lab.realistic``), named in
+    ``wanted``: zoom pairs at ``REALISTIC_RATIOS`` with one change each (padded, occluded,
+    partial, relit; each also swapped) and the null pairs with the same changes (padded-null:
+    both images on canvases; occluded-null), ``REALISTIC_NULLS`` of each, also swapped.
+
+    Each change draws from ``pair_rng(seed, "<photo> <kind>", ratio)``; an occluder is cut from
+    the next photo of ``paths`` (another scene).
+    """
+    from ..imageio import read_grey
+    from . import realistic
+
+    out: Dict[str, List[Pair]] = {}
+    kinds = [k for k in realistic.KINDS if {k, f"{k}-swapped"} & set(wanted)]
+    nulls = [k for k in ("padded-null", "occluded-null") if k in wanted]
+    if not kinds and not nulls:
+        return out
+    zoom = list(pairs_from_photos(paths, REALISTIC_RATIOS, seed))
+    others = {p.name: read_grey(paths[(i + 1) % len(paths)]) for i, p in enumerate(paths)}
+
+    def change(kind: str, z, rng):
+        if kind == "occluded":
+            return realistic.occluded(z, others[z.source], rng)
+        return {"padded": realistic.padded, "partial": realistic.partial,
+                "relit": realistic.relit}[kind](z, rng)
+
+    for kind in kinds:
+        pairs = []
+        for z in zoom:
+            q = change(kind, z, pair_rng(seed, f"{z.source} {kind}", z.ratio))
+            pairs.append(Pair(kind, f"{z.source} x{z.ratio:g}", q.low, q.high,
+                              as_matrix3(q.truth), False, "similarity", z.ratio))
+        log(f"made {len(pairs)} {kind} pairs")
+        out.update({kind: pairs, f"{kind}-swapped": swap(pairs, f"{kind}-swapped")})
+    for name in nulls:
+        unrelated = unrelated_from_pairs(zoom, REALISTIC_NULLS,
+                                         np.random.default_rng([seed, 2, len(name)]), scene_of)
+        pairs = []
+        for u in unrelated:
+            rng = pair_rng(seed, f"{u.source} / {u.high_source} {name}", u.ratio)
+            q = (realistic.padded_null(u, rng) if name == "padded-null"
+                 else realistic.occluded(u, others[u.source], rng))
+            pairs.append(Pair(name, f"{u.source} / {u.high_source} x{u.ratio:g}", q.low,
+                              q.high, None, False, "similarity", u.ratio))
+        log(f"made {len(pairs)} {name} pairs")
+        out[name] = pairs + swap(pairs, name)
+    return out
+
+
+def oxford_zoom_pairs(shared: Path) -> List[Pair]:
+    """The Oxford sequences as real degradations with a zoom (EVALUATION.md): high = img1,
+    low = imgN shrunk by 2, 4 or 8, truth the shrink composed with H1toN; also swapped."""
+    from ..imageio import read_grey
+    from .realistic import oxford_zoom
+
+    out = []
+    for seq in OXFORD_ZOOM_SEQUENCES:
+        folder = shared / "data" / "oxford" / seq
+        if not (folder / "img1.png").is_file():
+            continue
+        img1 = read_grey(folder / "img1.png")
+        for n in range(2, 7):
+            h1n = np.loadtxt(folder / f"H1to{n}p").reshape(3, 3)
+            imgn = read_grey(folder / f"img{n}.png")
+            for k in OXFORD_ZOOM_SHRINKS:
+                low, high, truth = oxford_zoom(img1, imgn, h1n, k)
+                out.append(Pair("oxford-zoom", f"{seq} 1->{n} /{k:g}", low, high, truth, False,
+                                "homography", k * similarity_parts(h1n)[0]))
+    return out + swap(out, "oxford-zoom")
+
+
 def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, Any]]:
     from ..pipeline import match
 
@@ -236,8 +318,11 @@ def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, An
     # the model the peers fit on oxford (EVALUATION.md: boat's truth is a homography); the
     # default configuration elsewhere, as a user would run it
     r = match(pair.low, pair.high, Config(model="homography") if pair.set == "oxford" else Config())
+    e = r.evidence
     info = {"inliers": r.n_inliers, "order": r.order, "model": r.model, "reason": r.reason,
-            "view_tilt": r.evidence.view_tilt}
+            "view_tilt": e.view_tilt, "best_inliers": e.inliers, "log10_nfa": e.log10_nfa,
+            "judged_by": e.judged_by, "unique_ratio": e.unique_ratio,
+            "second_inliers": e.second_inliers, "second_alike": e.second_alike}
     return (r.transform if r.matched else None), r.order == "given", info
 
 
@@ -282,6 +367,11 @@ def run_limited(name: str, pair: Pair, timeout: float):
         proc.join()
 
 
+#: What a row keeps of a method's own figures
+JUDGED_KEYS = ("inliers", "order", "model", "reason", "view_tilt", "best_inliers", "log10_nfa",
+               "judged_by", "unique_ratio", "second_inliers", "second_alike")
+
+
 def judge(method: str, pair: Pair, out) -> Dict[str, Any]:
     t, fwd, info, seconds = out
     est = canonical(pair, t, fwd)
@@ -290,8 +380,7 @@ def judge(method: str, pair: Pair, out) -> Dict[str, Any]:
             "tilt": pair.tilt, "claimed": t is not None, "error_px": err,
             "success": bool(pair.truth is not None and is_success(err)),
             "false_claim": bool(pair.truth is None and t is not None), "seconds": seconds,
-            **{k: v for k, v in info.items() if k in ("inliers", "order", "model", "reason",
-                                                     "view_tilt")}}
+            **{k: v for k, v in info.items() if k in JUDGED_KEYS}}
 
 
 def asift_subset(pairs: Sequence[Pair], n: int) -> List[Pair]:
@@ -312,7 +401,7 @@ def asift_subset(pairs: Sequence[Pair], n: int) -> List[Pair]:
 def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
     """Per (set, method): pairs, solved, rate, median error of successes, false claims, time."""
     out = []
-    known = SET_ORDER + EXTRA_SETS
+    known = SET_ORDER + EXTRA_SETS + REALISTIC_SETS
     keys = sorted({(r["set"], r["method"]) for r in rows},
                   key=lambda k: (known.index(k[0]) if k[0] in known else 99,
                                  METHODS.index(k[1])))
@@ -333,6 +422,11 @@ SET_ORDER = ("oxford", "zoom", "zoom-swapped", "tilted", "tilted-swapped", "unre
 #: for (issue 19: tilts 6 and 8, perspective, an oblique finer image); docs/STEEP.md
 EXTRA_SETS = ("steep", "steep-swapped", "perspective", "perspective-swapped", "oblique",
               "oblique-swapped")
+#: The realistic sets (``lab.realistic``, EVALUATION.md "Pairs with what real photographs
+#: bring"), run only when named; ``scalematch lab real-pairs --sets realistic`` names them all
+REALISTIC_SETS = ("padded", "padded-swapped", "occluded", "occluded-swapped", "partial",
+                  "partial-swapped", "relit", "relit-swapped", "oxford-zoom", "padded-null",
+                  "occluded-null")
 #: The sets reported by tilt (or spread), with the values and the column label
 BY_TILT = (("tilted", TILTS, "t"), ("steep", STEEP_TILTS, "t"),
            ("perspective", SPREADS, "spread"),
@@ -353,11 +447,30 @@ def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, 
     return out
 
 
-def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]]) -> str:
+#: Title and protocol line of the two sections this command writes: the real pairs, and the
+#: realistic pairs (every set run is one of ``REALISTIC_SETS``)
+SECTIONS = {
+    "real-pairs": ("Real pairs, either order, tilt",
+                   "Protocol: [EVALUATION-TILT.md](EVALUATION-TILT.md)."),
+    "realistic": ("Pairs with what real photographs bring",
+                  "Protocol: ../shared/EVALUATION.md, \"Pairs with what real photographs "
+                  "bring\" (`scalematch.lab.realistic`): no-data borders (padded), occluders, "
+                  "partial overlap, relighting, the Oxford sequences with a zoom, and null pairs "
+                  "with the same changes."),
+}
+
+
+def section_of(sets: Sequence[str]) -> str:
+    """The section a run's rows go to: "realistic" when every set is one of those."""
+    return "realistic" if sets and all(s in REALISTIC_SETS for s in sets) else "real-pairs"
+
+
+def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]],
+             section: str = "real-pairs") -> str:
     """The Markdown section: the runs whose rows it reports, the table per set, the tilt table."""
-    lines = ["## Real pairs, either order, tilt (issue 9)", "",
-             "Protocol: [EVALUATION-TILT.md](EVALUATION-TILT.md). Runs reported (the same pairs: "
-             "same seed and photos):", ""]
+    title, protocol = SECTIONS[section]
+    lines = [f"## {title}", "", f"{protocol} Runs reported (the same pairs: same seed and "
+             "photos):", ""]
     for m in runs:
         lines.append(f"- `{m.get('command', '?')}`: {m.get('date', '?')}, {m.get('machine', '?')}, "
                      f"load average at start {m.get('load', '?')}, seed {m.get('seed', '?')}, "
@@ -372,8 +485,9 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]]) -> str:
              "median s |", "|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in summary:
         err = "-" if math.isnan(r["median_error_px"]) else f"{r['median_error_px']:.2f}"
-        rate = "-" if r["set"] == "unrelated" else f"{100 * r['rate']:.0f} %"
-        solved = "-" if r["set"] == "unrelated" else str(r["solved"])
+        null = r["set"] in NULL_SETS
+        rate = "-" if null else f"{100 * r['rate']:.0f} %"
+        solved = "-" if null else str(r["solved"])
         lines.append(f"| {r['set']} | {r['method']} | {r['pairs']} | {solved} | {rate} | {err} | "
                      f"{r['false_claims']} | {r['median_s']:.2f} |")
     for family, values, label in BY_TILT:
@@ -393,17 +507,27 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-MARK_BEGIN = "<!-- real-pairs: begin (written by scalematch lab real-pairs) -->"
-MARK_END = "<!-- real-pairs: end -->"
+#: The sets whose pairs show different scenes: any claim there is false
+NULL_SETS = ("unrelated", "padded-null", "occluded-null")
 
 
-def write_section(doc: Path, text: str) -> None:
+def markers(section: str) -> Tuple[str, str]:
+    """The begin and end markers of a section in the document written."""
+    return (f"<!-- {section}: begin (written by scalematch lab real-pairs) -->",
+            f"<!-- {section}: end -->")
+
+
+MARK_BEGIN, MARK_END = markers("real-pairs")
+
+
+def write_section(doc: Path, text: str, section: str = "real-pairs") -> None:
     """Put ``text`` between the markers of ``doc`` (appended when they are absent)."""
+    begin, end = markers(section)
     old = doc.read_text() if doc.is_file() else ""
-    block = f"{MARK_BEGIN}\n{text}{MARK_END}\n"
-    if MARK_BEGIN in old and MARK_END in old:
-        head, rest = old.split(MARK_BEGIN, 1)
-        new = head + block + rest.split(MARK_END, 1)[1].lstrip("\n")
+    block = f"{begin}\n{text}{end}\n"
+    if begin in old and end in old:
+        head, rest = old.split(begin, 1)
+        new = head + block + rest.split(end, 1)[1].lstrip("\n")
     else:
         new = old.rstrip("\n") + "\n\n" + block
     doc.write_text(new)
@@ -414,7 +538,9 @@ def write_section(doc: Path, text: str) -> None:
               help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
 @click.option("--sets", default=",".join(SET_ORDER), show_default=True,
               help="Comma-separated sets to run; also " + ", ".join(EXTRA_SETS)
-                   + " (tilts 6 and 8, perspective pairs and oblique finer images: docs/STEEP.md).")
+                   + " (tilts 6 and 8, perspective pairs and oblique finer images: docs/STEEP.md)"
+                   " and " + ", ".join(REALISTIC_SETS) + " ('realistic': all of these; they "
+                   "are written to their own section).")
 @click.option("--methods", default=",".join(METHODS), show_default=True)
 @click.option("--photo-step", type=click.IntRange(min=1), default=PHOTO_STEP, show_default=True,
               help="Use every N-th photo.")
@@ -446,10 +572,13 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
     if shared is None:
         raise click.ClickException("../shared is absent: this benchmark needs its photos")
     wanted = [s.strip() for s in sets.split(",") if s.strip()]
+    wanted = [x for s in wanted for x in (REALISTIC_SETS if s == "realistic" else (s,))]
+    known = SET_ORDER + EXTRA_SETS + REALISTIC_SETS
     for s in wanted:
-        if s not in SET_ORDER + EXTRA_SETS:
-            raise click.BadParameter(f"unknown set {s!r}; one of "
-                                     f"{', '.join(SET_ORDER + EXTRA_SETS)}", param_hint="--sets")
+        if s not in known:
+            raise click.BadParameter(f"unknown set {s!r}; one of {', '.join(known)}",
+                                     param_hint="--sets")
+    section = section_of(wanted)
     names = [m.strip() for m in methods.split(",") if m.strip()]
     for m in names:
         if m not in METHODS:
@@ -461,6 +590,9 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
         wanted = []
     elif any(s != "oxford" for s in wanted):
         pool.update(synthetic_sets(paths, seed, log, wanted))
+        pool.update(realistic_sets(paths, seed, wanted, log))
+    if names and "oxford-zoom" in wanted:
+        pool["oxford-zoom"] = oxford_zoom_pairs(shared)
     if names and "oxford" in wanted:
         pool["oxford"] = oxford_pairs(shared)
     meta = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "seed": seed,
@@ -494,11 +626,11 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
         rows = rows + [r for r in json.loads(extra.read_text()) if (r["set"], r["method"]) not in seen]
         info = extra.parent / "meta.json"
         runs.append(json.loads(info.read_text()) if info.is_file() else {"command": str(extra)})
-    text = markdown(summarise(rows), by_tilt(rows), runs)
-    (out_dir / "real-pairs.md").write_text(text)
+    text = markdown(summarise(rows), by_tilt(rows), runs, section)
+    (out_dir / f"{section}.md").write_text(text)
     click.echo(text)
     if write_doc is not None:
-        write_section(write_doc, text)
+        write_section(write_doc, text, section)
         log(f"wrote {write_doc}")
 
 

@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
 from ..checks import in_range
-from ..geometry import apply, footprint, grid
+from ..geometry import apply, footprint, grid, similarity_parts
 from ..result import Evidence
 from .descriptors import Described
 from .estimator import model_of
@@ -110,6 +110,31 @@ class DecisionParams:
     #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
     #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
     min_final_margin: float = 0.0
+    #: a transform this far beyond chance (log10 NFA) is judged unique by the geometry alone:
+    #: the pixel tests above are measured and recorded, not decisive, unless a second transform
+    #: (``second_share``) shows a repeated structure. The pixels of a real pair are broken by
+    #: what the points never see: an occluder, a relit or parallax-ridden scene, a no-data
+    #: border. Measured (docs/NULLS.md): the lowest log10 NFA of any null run's best transform
+    #: is -38 (a repeated facade, refused as ambiguous by its pixels and by its second
+    #: transform); true answers refused by the pixels alone had -135 to -2080 (occluded,
+    #: padded and 3-D pairs, docs/BENCHMARKS.md). -60 leaves 22 orders of magnitude below the
+    #: worst null
+    max_log_nfa_geometry: float = -60.0
+    #: a repeated structure shows as a second transform of the same scale and angle, shifted,
+    #: among the candidates the winner leaves over: with at least this share of the winner's
+    #: inliers (and ``min_inliers``, beyond chance) the match is refused as ambiguous. Matching
+    #: a repeated structure splits each point's nearest neighbour among the copies, so the
+    #: copies' support is comparable; measured 0 to 0.09 on true pairs (docs/BENCHMARKS.md)
+    second_share: float = 0.5
+    #: the second transform's scale within this factor, and its angle within
+    #: ``second_angle_deg``, of the winner's: the same structure, elsewhere
+    second_scale_factor: float = 1.15
+    second_angle_deg: float = 10.0
+    #: ... and shifted by at least this fraction of the footprint's size (sqrt of its area): a
+    #: copy stands elsewhere, as the pixels' uniqueness test counts it
+    #: (``pixelcheck.UNIQUE_EXCLUSION``); a nearer second similarity is the same scene fitted
+    #: piecewise (a tilted plane fits two similarities a few px apart)
+    second_min_shift: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -128,6 +153,11 @@ class DecisionParams:
         in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
         in_range("decision", "min_final_margin", self.min_final_margin, lo=-2, hi=2)
+        in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
+        in_range("decision", "second_share", self.second_share, lo=0)
+        in_range("decision", "second_scale_factor", self.second_scale_factor, lo=1)
+        in_range("decision", "second_angle_deg", self.second_angle_deg, lo=0)
+        in_range("decision", "second_min_shift", self.second_min_shift, lo=0)
 
 
 @dataclass(frozen=True)
@@ -241,6 +271,65 @@ def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.nd
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
     check = pixel_check(low_image, high_image, grown)
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
+
+
+class Second(NamedTuple):
+    """The strongest other transform among a winner's candidates (a repeated structure?)."""
+
+    inliers: int  #: its distinct inliers (0: none found)
+    log10_nfa: float  #: beyond chance as the winner's is counted
+    gap_px: float  #: mean distance between its map of the finer image and the winner's, px
+    alike: bool  #: the same scale and angle as the winner's (within the ``second_*`` limits)
+
+
+NO_SECOND = Second(0, math.inf, math.nan, False)
+
+
+def second_transform(src: np.ndarray, dst: np.ndarray, inliers: np.ndarray, t: np.ndarray,
+                     high_shape, params: DecisionParams, ransac, seed: int,
+                     nfa: Callable[[int], float]) -> Second:
+    """Fit a similarity to the candidates (``src`` finer px, ``dst`` coarser px, (K, 2)) that
+    the winner ``t`` leaves over (``inliers``: its (K,) mask), and compare it with ``t``.
+
+    A repeated structure (the windows of a facade) is matched wherever a copy stands: its
+    copies show as transforms of the same scale and angle, shifted by the period. ``nfa(k)``:
+    the log10 NFA of ``k`` inliers among the same candidates.
+    """
+    from .estimator import estimate
+
+    rest = ~np.asarray(inliers, bool)
+    if rest.sum() <= 3:
+        return NO_SECOND
+    est = estimate("similarity", src[rest], dst[rest], ransac, seed=seed)
+    if est.transform is None or est.n_inliers == 0:
+        return NO_SECOND
+    r1, a1, _ = similarity_parts(t)
+    r2, a2, _ = similarity_parts(est.transform)
+    turn = abs((a2 - a1 + 180.0) % 360.0 - 180.0)
+    alike = (math.isfinite(r1) and math.isfinite(r2) and r1 > 0 and r2 > 0
+             and abs(math.log(r2 / r1)) <= math.log(params.second_scale_factor)
+             and turn <= params.second_angle_deg)
+    return Second(int(est.n_inliers), nfa(int(est.n_inliers)),
+                  mean_transfer_gap(est.transform, t, high_shape), alike)
+
+
+def repeats(second: Second, k: int, area: float, params: DecisionParams) -> bool:
+    """Whether ``second`` shows a repeated structure beside a winner of ``k`` inliers whose
+    footprint covers ``area`` coarser px^2: the same scale and angle, elsewhere (at least
+    ``second_min_shift`` of the footprint's size away), beyond chance, with at least
+    ``second_share`` of the winner's support.
+
+    >>> p = DecisionParams()
+    >>> repeats(Second(40, -90.0, 120.0, True), 60, 160 * 120, p)
+    True
+    >>> repeats(Second(5, -9.0, 120.0, True), 60, 160 * 120, p)   # too few
+    False
+    >>> repeats(Second(40, -90.0, 12.0, True), 60, 160 * 120, p)  # the same scene, piecewise
+    False
+    """
+    return (second.alike and second.gap_px >= params.second_min_shift * math.sqrt(max(area, 0.0))
+            and second.log10_nfa <= params.max_log_nfa
+            and second.inliers >= max(params.min_inliers, params.second_share * k))
 
 
 def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> bool:
@@ -362,36 +451,58 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone and not few:
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
                   f"{k} inliers)")
+    second = second_transform(best.src, best.dst, inl, est.transform, high_shape, params,
+                              config.ransac, config.seed,
+                              lambda k2: log10_nfa(n, k2, m, p, tests))
+    evidence = replace(evidence, second_inliers=second.inliers,
+                       second_log10_nfa=second.log10_nfa, second_gap_px=second.gap_px,
+                       second_alike=second.alike)
+    if repeats(second, k, area, params):
+        return no(f"ambiguous: a second transform of the same scale and angle, "
+                  f"{second.gap_px:.0f} px away, has {second.inliers} inliers against "
+                  f"{k}: a repeated structure")
     return Decision(True, "", best.row.s, t, pairs, evidence)
 
 
 def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
-                 params: DecisionParams, near=None):
+                 params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None):
     """(evidence, reason): the pixel tests of a match's final transform ``t`` (finer px ->
     coarser px, refit), and why it is refused ("" when it is not).
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
-    times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`).
+    times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`),
+    compared where the inliers ``vouched`` (coarser px, (N, 2)) for the map.
     Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
     (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
     Both are measured on the final transform: a similarity found before the refit may hold on
     part of the image only (a tilted view, a mild tilt), which the pixels would count against it.
+    The images carry NaN where they show no scene (:func:`scalematch.stages.nodata.with_nan`).
+
+    Geometry first: a transform beyond chance by ``max_log_nfa_geometry`` (and with no second
+    transform of comparable support, which :func:`decide` refuses) is unique by its geometry;
+    its pixel figures are recorded, not decisive: an occluder, parallax or relighting lowers
+    them where the points prove the map (``evidence.judged_by`` says which test decided).
     ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
     """
     from .pixelcheck import pixel_check, uniqueness
 
     if near is None:  # side by side: neither needs the other
-        u, near = thread_map(lambda job: job(), [lambda: uniqueness(coarser, finer, t),
-                                                 lambda: pixel_check(coarser, finer, t)])
+        u, near = thread_map(lambda job: job(), [
+            lambda: uniqueness(coarser, finer, t, vouched=vouched),
+            lambda: pixel_check(coarser, finer, t)])
     else:
-        u = uniqueness(coarser, finer, t)
+        u = uniqueness(coarser, finer, t, vouched=vouched)
+    geometric = evidence.log10_nfa <= params.max_log_nfa_geometry
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
-                       unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin)
+                       unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
+                       judged_by="geometry" if geometric else "pixels")
+    if geometric:
+        return evidence, ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        return evidence, (f"ambiguous: the high image fits elsewhere in the low image nearly "
-                          f"as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at the "
-                          f"transform found): a repeated structure?")
+        return evidence, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
+                          f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
+                          f"the transform found, log10 NFA {evidence.log10_nfa:.1f})")
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
         return evidence, (f"the pixels do not confirm it: the transform found fits the low "
                           f"image no better than nearby wrong placements (ZNCC margin "

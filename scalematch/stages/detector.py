@@ -38,6 +38,7 @@ import numpy as np
 
 from ..checks import in_range
 from .filters import gaussian_derivative
+from .nodata import away_from
 from .scalespace import Level, as_float_image, gaussian_blur, scale_space
 
 
@@ -348,12 +349,17 @@ def _level_contrast(level: Level, params: HarrisParams, contrast: Optional[Contr
 
 def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
                     contrast: Optional[Contrast] = None,
-                    grads: Optional[Gradients] = None) -> Keypoints:
+                    grads: Optional[Gradients] = None,
+                    inside: Optional[np.ndarray] = None, margin_px: float = 0.0) -> Keypoints:
     """Scale-adapted Harris points of one scale-space level, in full-resolution pixels.
 
     ``contrast`` (:func:`image_contrast` of the s = 1 image) is needed when ``params.adaptive``;
     at s = 1 on an undecimated level it is measured here when not given. ``grads``: the s = 1
     image's :class:`Gradients` at ``params.sigma`` when measured already (the same points).
+    ``inside``: (H, W) distance (full-resolution px) from each pixel to the nearest pixel that
+    shows no scene (:func:`scalematch.stages.nodata.distance_inside`); maxima closer than
+    ``margin_px * s`` are dropped before the strongest are kept, so the strong corners along a
+    no-data edge take no place among them.
     """
     h, w = level.image.shape
     radius = params.nms_radius * level.s / level.d
@@ -368,6 +374,9 @@ def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
         rc = _local_maxima(resp, radius, min(floor, threshold), border)
     else:
         rc = _local_maxima(resp, radius, threshold, border)
+    if inside is not None and rc.shape[0]:
+        rc = rc[away_from(inside, level.to_full(rc[:, ::-1].astype(np.float64)),
+                          margin_px * level.s)]
     if rc.shape[0] == 0:
         return Keypoints.empty(level.s)
     score = resp[rc[:, 0], rc[:, 1]]

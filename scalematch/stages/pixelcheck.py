@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple, Tuple, Union
+from typing import NamedTuple, Optional, Tuple, Union
 
 import cv2
 import numpy as np
@@ -71,6 +71,12 @@ class PixelParams:
     #: template, ample to tell a copy from the original (docs/FEWPOINTS.md section 6: the
     #: misfit ratios of true claims and of null claims, at 128 and at 64 px)
     unique_side_px: float = 64.0
+    #: the uniqueness test compares the pixels within this fraction of the footprint's size
+    #: (sqrt of its area) of the inliers, where the points vouch for the map: an occluder, a
+    #: foreground object or a 3-D scene's other planes hold no inlier and stay out. A quarter
+    #: (16 px of a 64 px footprint) is twice the descriptor window's radius (8 of its 16 px
+    #: at the point's scale), so most of what is compared was not what the descriptors matched
+    vouch_radius: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -314,8 +320,11 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
     from_small = _small_to_high(k)
 
+    box_shown = np.isfinite(box)
+
     def score(m3: np.ndarray) -> Tuple[float, int]:
         img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
+        mask &= box_shown & np.isfinite(img)
         n = int(mask.sum())
         if n < params.min_overlap_px:
             return float("nan"), n
@@ -395,8 +404,23 @@ def masked_zncc_map(image: np.ndarray, tpl: np.ndarray, mask: np.ndarray,
     return np.clip(out, -1.0, 1.0)
 
 
+def vouched_mask(shape: Tuple[int, int], xy: np.ndarray, radius: float) -> np.ndarray:
+    """(H, W) bool: the discs of ``radius`` px around the points ``xy`` (N, 2), (x, y) px.
+
+    >>> m = vouched_mask((20, 30), np.array([[5.0, 5.0], [25.0, 15.0]]), 3)
+    >>> bool(m[5, 5]), bool(m[15, 25]), bool(m[10, 15]), int(m.sum())
+    (True, True, False, 58)
+    """
+    out = np.zeros(shape, np.uint8)
+    r = max(int(round(radius)), 1)
+    for x, y in np.rint(np.asarray(xy, np.float64)).astype(int):
+        cv2.circle(out, (int(x), int(y)), r, 1, thickness=-1)
+    return out.astype(bool)
+
+
 def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
-               params: PixelParams = PixelParams()) -> Uniqueness:
+               params: PixelParams = PixelParams(),
+               vouched: Optional[np.ndarray] = None) -> Uniqueness:
     """Slide the high image, warped by ``t`` (rotation, scale, tilt kept), over the whole low
     image and compare the claimed placement with the best one elsewhere (``cv2.matchTemplate``,
     ZNCC over the footprint's mask).
@@ -426,12 +450,18 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     small, k = blurred_for_ratio(high, ratio)
     hh, ww = low.shape
     img, mask = _warp_into(small, t3 @ _small_to_high(k), (ww, hh), params.edge_px)
+    shown = np.isfinite(low)
+    mask &= np.isfinite(img) & shown  # both show the scene at the claimed placement
+    if vouched is not None and len(vouched):  # where the inliers vouch for the map
+        radius = params.vouch_radius * math.sqrt(max(float(mask.sum()), 1.0))
+        mask &= vouched_mask(mask.shape, apply(t3, vouched), radius)
+    low = np.where(shown, low, np.float32(0.0))
     rows, cols = np.nonzero(mask)
     if rows.size < params.min_overlap_px:
         return Uniqueness(nan, nan, nan)
     y0, y1, x0, x1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-    tpl = np.ascontiguousarray(img[y0:y1, x0:x1])
     tmask = mask[y0:y1, x0:x1]
+    tpl = np.ascontiguousarray(np.where(tmask, img[y0:y1, x0:x1], np.float32(0.0)))
     if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask].std()) <= params.min_std:
         return Uniqueness(nan, nan, nan)  # no room to place it anywhere else, or flat
     r = masked_zncc_map(low, tpl, tmask, params.min_std)

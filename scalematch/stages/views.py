@@ -24,6 +24,7 @@ import numpy as np
 
 from ..checks import in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
+from .nodata import away_from, distance_inside
 
 
 #: The passes of views (issue 19): t = 2, then 4, then 6 and 8 together (longitude steps 72/t:
@@ -111,8 +112,9 @@ class View:
     longitude_deg: float  #: phi, degrees, the direction compressed by t
     image: np.ndarray = field(repr=False)  #: (h', w') float32 view
     to_view: np.ndarray = field(repr=False)  #: 2x3, high px -> view px
-    #: (h', w') float32 distance (view px) to the nearest pixel outside the high image, or None
-    #: when every pixel of the view shows the high image
+    #: (h', w') float32 distance (view px) to the nearest pixel outside the high image or on its
+    #: no-data region (:mod:`scalematch.stages.nodata`), or None when every pixel of the view
+    #: shows the scene
     inside_distance: object = field(default=None, repr=False)
     #: (h, w) of the image viewed (None: unknown), where a map found through the view must hold
     source_shape: Optional[Tuple[int, int]] = None
@@ -138,21 +140,24 @@ def view_plan(params: ViewParams) -> List[List[Tuple[float, float]]]:
             for tilts in params.passes]
 
 
-def identity_view(high: np.ndarray) -> View:
+def identity_view(high: np.ndarray, valid: Optional[np.ndarray] = None) -> View:
+    """The image itself as a view; ``valid`` (bool, its shape): where it shows the scene
+    (:func:`scalematch.stages.nodata.valid_mask`; None: everywhere)."""
     return View(1.0, 0.0, high, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
-                source_shape=tuple(high.shape[:2]))
+                distance_inside(valid), tuple(high.shape[:2]))
 
 
 def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
-              params: ViewParams = ViewParams()) -> View:
+              params: ViewParams = ViewParams(), valid: Optional[np.ndarray] = None) -> View:
     """The view of ``high`` (H, W) float32 compressed by ``tilt`` along ``longitude_deg``.
 
     The image is turned by phi onto a canvas that holds all of it, blurred along x by
     ``antialias_c * sqrt(t^2 - 1)`` px and resized along x by 1/t (``cv2.resize``'s
-    centre-aligned convention: x -> (x + 0.5) / t - 0.5).
+    centre-aligned convention: x -> (x + 0.5) / t - 0.5). ``valid``: where the image shows the
+    scene (None: everywhere); the view's ``inside_distance`` measures to the rest.
     """
     if tilt <= 1.0:
-        return identity_view(high)
+        return identity_view(high, valid)
     h, w = high.shape
     a = math.radians(longitude_deg)
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
@@ -162,7 +167,8 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     cw, ch = (int(v) for v in np.ceil(hi - lo) + 1)
     img = cv2.warpAffine(np.asarray(high, np.float32), turn, (cw, ch), flags=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    inside = cv2.warpAffine(np.ones((h, w), np.uint8), turn, (cw, ch), flags=cv2.INTER_NEAREST,
+    shown = np.ones((h, w), np.uint8) if valid is None else valid.astype(np.uint8)
+    inside = cv2.warpAffine(shown, turn, (cw, ch), flags=cv2.INTER_NEAREST,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     img = cv2.GaussianBlur(img, (0, 0), sigmaX=params.antialias_c * math.sqrt(tilt * tilt - 1),
                            sigmaY=0.01)
@@ -178,11 +184,12 @@ def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:
     """Boolean mask of the points (N, 2) (view px) at least ``margin_px`` from the view's edge."""
     if view.inside_distance is None or len(xy) == 0:
         return np.ones(len(xy), bool)
-    d = view.inside_distance
-    h, w = d.shape
-    x = np.clip(np.rint(xy[:, 0]).astype(int), 0, w - 1)
-    y = np.clip(np.rint(xy[:, 1]).astype(int), 0, h - 1)
-    return d[y, x] >= margin_px
+    return away_from(view.inside_distance, xy, margin_px)
+
+
+def valid_in(view: View) -> Optional[np.ndarray]:
+    """(h', w') bool: where the view shows the scene (None: everywhere)."""
+    return None if view.inside_distance is None else view.inside_distance > 0
 
 
 def to_high(view: View, xy: np.ndarray) -> np.ndarray:
