@@ -1,6 +1,6 @@
 """Throughput and memory of ``scalematch batch`` (docs/BATCH.md).
 
-    python scripts/batch_throughput.py [--pairs 200] [--memory-pairs 2000] [--repeats 2]
+Usage: python scripts/batch_throughput.py [--pairs 200] [--memory-pairs 2000] [--repeats 2]
 
 1. Cuts ``--pairs`` tiny synthetic zoom pairs from data/raccoon.jpg (``make_zoom_pair``: high
    200x150 px, low at most 200x150 px, ratios 2 to 4, seeded) into a temporary folder, as PNG

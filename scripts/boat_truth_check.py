@@ -1,6 +1,8 @@
 """Boat 1->N: how well the published homography and scalematch's fit the images themselves.
 
-Usage: python scripts/boat_truth_check.py   (needs ../shared)
+Usage: python scripts/boat_truth_check.py   (needs ../shared, or $SCALEMATCH_SHARED)
+
+Its output is docs/BOAT.md's table.
 
 For each pair: scalematch's homography and its inliers; the residual of both homographies on
 those inliers (median, 90th percentile, low px); the EVALUATION.md error between them; and the
@@ -8,6 +10,8 @@ normalised cross-correlation of img1 warped into imgN by each (over the warped f
 """
 
 from __future__ import annotations
+
+import argparse
 
 import scalematch  # noqa: F401  (first: sets the BLAS threads before numpy loads)
 import cv2
@@ -30,6 +34,7 @@ def ncc(high: np.ndarray, low: np.ndarray, t: np.ndarray) -> float:
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     shared = find_shared()
     if shared is None:
         raise SystemExit("../shared not found")

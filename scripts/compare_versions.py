@@ -1,5 +1,7 @@
-"""Plain zoom pairs, two versions of scalematch, alternately in one run (issue 9's "as good and
-no slower than today").
+"""Two versions of scalematch on the same pairs, alternately in one run: the same answers? how fast?
+
+Usage: python scripts/compare_versions.py --old OLD_SOURCE_TREE [--new TREE] [--photos 38]
+       [--swapped] [--unrelated N] [--nulls FOLDER --every N]
 
 Each version runs in its own persistent worker process with its source tree first on
 ``sys.path``; the pairs (EVALUATION.md, ``scalematch.lab.synthetic.pairs_from_photos``) are made
@@ -58,8 +60,11 @@ def _stored_nulls(folder: Path, every: int) -> list:
     import cv2
     from scalematch.lab.nulls import TRUE_KIND, read_manifest
 
-    entries = [e for _, e in sorted(read_manifest(folder).items())
-               if e["kind"] != TRUE_KIND][::max(every, 1)]
+    stored = read_manifest(folder)
+    if not stored:
+        sys.exit(f"no stored null pairs in {folder}: `scalematch lab nulls --out-dir DIR` stores "
+                 "them in DIR/pairs-seed0")
+    entries = [e for _, e in sorted(stored.items()) if e["kind"] != TRUE_KIND][::max(every, 1)]
     return [_Stored(cv2.imread(str(folder / e["low_file"]), cv2.IMREAD_GRAYSCALE),
                     cv2.imread(str(folder / e["high_file"]), cv2.IMREAD_GRAYSCALE))
             for e in entries]

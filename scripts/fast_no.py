@@ -1,4 +1,4 @@
-"""What ``--no-views`` buys and costs: the default search against the plain search alone (issue 16).
+"""What ``--no-views`` buys and costs: the default search against the plain search alone.
 
 Usage: python scripts/fast_no.py [--every 4] [--sets zoom,tilted,unrelated] [--big-rounds 3]
 
@@ -8,14 +8,15 @@ the command line) searches the image itself in both orders only. In one process,
 pair by pair (the order of the three turned each pair), this script runs the default, the
 preset and the SIFT reference (``scalematch.lab.baselines``, EVALUATION.md) on:
 
-* the stored null runs of ``scalematch lab nulls`` (every ``--every``-th pair of
-  ``bench-out/nulls-noviews/pairs-seed0`` or ``--nulls``, both orders): the time of a "no", and
-  any claim (false);
+* the stored null pairs of ``scalematch lab nulls`` (every ``--every``-th pair of ``--nulls``,
+  by default ``bench-out/nulls/pairs-seed0``, where ``scalematch lab nulls`` stores them; both
+  orders): the time of a "no", and any claim (false). Skipped, with a note, when the folder
+  holds no pairs;
 * the sets of ``scalematch lab real-pairs`` named in ``--sets`` (every 3rd photo, seed 0):
   pairs solved (grid error under 3 px), wrong claims, median time; SIFT fits each set's model
   (a homography on tilted pairs), as in ``lab real-pairs``;
 
-then, as whole processes, the 12-16 MP unrelated pair of issue 16 (``scalematch A B -q`` with
+then, as whole processes, a 12-16 MP unrelated pair (``scalematch A B -q`` with
 and without ``--no-views``, ``--big-rounds`` rounds alternately; seconds and peak memory from
 ``/usr/bin/time`` when it exists). Prints Markdown tables.
 """
@@ -130,7 +131,8 @@ def big_table(shared: Path, rounds: int) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=4)
-    ap.add_argument("--nulls", default=str(ROOT / "bench-out" / "nulls-noviews" / "pairs-seed0"))
+    ap.add_argument("--nulls", default=str(ROOT / "bench-out" / "nulls" / "pairs-seed0"),
+                    help="a pairs folder of `scalematch lab nulls` (its manifest.json and PNGs)")
     ap.add_argument("--sets", default="zoom,tilted,unrelated")
     ap.add_argument("--big-rounds", type=int, default=3)
     a = ap.parse_args()
@@ -140,7 +142,10 @@ def main() -> None:
     print(f"load average at the start {os.getloadavg()[0]:.2f}\n")
     if a.big_rounds:
         print(big_table(shared, a.big_rounds) + "\n")
-    if a.every:
+    if a.every and not (Path(a.nulls) / "manifest.json").is_file():
+        print(f"No stored null pairs in {a.nulls}: `scalematch lab nulls --limit 40` makes 40 "
+              "(and runs them); the null table is skipped.\n")
+    elif a.every:
         print(nulls_table(Path(a.nulls), a.every) + "\n")
     names = [s for s in a.sets.split(",") if s]
     if names:

@@ -7,11 +7,14 @@ low:  the whole photo turned by 25 degrees and shrunk by 3 with ``zoom_warp`` (t
       (std 2 grey levels, seed 0) inside the photo's footprint.
 
 The truth transform (high px -> low px, OpenCV pixel convention) is printed; it is recorded in
-data/SOURCES.md. Run from the repository root:  python scripts/make_demo.py
+data/SOURCES.md. The script is deterministic: the shipped files are what it writes.
+
+Usage: python scripts/make_demo.py [--out-dir data]
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -45,11 +48,16 @@ def make(photo: np.ndarray):
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out-dir", type=Path, default=ROOT / "data",
+                    help="where to write demo_low.png and demo_high.png (default: data/)")
+    args = ap.parse_args()
     photo = cv2.imread(str(ROOT / "data" / "raccoon.jpg"), cv2.IMREAD_COLOR)
     low, high, truth = make(photo)
     opts = [cv2.IMWRITE_PNG_COMPRESSION, 9]
-    cv2.imwrite(str(ROOT / "data" / "demo_low.png"), low, opts)
-    cv2.imwrite(str(ROOT / "data" / "demo_high.png"), high, opts)
+    args.out_dir.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(args.out_dir / "demo_low.png"), low, opts)
+    cv2.imwrite(str(args.out_dir / "demo_high.png"), high, opts)
     print(f"low {low.shape[1]}x{low.shape[0]}, high {high.shape[1]}x{high.shape[0]}")
     print("truth (high px -> low px):", [[round(float(v), 4) for v in row] for row in truth])
 

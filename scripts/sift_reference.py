@@ -10,6 +10,7 @@ The same recipe as ``scalematch.lab.baselines`` (EVALUATION.md), as one standalo
 ``scripts/speed_bench.py`` times it against ``scalematch LOW HIGH``.
 """
 
+import argparse
 import json
 import sys
 
@@ -18,8 +19,12 @@ import numpy as np
 
 
 def main() -> int:
-    low = cv2.imread(sys.argv[1], cv2.IMREAD_GRAYSCALE)
-    high = cv2.imread(sys.argv[2], cv2.IMREAD_GRAYSCALE)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("low", help="the low-resolution image")
+    ap.add_argument("high", help="the high-resolution image")
+    args = ap.parse_args()
+    low = cv2.imread(args.low, cv2.IMREAD_GRAYSCALE)
+    high = cv2.imread(args.high, cv2.IMREAD_GRAYSCALE)
     if low is None or high is None:
         sys.exit("cannot read the images")
     cv2.setRNGSeed(0)

@@ -1,6 +1,9 @@
-"""How long a user waits: ``scalematch LOW HIGH`` against the SIFT reference (issue 12).
+"""How long a user waits: ``scalematch LOW HIGH`` against the SIFT reference.
 
-Usage: python scripts/speed_bench.py [--photos N] [--ratios 2,3,4,6,8,10] [--no-large]
+Usage: python scripts/speed_bench.py [--photos N] [--ratios 2,3,4,6,8,10]
+       [--parts process,inprocess,large]
+
+The figures are in docs/design/SPEED.md.
 
 A benchmark, not a test: nothing here asserts a time. On synthetic zoom pairs
 (``scalematch.lab.synthetic.pairs_from_photos`` over ``../shared/data/photos``, EVALUATION.md),

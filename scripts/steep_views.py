@@ -1,7 +1,7 @@
-"""Steep views (issue 19): tilted zoom pairs beyond t = 4, scalematch's view passes against SIFT.
+"""Tilted, perspective and oblique pairs: configurations of scalematch's views against SIFT.
 
 Usage: python scripts/steep_views.py [--tilts 6,8] [--ratios 2,4] [--photo-step 3]
-       [--variants default,steep] [--swapped] [--out FILE.jsonl]
+       [--variants default,tilt-4] [--swapped] [--out FILE.jsonl]
        python scripts/steep_views.py --kind perspective --tilts 4,8 [...]
        python scripts/steep_views.py --kind oblique --variants default,no-coarser --swapped
        python scripts/steep_views.py --kind oxford --variants homography,default --swapped
@@ -47,17 +47,17 @@ from scalematch.lab.realpairs import (STEEP_TILTS, canonical, oblique_pairs,  # 
 from scalematch.lab.synthetic import OBLIQUE_CASES  # noqa: E402
 from scalematch.stages.views import ViewParams  # noqa: E402
 
-#: scalematch configurations compared: today's passes (t = 2, then 4) and a third pass of
-#: steeper tilts (6 and 8, longitude steps 72/t as Morel & Yu), run only when both found nothing
+#: scalematch configurations compared (``--variants``; docs/design/VIEWS.md): the default's
+#: passes of views are t = 2, then 4, then 6 and 8, each run only when the earlier found nothing
 VARIANTS = {
     "default": Config(),
-    # the default without its third pass (t = 6 and 8): the default before issue 19's closing
+    # the default without its third pass (t = 6 and 8)
     "tilt-4": Config.preset("tilt-4"),
     # what a user who knows the pair is seen in perspective would ask for
     "homography": Config(model="homography"),
     # the default with a time budget of 1 s: what the budget costs on pairs that have an answer
     "budget-1s": Config.preset("budget-1s"),
-    # the default without the views of the coarser image (before issue 19's item 2)
+    # the default without the views of the coarser image
     "no-coarser": Config(views=ViewParams(coarser=False)),
     # a third pass of tilt 8 alone (a sampling ratio of 2: 2, 4, 8), 20 views instead of 35
     "steep8": Config(views=ViewParams(passes=((2.0,), (4.0,), (8.0,)))),
@@ -65,7 +65,7 @@ VARIANTS = {
     "coarser-one": Config(views=ViewParams(coarser_directions="one")),
 }
 
-#: The Oxford pairs of issue 19 ("graf 1->5 and 1->6, wall 1->6, both directions")
+#: The Oxford viewpoint pairs (graf 1->5 and 1->6, wall 1->6; both directions with --swapped)
 OXFORD_PAIRS = ("graf 1->5", "graf 1->6", "wall 1->6")
 
 
@@ -116,7 +116,8 @@ def main() -> None:
     ap.add_argument("--ratios", default="2,4")
     ap.add_argument("--photo-step", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--variants", default="default,steep")
+    ap.add_argument("--variants", default="default,tilt-4",
+                    help="comma-separated names of VARIANTS: " + ", ".join(VARIANTS))
     ap.add_argument("--swapped", action="store_true")
     ap.add_argument("--kind", choices=("tilted", "perspective", "oblique", "oxford"),
                     default="tilted")
