@@ -1,0 +1,141 @@
+"""Every code block of README.md and the user guide runs as written, from the repository root.
+
+A fenced block whose language is ``bash``, ``sh``, ``shell`` or ``console`` runs in bash with
+``set -e -o pipefail`` (a ``console`` block: only its ``$ `` lines); a ``python`` block runs in
+a fresh interpreter, so it must stand on its own. Each block runs in a fresh folder that holds
+what the repository root holds for it (``data``, ``scripts`` and ``.venv``, linked), with the
+interpreter's ``bin`` first on ``PATH``: ``scalematch`` and ``python`` are the ones under test.
+
+Words after the language in the fence say when a block does not run here:
+
+* ``skip``: never (``make test`` inside a test, a server that does not return, ``pip install``);
+* ``shared``: only when ``../shared`` is present (``SCALEMATCH_SHARED`` points at it);
+* ``dask``: only when ``distributed`` is installed.
+
+Blocks in any other language (``text`` for output) are not run.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from typing import List, NamedTuple
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = ("README.md", "docs/GUIDE.md")
+SHARED = ROOT.parent / "shared"
+SHELLS = {"bash", "sh", "shell", "console"}
+MARKS = {"skip", "shared", "dask"}
+#: What a block reaches for in the repository root.
+LINKED = ("data", "scripts")
+#: Seconds a block may take (a demo match takes about one).
+TIMEOUT_S = 120
+
+
+class Block(NamedTuple):
+    page: str
+    line: int  #: of the opening fence, 1-based
+    lang: str
+    marks: frozenset
+    text: str
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def code_blocks(page: str) -> List[Block]:
+    """The fenced blocks of ``page`` (```lang words ... ```), in order."""
+    out, lines = [], (ROOT / page).read_text().splitlines()
+    i = 0
+    while i < len(lines):
+        m = re.match(r"^(\s*)```\s*([\w+-]*)(.*)$", lines[i])
+        if not m:
+            i += 1
+            continue
+        indent, lang, rest = m.group(1), m.group(2).lower(), m.group(3).split()
+        body, j = [], i + 1
+        while j < len(lines) and lines[j].strip() != "```":
+            body.append(lines[j][len(indent):] if lines[j].startswith(indent) else lines[j])
+            j += 1
+        out.append(Block(page, i + 1, lang, frozenset(rest), "\n".join(body) + "\n"))
+        i = j + 1
+    return out
+
+
+def runnable(block: Block) -> bool:
+    return block.lang in SHELLS or block.lang == "python"
+
+
+BLOCKS = [b for page in PAGES for b in code_blocks(page) if runnable(b)]
+
+
+def _shell_text(block: Block) -> str:
+    if block.lang != "console":
+        return block.text
+    return "".join(line[2:] + "\n" for line in block.text.splitlines() if line.startswith("$ "))
+
+
+def _workdir(tmp_path: Path) -> Path:
+    """A folder that looks like the repository root to a block."""
+    for name in LINKED:
+        (tmp_path / name).symlink_to(ROOT / name)
+    venv = Path(sys.prefix)
+    if (venv / "bin" / "activate").is_file():
+        (tmp_path / ".venv").symlink_to(venv)
+    else:  # not run from a virtual environment: an activate that puts this interpreter first
+        (tmp_path / ".venv" / "bin").mkdir(parents=True)
+        (tmp_path / ".venv" / "bin" / "activate").write_text(
+            f'export PATH="{Path(sys.executable).parent}:$PATH"\n')
+    return tmp_path
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["SCALEMATCH_SHARED"] = str(SHARED)
+    return env
+
+
+@pytest.mark.parametrize("block", BLOCKS, ids=[b.id for b in BLOCKS])
+def test_code_block_runs(block: Block, tmp_path):
+    if "skip" in block.marks:
+        pytest.skip("marked as not runnable here")
+    if "shared" in block.marks and not (SHARED / "data" / "photos").is_dir():
+        pytest.skip("../shared is absent")
+    if "dask" in block.marks and importlib.util.find_spec("distributed") is None:
+        pytest.skip("distributed is not installed")
+    cwd = _workdir(tmp_path)
+    if block.lang == "python":
+        cmd = [sys.executable, "-c", block.text]
+    else:
+        cmd = ["bash", "-e", "-o", "pipefail", "-c", _shell_text(block)]
+    run = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True,
+                         timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+    assert run.returncode == 0, (
+        f"{block.id} exited {run.returncode}\n--- block\n{block.text}--- stdout\n"
+        f"{run.stdout[-2000:]}--- stderr\n{run.stderr[-3000:]}")
+
+
+def test_every_page_has_blocks_that_run():
+    for page in PAGES:
+        assert any(b.page == page and not b.marks & {"skip"} for b in BLOCKS), page
+
+
+def test_marks_are_known_and_needs_are_marked():
+    """A block that needs ../shared or Dask says so, so that it is skipped rather than failed
+    where they are absent; a mark is one of MARKS."""
+    for b in BLOCKS:
+        assert b.marks <= MARKS, f"{b.id}: unknown words {sorted(b.marks - MARKS)}"
+        if b.marks & {"skip"}:
+            continue
+        if "../shared" in b.text:
+            assert "shared" in b.marks, f"{b.id} needs ../shared: mark it ```{b.lang} shared"
+        if "--scheduler" in b.text or "distributed" in b.text:
+            assert "dask" in b.marks, f"{b.id} needs Dask: mark it ```{b.lang} dask"
