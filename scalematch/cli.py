@@ -8,6 +8,7 @@ line each (the work itself is in :mod:`scalematch.batch`). ``bench``, ``repeatab
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib
 import importlib.machinery
@@ -30,11 +31,13 @@ from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, to_grey
 from .result import MatchResult, dumps
 
-#: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT, the shells' convention.
-#: 4 is not 1: a script must not read a crash (out of memory, a bug) as "no reliable match".
+#: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT and 141 = 128 + SIGPIPE,
+#: the codes a shell reports for a process those signals end. 4 is not 1: a script must not read
+#: a crash (out of memory, a bug) as "no reliable match"; nor 141 a closed pipe.
 EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS = 0, 1, 2, 3
 EXIT_INTERNAL_ERROR = 4
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
 #: What each exit code means, for every command (--help and README.md show this table).
 EXIT_CODES = (
     (EXIT_MATCHED, "matched; batch: every pair has its line, none an error"),
@@ -43,7 +46,15 @@ EXIT_CODES = (
     (EXIT_PAIR_ERRORS, "batch: some pair has an \"error\" line (this run's or an earlier one's)"),
     (EXIT_INTERNAL_ERROR, "unexpected error (out of memory, a bug), not an answer; -v: traceback"),
     (EXIT_INTERRUPTED, "interrupted (Ctrl-C)"),
+    (EXIT_BROKEN_PIPE, "the output pipe was closed by its reader (| head); nothing more written"),
 )
+#: Exits that skip the interpreter's shutdown (``exit_at_once``): when Ctrl-C stops the main
+#: thread, the pipeline's threads (``stages.threads``) may still be inside OpenCV; a thread that
+#: comes back from it during the shutdown is ended by the interpreter (pthread_exit), whose
+#: unwinding through OpenCV's C++ frames aborts the process (SIGABRT, exit 134: "terminate
+#: called without an active exception", "FATAL: exception not rethrown"). After a closed pipe,
+#: the shutdown would flush stdout into it again.
+EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 
 
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
@@ -53,7 +64,8 @@ EXIT_TEXT_WIDTH = 76
 MATCH_EXIT_TEXT = {EXIT_MATCHED: "matched",
                    EXIT_BAD_INPUT: "bad input or usage (image, path, output file, option value)"}
 BATCH_EXIT_TEXT = {
-    EXIT_MATCHED: "every pair has its line, none an error",
+    EXIT_MATCHED: "every pair has its line, none an error (a pair with no reliable match is a "
+                  "line too: a batch never exits 1)",
     EXIT_BAD_INPUT: "bad usage (the CSV, an option value, the output file); a pair's missing or "
                     "bad image is its error line (exit 3)",
 }
@@ -104,9 +116,10 @@ LAZY_COMMANDS = {
 }
 
 #: Named threshold options: (option, Config paths, type, help). An option is offered only when
-#: its path exists in ``Config()``; any other field can be set with ``--set PATH=VALUE``. The
-#: values that mean something are checked by the parameters themselves (``scalematch.checks``),
-#: so an option, ``--set`` and the library refuse a value with the same message.
+#: its path exists in ``Config()``; any other field can be set with ``--set PATH=VALUE``. A
+#: ``{path}`` in a help is that field's default. The values that mean something are checked by
+#: the parameters themselves (``scalematch.checks``), so an option, ``--set`` and the library
+#: refuse a value with the same message.
 THRESHOLD_OPTIONS = (
     ("--harris-threshold", ("harris.threshold", "harris_low.threshold"), click.FLOAT,
      "Cornerness threshold of the scale-adapted Harris detector (both images), "
@@ -118,7 +131,9 @@ THRESHOLD_OPTIONS = (
     ("--ransac-iterations", ("ransac.max_iters",), click.INT,
      "RANSAC iterations at most, >= 1."),
     ("--min-inliers", ("decision.min_inliers",), click.INT,
-     "Fewest inliers for a match to count as reliable, >= 0."),
+     "Inliers a match needs to count as reliable by their number, >= 0; with fewer, down to "
+     "{decision.few_min_inliers}, a match is accepted only when it is far beyond chance and the "
+     "pixel check confirms it (--set decision.few_min_inliers=N)."),
     ("--max-log-nfa", ("decision.max_log_nfa",), click.FLOAT,
      "Largest log10 number of false alarms for a match to count as reliable (lower: stricter)."),
 )
@@ -253,10 +268,11 @@ def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: O
 # --------------------------------------------------------------------------- human output
 
 def summary(result: MatchResult) -> str:
-    """The one-line verdict on stderr: :func:`render.verdict` (the captions' too) and the time."""
+    """The one-line verdict on stderr: :func:`render.verdict` (the captions' too) and the time the
+    match took (``MatchResult.seconds``: not the reading of the images, nor Python's start)."""
     from .render import verdict
 
-    return f"{verdict(result)}, {result.seconds:.2f} s"  # 0.04 s, not 0.0 s
+    return f"{verdict(result)}; matching took {result.seconds:.2f} s"  # 0.04 s, not 0.0 s
 
 
 def scale_table(result: MatchResult) -> str:
@@ -280,6 +296,31 @@ def _show_progress(quiet: bool) -> bool:
         return False
 
 
+class PlanBar:
+    """The progress bar of one match: the units of its search plan done, of all of them (the
+    pipeline's ``progress(done, total)``: one unit per scale detected or matched). It appears at
+    the pipeline's first report, when the plan's length is known, and keeps that length: the
+    bar counts one thing from start to end. A context manager: its exit ends the bar's line."""
+
+    def __init__(self, file: Optional[Any] = None) -> None:
+        self.file = file
+        self.bar: Optional[Any] = None
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is None:
+            self.bar = click.progressbar(length=max(total, 1), label="matching",
+                                         file=self.file or sys.stderr, show_pos=True)
+            self.bar.__enter__()
+        self.bar.update(min(done, self.bar.length) - self.bar.pos)
+
+    def __enter__(self) -> "PlanBar":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+
 # --------------------------------------------------------------------------- output checks
 
 def check_out_dir(path: Path) -> None:
@@ -296,13 +337,16 @@ def check_out_dir(path: Path) -> None:
 
 
 def check_out_file(path: Path, option: str) -> None:
-    """Make sure ``path`` can be written (its folder exists and is writable) before the work."""
+    """Make sure ``path`` can be written before the work: its folder is created when missing (as
+    ``--out-dir`` is), and the file can be opened for appending."""
     if path.is_dir():
         raise InputError(f"{option} {path} is a directory; give a file name")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"cannot write {option} {path}: the folder {parent} does not exist; "
-                         "create it first")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot write {option} {path}: cannot create the folder {parent}: "
+                         f"{exc.strerror or exc}")
     existed = path.exists()
     try:
         with open(path, "a"):
@@ -354,7 +398,8 @@ class ScalematchGroup(click.Group):
              complete_var: Optional[str] = None, standalone_mode: bool = True,
              **extra: Any) -> Any:
         """Click's main, with every error on one line (a usage error says where help is, in
-        place of click's usage block: 4 lines) and Ctrl-C exiting 130, not 1 (no match)."""
+        place of click's usage block: 4 lines), Ctrl-C exiting 130 and a closed output pipe
+        141, neither 1 (no match)."""
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
@@ -366,7 +411,9 @@ class ScalematchGroup(click.Group):
         except click.ClickException as exc:
             exc.show()
             sys.exit(exc.exit_code)
-        except click.Abort:  # Ctrl-C (click turns KeyboardInterrupt into Abort)
+        except (click.Abort, KeyboardInterrupt):
+            # Ctrl-C: click turns KeyboardInterrupt into Abort, and passes on one that comes
+            # while it ends
             click.echo("interrupted", err=True)
             sys.exit(EXIT_INTERRUPTED)
         except Exception as exc:  # noqa: BLE001 (anything else is ours: exit 4, never 1)
@@ -380,10 +427,23 @@ class ScalematchGroup(click.Group):
             sys.exit(EXIT_INTERNAL_ERROR)
         sys.exit(rv if isinstance(rv, int) else 0)
 
+    def make_context(self, *args: Any, **kwargs: Any) -> click.Context:
+        with closed_pipe_ends_quietly():  # the group's --help and --version write here
+            return super().make_context(*args, **kwargs)
+
+    def invoke(self, ctx: click.Context) -> Any:
+        with closed_pipe_ends_quietly():  # the commands, their --help
+            return super().invoke(ctx)
+
     def _known(self) -> set:
         return set(self.commands) | set(LAZY_COMMANDS)
 
     def parse_args(self, ctx: click.Context, args: List[str]) -> List[str]:
+        if not args and not ctx.resilient_parsing:
+            # nothing to do: the help with its examples, on stderr, as a usage error (exit 2)
+            # without "Error:" (click's own would be "Error: Usage: ...")
+            click.echo(ctx.get_help(), err=True)
+            ctx.exit(EXIT_BAD_INPUT)
         own = {"--help", "-h", "--version"}
         if args and args[0] not in self._known() and args[0] not in own:
             args = [self.default_command] + list(args)
@@ -412,6 +472,18 @@ class ScalematchGroup(click.Group):
                 if n in LAZY_COMMANDS or not self.commands[n].hidden]
         with formatter.section("Commands"):
             formatter.write_dl(rows)
+
+
+@contextlib.contextmanager
+def closed_pipe_ends_quietly() -> Iterator[None]:
+    """Exit 141 (128 + SIGPIPE, as a writer killed by its closed pipe), with nothing more
+    written, when stdout or stderr is a pipe whose reader has gone (``| head -1`` once head has
+    its line): click would exit 1, which means "no reliable match". A ``BrokenPipeError`` that
+    gets here is the output's: the batch's pipes to its workers handle their own."""
+    try:
+        yield
+    except BrokenPipeError:
+        sys.exit(EXIT_BROKEN_PIPE)
 
 
 def _module_exists(name: str) -> bool:
@@ -513,8 +585,8 @@ def matching_options(f: Callable) -> Callable:
         if paths:
             dest = "thr_" + name[2:].replace("-", "_")
             opts.append(click.option(name, dest, type=typ, default=None,
-                                     help=f"{text} (Config {', '.join(paths)}) [default: "
-                                          f"{_get(base, paths[0])}]"))
+                                     help=f"{_with_defaults(text, base)} (Config "
+                                          f"{', '.join(paths)}) [default: {_get(base, paths[0])}]"))
     opts += [
         click.option("--set", "settings", multiple=True, metavar="PATH=VALUE",
                      help="Set any Config field, e.g. --set harris.sigma_tilde=2.5 (repeatable)."),
@@ -532,6 +604,16 @@ def _get(obj: Any, path: str) -> Any:
     for name in path.split("."):
         obj = getattr(obj, name)
     return obj
+
+
+def _with_defaults(text: str, config: Any) -> str:
+    """``text`` with each ``{path}`` of a field of ``config`` replaced by its value.
+
+    >>> _with_defaults("down to {decision.few_min_inliers} inliers", Config())
+    'down to 4 inliers'
+    """
+    return re.sub(r"\{([a-z_.]+)\}", lambda m: str(_get(config, m.group(1)))
+                  if _has_path(config, m.group(1)) else m.group(0), text)
 
 
 def _config_from(kwargs: Dict[str, Any]) -> Config:
@@ -592,21 +674,22 @@ def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Write overlay.png, matches.png, scales.png and matches.csv here.")
 @click.option("--json", "json_path", metavar="PATH",
-              help="Write the result as JSON here ('-' for stdout); written whether or not a "
-                   "match was found.")
+              help="Write the result as JSON here ('-' for stdout; a missing folder is created, "
+                   "as for --out-dir); written whether or not a match was found.")
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar on stderr.")
 @click.option("-v", "--verbose", is_flag=True,
               help="Also print the per-scale table, the timings and the files written (and the "
                    "traceback of an unexpected error).")
 @exit_codes_in_help(EXIT_MATCHED, EXIT_NO_MATCH, EXIT_BAD_INPUT, EXIT_INTERNAL_ERROR,
-                    EXIT_INTERRUPTED, texts=MATCH_EXIT_TEXT)
+                    EXIT_INTERRUPTED, EXIT_BROKEN_PIPE, texts=MATCH_EXIT_TEXT)
 def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optional[str],
                   quiet: bool, verbose: bool, max_pixels: int, **kwargs: Any) -> None:
     """Match LOW (low-resolution image) against HIGH (high-resolution image).
 
     Finds the zoom ratio (2x-16x), rotation and translation taking HIGH's pixels to LOW's, or
-    says "no reliable match". A one-line summary goes to stderr.
+    says "no reliable match". A one-line summary goes to stderr: the verdict and the time the
+    matching took (not the reading of the images, nor Python's start).
 
     \b
     Examples:
@@ -640,14 +723,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
     try:
         if _show_progress(quiet):
-            # steps: each scale detected, then each matched; the length grows when the search
-            # goes on to the other order or to tilted views
-            with click.progressbar(length=2 * len(config.scales), label="matching",
-                                   file=sys.stderr, show_pos=True) as bar:
-                def progress(done: int, total: int) -> None:
-                    bar.length = max(total, done)
-                    bar.update(done - bar.pos)
-                result = _run_match(low_grey, high_grey, config, progress, factors)
+            with PlanBar() as bar:
+                result = _run_match(low_grey, high_grey, config, bar, factors)
         else:
             result = _run_match(low_grey, high_grey, config, factors=factors)
     except ImageError as exc:
@@ -703,9 +780,10 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
 @click.argument("pairs_csv", metavar="PAIRS.csv",
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Append JSON lines here instead of stdout; resumable: the pairs already in it "
-                   "are skipped. It must be new or the output of an earlier batch run with the "
-                   "same options (anything else is refused, exit 2).")
+              help="Append JSON lines here instead of stdout (a missing folder is created); "
+                   "resumable: the pairs already in it are skipped. It must be new or the output "
+                   "of an earlier batch run with the same options (anything else is refused, "
+                   "exit 2).")
 @click.option("--retry-errors", is_flag=True,
               help="When resuming, match again the pairs whose line in --output is an error "
                    "(the file is rewritten without those lines first; every other line kept).")
@@ -720,7 +798,7 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
               help="The traceback of an unexpected error of the batch itself (a pair's is in its "
                    "line).")
 @exit_codes_in_help(EXIT_MATCHED, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS, EXIT_INTERNAL_ERROR,
-                    EXIT_INTERRUPTED, texts=BATCH_EXIT_TEXT)
+                    EXIT_INTERRUPTED, EXIT_BROKEN_PIPE, texts=BATCH_EXIT_TEXT)
 def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, jobs: int,
                   scheduler: Optional[str], quiet: bool, verbose: bool, max_pixels: int,
                   **kwargs: Any) -> None:
@@ -851,8 +929,26 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
-    """Console entry point (``scalematch``)."""
-    cli.main(args=list(argv) if argv is not None else None, prog_name="scalematch")
+    """Console entry point (``scalematch``): ends at once with the codes of ``EXITS_AT_ONCE``."""
+    try:
+        cli.main(args=list(argv) if argv is not None else None, prog_name="scalematch")
+    except SystemExit as exc:
+        if exc.code in EXITS_AT_ONCE:
+            exit_at_once(exc.code)
+        raise
+
+
+def exit_at_once(code: int) -> None:
+    """End the process with ``code`` once stdout and stderr are flushed (as far as they can
+    be), without the interpreter's shutdown (``EXITS_AT_ONCE`` says why). Whatever the command
+    holds is closed by then: the batch closes its output file and stops its workers and its
+    Dask client before it exits."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):  # a closed pipe, a closed file
+            pass
+    os._exit(code)
 
 
 if __name__ == "__main__":

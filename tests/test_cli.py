@@ -4,6 +4,7 @@ Ctrl-C (exit 130), no match (exit 1), the JSON contract, the demo (exit 0). Batc
 from __future__ import annotations
 
 import csv
+import io
 import json
 import re
 import subprocess
@@ -83,6 +84,28 @@ def test_each_command_says_what_its_own_exit_codes_mean():
     assert "batch" not in match_help.split("Exit codes")[1]  # the batch's meanings stay there
     assert "0 every pair has its line, none an error" in batch_help
     assert "a pair's missing or bad image is its error line (exit 3)" in batch_help
+    # a pair's "no" is its line: the batch has no exit 1 (a closed pipe is 141, test_exits.py)
+    batch_codes = batch_help.split("Exit codes")[1].split("Options:")[0]
+    assert " 1 " not in batch_codes and "a batch never exits 1" in batch_codes
+    for text in (match_help, batch_help):
+        assert "130 interrupted (Ctrl-C) 141 the output pipe was closed" in text
+
+
+def test_no_arguments_print_the_help_and_examples_without_error():
+    result = run()
+    assert result.exit_code == 2  # a usage error: nothing to do
+    assert "Error" not in result.output
+    assert result.stderr.startswith("Usage: scalematch") and "Examples:" in result.stderr
+    assert "Exit codes:" in result.stderr
+
+
+def test_min_inliers_help_says_fewer_pass_with_the_pixel_check():
+    from scalematch.config import Config
+
+    text = " ".join(run("match", "--help").output.split())
+    few = Config().decision.few_min_inliers
+    assert f"with fewer, down to {few}, a match is accepted only when it is far beyond chance " \
+           "and the pixel check confirms it" in text
 
 
 def test_python_dash_m_runs_the_command_line():
@@ -161,8 +184,10 @@ def _bad_input(tmp_path: Path, case: str):
         blocker = tmp_path / "file.txt"
         blocker.write_text("a file, not a folder")
         return [good, good, "--out-dir", blocker / "out"], "--out-dir"
-    if case == "unwritable_json":
-        return [good, good, "--json", tmp_path / "no" / "such" / "r.json"], "does not exist"
+    if case == "unwritable_json":  # its folder would be a file
+        blocker = tmp_path / "file.txt"
+        blocker.write_text("a file, not a folder")
+        return [good, good, "--json", blocker / "r.json"], "cannot write --json"
     if case == "bad_scales":
         return [good, good, "--scales", "8-1"], "scales"
     if case == "bad_set":
@@ -232,6 +257,34 @@ def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
     assert "130  interrupted" in run("match", "--help").output
 
 
+# --------------------------------------------------------------------------- progress bar
+
+class _Terminal(io.StringIO):
+    """A stream that click takes for a terminal: its progress bar is drawn there."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+@needs_pipeline
+def test_the_progress_bar_counts_the_plan_from_start_to_end():
+    """Every state the bar shows has the same total, the plan's; the count only grows, and ends
+    at the total (the search stops early on the demo pair: the rest is counted as done)."""
+    from scalematch.cli import PlanBar, _run_match
+    from scalematch.config import Config
+    from scalematch.imageio import read_grey
+
+    screen = _Terminal()
+    with PlanBar(screen) as bar:
+        _run_match(read_grey(DEMO_LOW), read_grey(DEMO_HIGH), Config(), bar)
+    shown = [(int(done), int(total)) for done, total
+             in re.findall(r"matching.*?(\d+)/(\d+)", screen.getvalue())]
+    assert len(shown) >= 2, screen.getvalue()
+    assert len({total for _, total in shown}) == 1, shown
+    done = [d for d, _ in shown]
+    assert done == sorted(done) and done[-1] == shown[-1][1]
+
+
 # --------------------------------------------------------------------------- no match: exit 1
 
 @needs_pipeline
@@ -280,6 +333,9 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     assert data["best_scale"] in [row["s"] for row in data["scales"]]
     assert data["seconds"] > 0
     assert "matched" in result.stderr
+    # the time the summary gives is the match's, as the JSON's "seconds"
+    took = re.search(r"; matching took (\d+\.\d\d) s$", result.stderr.strip())
+    assert took and float(took.group(1)) == pytest.approx(data["seconds"], abs=0.006)
     said = re.search(r"ratio (\d+\.\d+)", result.stderr)
     assert said and abs(float(said.group(1)) - 3.0) < 0.05, result.stderr
     with open(out / "matches.csv") as fh:
@@ -382,6 +438,16 @@ def test_out_of_memory_exits_4_not_1(big_pair):
 
 
 # --------------------------------------------------------------------------- outputs vs inputs
+
+@needs_pipeline
+def test_json_into_a_missing_folder_creates_it_as_out_dir_does(tmp_path, flat_pair):
+    js = tmp_path / "new" / "deeper" / "result.json"
+    out = tmp_path / "new" / "pictures"
+    result = run(*flat_pair, "--json", js, "-o", out, "-q")
+    assert result.exit_code == 1, result.output  # no reliable match: both written all the same
+    assert json.loads(js.read_text())["matched"] is False
+    assert (out / "overlay.png").is_file()
+
 
 def test_json_never_overwrites_an_input(flat_pair):
     low, high = flat_pair
