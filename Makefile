@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_OUT := out/demo
 
-.PHONY: setup bytecode demo test test-fast bench bench-real repeatability clean
+.PHONY: setup bytecode demo test lint bench bench-real repeatability clean
 
 setup: $(STAMP)
 
@@ -30,15 +30,21 @@ demo: $(STAMP) bytecode
 test: $(STAMP) bytecode
 	$(BIN)/python -m pytest -q
 
+## check the code with ruff (the rules: pyproject.toml, [tool.ruff])
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
 ## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
 bench: $(STAMP)
 	$(BIN)/scalematch lab bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
 
-## the real-pair benchmark of issue 9 (needs ../shared): Oxford both ways, tilted and swapped pairs
+## the real-pair benchmark (needs ../shared): Oxford both ways, tilted and swapped pairs; writes its
+## tables into docs/BENCHMARKS.md
 bench-real: $(STAMP)
 	$(BIN)/scalematch lab real-pairs --write-doc docs/BENCHMARKS.md
 
-## the repeatability study of issue 2 (needs ../shared)
+## the repeatability of standard vs scale-adapted Harris (needs ../shared); writes
+## docs/repeatability.csv, .json and .png (docs/REPEATABILITY.md explains them)
 repeatability: $(STAMP)
 	$(BIN)/scalematch lab repeatability --out-dir docs
 

@@ -16,7 +16,6 @@ import signal
 import stat
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -374,9 +373,10 @@ def test_exit_3_is_documented():
 
 
 def test_a_paper_mode_batch_resumes(images, tmp_path):
-    """Issue 16: the config recorded with each line held an output of the search (the covariance
-    used), so a paper-mode batch run a second time refused its own file ("made with other
-    options"). Provenance is in the result now; the second run resumes and adds nothing."""
+    """A line's config is the options alone: what the search used (the covariance of the paper
+    mode, ``covariance_used``) is in the result beside it, so a paper-mode batch run a second
+    time resumes from its own file (not refused as "made with other options") and adds
+    nothing."""
     out = tmp_path / "paper.jsonl"
     pairs = write(tmp_path / "pairs.csv", f"{images}/low.png,{images}/high.png\n")
     first = run("batch", pairs, "--mode", "paper", "--output", out, "-q")
