@@ -23,15 +23,15 @@ import numpy as np
 from .config import Config
 from .geometry import answer_parts, finer_to_coarser
 from .imageio import grey_levels
-from .result import Direction, Evidence, MatchResult, ScaleRow, StepRecord
-from .search import (STOP_REASONS, Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
+from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
+from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Look, final_checks, decide, look_again
+from .stages.decision import Look, decide, figures, final_checks, look_again
 from .stages.descriptors import Described, describe_gradients, describe_jets
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
-from .stages.estimator import estimate, model_of
+from .stages.estimator import Estimate, estimate, model_of
 from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import distance_inside, with_nan
@@ -652,6 +652,26 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     return matched[k], fits[k], checks[k]
 
 
+def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
+    """The refused search whose best transform is strongest (lowest log10 NFA), among those
+    made on the images themselves (a view's transform is in the view's pixels): a "no" shows
+    it (``MatchResult.rejected``); None when no search found a transform to refuse."""
+    refused = [a for a in attempts if not a.matched and a.verdict.candidate is not None
+               and a.view.is_identity and a.coarser_view is None]
+    return min(refused, key=lambda a: a.verdict.evidence.log10_nfa, default=None)
+
+
+def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction: Direction,
+                       test: str, evidence: Evidence, config: Config) -> Rejected:
+    """A refused transform (finer working px -> coarser working px, found in ``direction``) as
+    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``)."""
+    t, inliers, swapped = finer_to_coarser(np.asarray(t, np.float64), inliers,
+                                           direction is Direction.SWAPPED)
+    return Rejected(t, model, inliers, evidence.log10_nfa, test,
+                    figures(test, evidence, config.decision),
+                    Direction.SWAPPED if swapped else Direction.GIVEN)
+
+
 def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
                  timings: Dict[str, float], work: WorkImages) -> MatchResult:
@@ -663,7 +683,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     repeated structure is refused there.
     """
     winner, final, near = best_fitting(attempts, config, work)
-    shown = winner or attempts[0]
+    refused = best_refused(attempts)
+    shown = winner or refused or attempts[0]
     searches = sum(r.views for r in records)
     evidence = replace(shown.verdict.evidence, searches=searches,
                        search_order=shown.step.direction, view_tilt=shown.shown_view.tilt,
@@ -680,15 +701,23 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
         if stopped == "time budget":
             more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
                      f"{len(records)} of {len(plan)} steps")
-        return MatchResult(matched=False, reason=shown.verdict.reason + more, **common)
+        verdict = shown.verdict
+        rejected = None if refused is None else rejected_candidate(
+            verdict.candidate, verdict.candidate_inliers, config.model, refused.step.direction,
+            verdict.test, evidence, config)
+        return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
+                           **common)
     t, inliers, model = final
     has_ratio = model_of(model).has_ratio
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        common["evidence"], reason = final_checks(coarse, fine, t, evidence, config.decision,
-                                                  near, vouched=inliers[:, :2])
+        common["evidence"], reason, test = final_checks(coarse, fine, t, evidence,
+                                                        config.decision, near,
+                                                        vouched=inliers[:, :2])
         if reason:
-            return MatchResult(matched=False, reason=reason, **common)
+            return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
+                t, inliers, model, winner.step.direction, test, common["evidence"], config),
+                **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (

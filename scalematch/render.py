@@ -35,6 +35,10 @@ PathLike = Union[str, Path]
 OUTLINE = (0, 215, 255)  # amber
 INLIER_LINE = (60, 200, 60)  # green
 INLIER_DOT = (0, 215, 255)
+#: A "no"'s refused candidate: its footprint dashed in red, its inliers greyed (BGR)
+REJECTED = (60, 60, 255)
+REJECTED_LINE = (150, 150, 150)
+REJECTED_DOT = (190, 190, 190)
 #: Weight of the low image outside the footprint (dimmed so the footprint stands out).
 OUTSIDE_DIM = 0.55
 #: Height range of the side-by-side matches picture, px.
@@ -191,6 +195,11 @@ def evidence_line(result: MatchResult) -> str:
         parts.append(f"pixels: ZNCC {ncc:.2f}, {margin:+.2f} against nearby placements")
     if np.isfinite(e.unique_ratio):
         parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
+    if result.matched and e.judged_by == "geometry":
+        parts.append("unique by its geometry")
+    if result.matched and e.parallax:
+        parts.append(f"parallax: {e.parallax_points} matches off its plane (a 3-D scene; "
+                     f"--model fundamental gives the epipolar geometry)")
     return "; ".join(parts)
 
 
@@ -273,6 +282,12 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
         lines.append("magenta = low, green = high warped (grey where they agree); "
                      "outline = high footprint" + (" (cut at the picture's edge, where it "
                                                    "runs beyond)" if clipped else ""))
+    elif not result.matched and rejected_footprint(result, high.shape) is not None:
+        corners = rejected_footprint(result, high.shape)
+        thick = max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
+        dashed_polygon(out, corners, REJECTED, thick, dash_px=max(8, 4 * thick))
+        lines.append(f"dashed = the best candidate's footprint ({result.rejected.n_inliers} "
+                     f"inliers), refused by the {result.rejected.test} test")
     elif result.matched and result.inliers.size:
         for x, y in result.inliers[:, 2:4]:
             cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
@@ -348,6 +363,30 @@ def drawn_note(factor: float) -> str:
     return f"   low drawn at 1/{factor:g} of its file size" if factor != 1.0 else ""
 
 
+def rejected_footprint(result: MatchResult, high_shape) -> "np.ndarray | None":
+    """(4, 2) the footprint of a "no"'s refused candidate in the coarser image, or None (a
+    match, no candidate, a fundamental matrix, a corner at infinity)."""
+    rej = result.rejected
+    if result.matched or rej is None or not model_of(rej.model).has_ratio:
+        return None
+    return footprint(np.asarray(rej.transform, np.float64), high_shape)
+
+
+def dashed_polygon(image: np.ndarray, corners: np.ndarray, colour, thick: int,
+                   dash_px: float) -> None:
+    """Draw the closed polygon ``corners`` (N, 2) dashed onto ``image`` (in place): dashes of
+    ``dash_px`` with gaps as long, anti-aliased, at sub-pixel precision."""
+    pts = np.asarray(corners, np.float64)
+    for a, b in zip(pts, np.roll(pts, -1, axis=0)):
+        length = float(np.hypot(*(b - a)))
+        steps = np.arange(0.0, length, 2.0 * dash_px)
+        for start in steps:
+            p = a + (b - a) * (start / max(length, 1e-9))
+            q = a + (b - a) * (min(start + dash_px, length) / max(length, 1e-9))
+            cv2.line(image, tuple(int(round(v * 16)) for v in p),
+                     tuple(int(round(v * 16)) for v in q), colour, thick, cv2.LINE_AA, shift=4)
+
+
 def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
                   seed: int = 0, factors: Tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
     """low (left) and high (right) side by side at one height, a line per inlier match.
@@ -365,7 +404,10 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
     canvas[:, :a.shape[1]] = a
     x0 = a.shape[1] + gap
     canvas[:, x0:] = b
-    pts = np.asarray(result.inliers, dtype=np.float64).reshape(-1, 4)
+    refused = not result.matched and result.rejected is not None
+    pts = np.asarray(result.rejected.inliers if refused else result.inliers,
+                     dtype=np.float64).reshape(-1, 4)
+    line_colour, dot_colour = (REJECTED_LINE, REJECTED_DOT) if refused else (INLIER_LINE, INLIER_DOT)
     note = ""
     if pts.shape[0] > MAX_LINES:
         keep = np.random.default_rng(seed).choice(pts.shape[0], MAX_LINES, replace=False)
@@ -376,13 +418,15 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
         pb = apply(resize_map(fb), [[xh, yh]])[0] + (x0, 0.0)
         ia = (int(round(pa[0] * 16)), int(round(pa[1] * 16)))
         ib = (int(round(pb[0] * 16)), int(round(pb[1] * 16)))
-        cv2.line(canvas, ia, ib, INLIER_LINE, 1, cv2.LINE_AA, shift=4)
-        cv2.circle(canvas, ia, 2 * 16, INLIER_DOT, -1, cv2.LINE_AA, shift=4)
-        cv2.circle(canvas, ib, 2 * 16, INLIER_DOT, -1, cv2.LINE_AA, shift=4)
+        cv2.line(canvas, ia, ib, line_colour, 1, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, ia, 2 * 16, dot_colour, -1, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, ib, 2 * 16, dot_colour, -1, cv2.LINE_AA, shift=4)
     lh, lw = low_bgr.shape[:2]
     hh, hw = high_bgr.shape[:2]
+    what = (f"{len(pts)} inliers of the refused candidate (grey){note}" if refused
+            else f"{result.n_inliers} inlier matches{note}")
     head = (f"left: low {size_label(lw, lh, factors[0])}   right: high "
-            f"{size_label(hw, hh, factors[1])}   {result.n_inliers} inlier matches{note}")
+            f"{size_label(hw, hh, factors[1])}   {what}")
     return np.vstack([_band([head, verdict(result)], canvas.shape[1]), canvas])
 
 
@@ -480,7 +524,10 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     """
     drawn = in_decoded(result, *factors)
     f_low, f_high = factors
-    if result.order == "swapped":  # the pictures show the finer image on the coarser one
+    # the pictures show the finer image on the coarser one: a "no", its refused candidate's
+    order = result.rejected.order if not result.matched and result.rejected is not None \
+        else result.order
+    if order == "swapped":
         low_path, high_path, low, high = high_path, low_path, high, low
         f_low, f_high = f_high, f_low
     out = Path(out_dir)

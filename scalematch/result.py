@@ -81,7 +81,11 @@ class Evidence:
     second_inliers: int = 0
     second_log10_nfa: float = math.inf
     second_gap_px: float = math.nan  #: its mean distance from the winner's map, px
-    second_alike: bool = False  #: the same scale and angle as the winner's
+    #: candidates off the winner's plane that an epipolar geometry explains
+    #: (``stages.rivals.off_plane``), and whether they show parallax: a 3-D scene, the
+    #: transform that of its dominant plane (``--model fundamental`` gives the epipolar geometry)
+    parallax_points: int = 0
+    parallax: bool = False
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)
@@ -132,6 +136,37 @@ class ScaleRow:
 
 
 @dataclass(frozen=True)
+class Rejected:
+    """The best candidate of a "no" (JSON ``rejected``): what was found and which test refused
+    it, so that a user sees both. In a match's conventions: ``transform`` maps the finer
+    image's pixels to the coarser one's, ``order`` says which image given is the coarser."""
+
+    transform: np.ndarray = field(repr=False)  #: 2x3 or 3x3, finer px -> coarser px
+    model: str  #: similarity | affine | homography
+    inliers: np.ndarray = field(repr=False)  #: (N, 4) x_finer, y_finer, x_coarser, y_coarser
+    log10_nfa: float  #: how far beyond chance its inliers are (a contrario)
+    #: which test refused it (``stages.decision.TESTS``: "chance", "uniqueness", ...)
+    test: str
+    #: that test's figures and limits (``stages.decision.figures``)
+    figures: Dict[str, Any] = field(default_factory=dict)
+    order: Direction = Direction.GIVEN  #: GIVEN: the first image given is the coarser one
+
+    @property
+    def n_inliers(self) -> int:
+        return int(np.asarray(self.inliers).reshape(-1, 4).shape[0])
+
+    def to_dict(self) -> Dict[str, Any]:
+        """Plain JSON types: the transform, model, order, inlier count and pairs, log10 NFA,
+        the test and its figures."""
+        return {"transform": to_jsonable(np.asarray(self.transform, np.float64)),
+                "model": self.model, "order": str(self.order), "n_inliers": self.n_inliers,
+                "matches": to_jsonable(np.round(np.asarray(self.inliers, np.float64)
+                                                .reshape(-1, 4), 3)),
+                "log10_nfa": to_jsonable(float(self.log10_nfa)), "test": self.test,
+                "figures": to_jsonable(self.figures)}
+
+
+@dataclass(frozen=True)
 class MatchResult:
     """Everything a match produced; ``matched`` False means "no reliable match" (see ``reason``)."""
 
@@ -159,6 +194,9 @@ class MatchResult:
     #: provenance of the paper mode: which Lambda was used ("packaged" or the resolved path,
     #: with the first 12 hex digits of the file's SHA-256); "" in the default mode
     covariance_used: str = ""
+    #: a "no": its best candidate and the test that refused it (None when matched, or when no
+    #: transform was found)
+    rejected: Optional[Rejected] = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "order", Direction(self.order))
@@ -227,6 +265,7 @@ class MatchResult:
             "search": [to_jsonable(step) for step in self.search],
             "config": to_jsonable(self.config),
             "covariance_used": self.covariance_used or None,
+            "rejected": None if self.rejected is None else self.rejected.to_dict(),
             "version": __version__,
             "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
             "high": {"path": str(high_path), "width": int(high_shape[1]),

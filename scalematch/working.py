@@ -158,16 +158,31 @@ def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
     return compose(s_coarse, compose(t, invert(s_fine)))
 
 
-def _mapped(result: MatchResult, s_low: np.ndarray,
-            s_high: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """(transform, inliers) of a matched ``result`` with each image's pixels mapped by its map
-    (2x3: ``s_low`` for the first image given, ``s_high`` for the second), the finer and
-    coarser one as ``result.order`` says."""
+def _mapped(result, s_low: np.ndarray, s_high: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(transform, inliers) of a matched ``result`` (or a ``Rejected`` candidate) with each
+    image's pixels mapped by its map (2x3: ``s_low`` for the first image given, ``s_high`` for
+    the second), the finer and coarser one as ``result.order`` says."""
     swapped = result.order == Direction.SWAPPED
     s_fine, s_coarse = (s_low, s_high) if swapped else (s_high, s_low)
     t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
     pts = np.asarray(result.inliers, np.float64).reshape(-1, 4)
     return t, np.hstack([apply(s_fine, pts[:, :2]), apply(s_coarse, pts[:, 2:4])])
+
+
+def _rejected_mapped(result: MatchResult, s_low: np.ndarray, s_high: np.ndarray,
+                     turn: bool) -> MatchResult:
+    """``result`` with its ``rejected`` candidate mapped as :func:`_mapped` maps a match (and,
+    with ``turn``, turned round as ``finer_to_coarser`` turns one)."""
+    rej = result.rejected
+    if rej is None:
+        return result
+    t, inliers = _mapped(rej, s_low, s_high)
+    swapped = rej.order == Direction.SWAPPED
+    if turn:
+        t, inliers, swapped = finer_to_coarser(t, inliers, swapped)
+    return replace(result, rejected=replace(
+        rej, transform=t, inliers=inliers,
+        order=Direction.SWAPPED if swapped else Direction.GIVEN))
 
 
 def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
@@ -190,7 +205,7 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
     out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config,
                   evidence=evidence)
     if not result.matched:
-        return out
+        return _rejected_mapped(out, _to_original(f_low), _to_original(f_high), turn=True)
     swapped = result.order == Direction.SWAPPED
     t, inliers = _mapped(result, _to_original(f_low), _to_original(f_high))
     if not model_of(result.model).has_ratio:
@@ -217,8 +232,11 @@ def in_decoded(result: MatchResult, f_low: float, f_high: float) -> MatchResult:
     >>> d.transform.round(3).tolist(), d.inliers.round(3).tolist()
     ([[0.125, 0.0, 49.75], [0.0, 0.125, 24.75]], [[0.0, 0.0, 49.75, 24.75]])
     """
-    if (f_low == 1.0 and f_high == 1.0) or not result.matched or result.transform is None:
+    if f_low == 1.0 and f_high == 1.0:
         return result
+    if not result.matched or result.transform is None:
+        return _rejected_mapped(result, invert(_to_original(f_low)),
+                                invert(_to_original(f_high)), turn=False)
     t, inliers = _mapped(result, invert(_to_original(f_low)), invert(_to_original(f_high)))
     return replace(result, transform=t, inliers=inliers)
 

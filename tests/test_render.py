@@ -244,3 +244,35 @@ def test_the_verdict_says_which_image_the_tilted_view_was_of():
     assert verdict(found("coarser")).endswith(
         "seen tilted by 4 at 36 deg (the coarser image)")
     assert verdict(found("finer")).endswith("seen tilted by 4 at 36 deg")
+
+
+def test_a_no_draws_its_refused_candidate_dashed_and_its_inliers_grey(pair):
+    """A "no" with a ``rejected`` candidate: the overlay draws its footprint dashed in red where
+    the transform puts it (dashes and gaps along each side), nothing where a match's outline
+    would be amber; matches.png draws its inliers in grey."""
+    from dataclasses import replace
+
+    from scalematch.render import REJECTED, REJECTED_DOT
+    from scalematch.result import Rejected
+
+    low, high, t = pair
+    found = make_result(t)
+    no = replace(make_result(None, matched=False), reason="ambiguous: ...",
+                 rejected=Rejected(t, "similarity", found.inliers, -30.0, "uniqueness",
+                                   {"unique_ratio": 1.2, "min_unique_ratio": 2.0}))
+    out = overlay(low, high, no)
+    assert out.shape == low.shape + (3,) and not outline_mask(out).any()
+    red = np.all(np.abs(out.astype(int) - np.array(REJECTED)) <= 40, axis=2)
+    corners = footprint(t, high.shape)
+    # along the top side of the footprint: red dashes with gaps between them
+    a, b = corners[0], corners[1]
+    on_side = [bool(red[int(round(y)), int(round(x))].any())
+               for x, y in (a + (b - a) * f for f in np.linspace(0.05, 0.95, 60))]
+    assert 0.3 < np.mean(on_side) < 0.8
+    far = np.ones(red.shape, bool)
+    cv2.fillConvexPoly(far.view(np.uint8), np.round(corners).astype(np.int32), 0)
+    far = cv2.erode(far.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+    assert not red[far].any()  # nothing away from its footprint
+    m = matches_image(low, high, no)
+    grey = np.all(np.abs(m.astype(int) - np.array(REJECTED_DOT)) <= 8, axis=2)
+    assert grey.sum() > 40  # the refused inliers' dots

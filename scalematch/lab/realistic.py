@@ -113,11 +113,6 @@ def occluded(pair: ZoomPair, other: np.ndarray, rng: np.random.Generator) -> Zoo
     return replace(pair, high=high)
 
 
-def _inside_share(points: np.ndarray, axis: int, cut: float, keep_low_side: bool) -> float:
-    side = points[:, axis] <= cut if keep_low_side else points[:, axis] >= cut
-    return float(side.mean())
-
-
 def partial(pair: ZoomPair, rng: np.random.Generator) -> ZoomPair:
     """The low image cut across the high image's footprint so that 30-70 % of it (of a grid
     over the high image) lies inside: a telephoto frame overhanging the wide one. The cut runs

@@ -322,7 +322,7 @@ def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, An
     info = {"inliers": r.n_inliers, "order": r.order, "model": r.model, "reason": r.reason,
             "view_tilt": e.view_tilt, "best_inliers": e.inliers, "log10_nfa": e.log10_nfa,
             "judged_by": e.judged_by, "unique_ratio": e.unique_ratio,
-            "second_inliers": e.second_inliers, "second_alike": e.second_alike}
+            "second_inliers": e.second_inliers, "parallax": e.parallax}
     return (r.transform if r.matched else None), r.order == "given", info
 
 
@@ -369,7 +369,7 @@ def run_limited(name: str, pair: Pair, timeout: float):
 
 #: What a row keeps of a method's own figures
 JUDGED_KEYS = ("inliers", "order", "model", "reason", "view_tilt", "best_inliers", "log10_nfa",
-               "judged_by", "unique_ratio", "second_inliers", "second_alike")
+               "judged_by", "unique_ratio", "second_inliers", "parallax")
 
 
 def judge(method: str, pair: Pair, out) -> Dict[str, Any]:

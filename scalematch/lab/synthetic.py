@@ -590,7 +590,6 @@ def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rand
         raise ValueError(f"photo {pw}x{ph} seen at tilt {tilt:g} holds no {w}x{h} crop; use a "
                          f"smaller high_size")
     x, y = best
-    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
     high = np.ascontiguousarray(oblique[y:y + h, x:x + w])
     angle = float(rng.uniform(*ANGLE_RANGE))
     gain, offset, noise_std = grey_change(rng)

@@ -31,15 +31,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, NamedTuple, Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 from ..checks import in_range
-from ..geometry import apply, footprint, grid, similarity_parts
+from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .descriptors import Described
 from .estimator import model_of
+from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
+                     Second)
 from .threads import thread_map
 
 
@@ -135,6 +137,15 @@ class DecisionParams:
     #: (``pixelcheck.UNIQUE_EXCLUSION``); a nearer second similarity is the same scene fitted
     #: piecewise (a tilted plane fits two similarities a few px apart)
     second_min_shift: float = 0.5
+    #: the scene shows parallax (``Evidence.parallax``: a 3-D scene, the answer the map of its
+    #: dominant plane) when an epipolar geometry explains at least this many of the winner's
+    #: outliers among its candidates (``stages.rivals.off_plane``) ...
+    parallax_min_points: int = 10
+    #: ... and this share of its inliers: measured 0 to 2 off-plane points on 15 zoom pairs of
+    #: real photos, 118 beside 42 inliers on the desk scene of ../shared/data/ef/zoom
+    parallax_share: float = 0.25
+    #: distance to the epipolar line within which a candidate fits it, px
+    parallax_threshold_px: float = 1.5
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -158,6 +169,10 @@ class DecisionParams:
         in_range("decision", "second_scale_factor", self.second_scale_factor, lo=1)
         in_range("decision", "second_angle_deg", self.second_angle_deg, lo=0)
         in_range("decision", "second_min_shift", self.second_min_shift, lo=0)
+        in_range("decision", "parallax_min_points", self.parallax_min_points, lo=0, integer=True)
+        in_range("decision", "parallax_share", self.parallax_share, lo=0)
+        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px, lo=0,
+                 lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -168,6 +183,38 @@ class Decision:
     transform: Optional[np.ndarray] = field(repr=False)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) x_high, y_high, x_low, y_low
     evidence: Evidence = field(default_factory=Evidence)
+    #: a "no": the test that refused (a key of ``TESTS``; "" when matched or nothing to refuse)
+    test: str = ""
+    #: a "no": the best transform and its inliers, as ``transform`` and ``inliers`` would be
+    candidate: Optional[np.ndarray] = field(default=None, repr=False)
+    candidate_inliers: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)), repr=False)
+
+
+#: The tests that refuse a best transform, and the figures each reports (from the evidence,
+#: then from :class:`DecisionParams`): the ``rejected`` block of a "no" (``result.Rejected``)
+TESTS = {
+    "too few inliers": ("inliers", "min_inliers", "log10_nfa", "pixel_margin"),
+    "chance": ("inliers", "candidates", "log10_nfa", "max_log_nfa"),
+    "folded": (),
+    "footprint area": ("footprint_area_px", "min_area_px"),
+    "footprint inside": ("footprint_inside", "min_inside", "log10_nfa", "max_log_nfa_alone"),
+    "agreeing scales": ("agreeing_scales", "min_agreeing_scales", "log10_nfa",
+                        "max_log_nfa_alone"),
+    "repeated structure": ("inliers", "second_inliers", "second_gap_px", "second_share"),
+    "uniqueness": ("unique_ratio", "min_unique_ratio", "unique_claimed", "unique_elsewhere",
+                   "log10_nfa", "max_log_nfa_geometry"),
+    "pixels": ("final_margin", "min_final_margin", "log10_nfa", "max_log_nfa_geometry"),
+}
+
+
+def figures(test: str, evidence: Evidence, params: DecisionParams) -> dict:
+    """The figures of ``test`` (:data:`TESTS`): name -> value, from the evidence or the params.
+
+    >>> figures("chance", Evidence(inliers=5, candidates=40, log10_nfa=-1.0), DecisionParams())
+    {'inliers': 5, 'candidates': 40, 'log10_nfa': -1.0, 'max_log_nfa': -2.0}
+    """
+    return {name: getattr(evidence, name) if hasattr(evidence, name) else getattr(params, name)
+            for name in TESTS.get(test, ())}
 
 
 def log10_binom(n: int, k: int) -> float:
@@ -182,15 +229,6 @@ def log10_nfa(n: int, k: int, m: int, p: float, tests: float) -> float:
         return math.inf
     return (math.log10(max(tests, 1.0)) + log10_binom(n, k) + log10_binom(k, m)
             + (k - m) * math.log10(max(min(p, 1.0), 1e-300)))
-
-
-def mean_transfer_gap(t1: np.ndarray, t2: np.ndarray, high_shape) -> float:
-    """Mean distance (low px) between two transforms' images of a grid over the high image."""
-    g = grid(high_shape)
-    try:
-        return float(np.mean(np.linalg.norm(apply(t1, g) - apply(t2, g), axis=1)))
-    except (FloatingPointError, ValueError):
-        return math.inf
 
 
 def _polygon_area(poly: np.ndarray) -> float:
@@ -273,62 +311,28 @@ def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.nd
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
-class Second(NamedTuple):
-    """The strongest other transform among a winner's candidates (a repeated structure?)."""
-
-    inliers: int  #: its distinct inliers (0: none found)
-    log10_nfa: float  #: beyond chance as the winner's is counted
-    gap_px: float  #: mean distance between its map of the finer image and the winner's, px
-    alike: bool  #: the same scale and angle as the winner's (within the ``second_*`` limits)
-
-
-NO_SECOND = Second(0, math.inf, math.nan, False)
-
-
-def second_transform(src: np.ndarray, dst: np.ndarray, inliers: np.ndarray, t: np.ndarray,
-                     high_shape, params: DecisionParams, ransac, seed: int,
-                     nfa: Callable[[int], float]) -> Second:
-    """Fit a similarity to the candidates (``src`` finer px, ``dst`` coarser px, (K, 2)) that
-    the winner ``t`` leaves over (``inliers``: its (K,) mask), and compare it with ``t``.
-
-    A repeated structure (the windows of a facade) is matched wherever a copy stands: its
-    copies show as transforms of the same scale and angle, shifted by the period. ``nfa(k)``:
-    the log10 NFA of ``k`` inliers among the same candidates.
-    """
-    from .estimator import estimate
-
-    rest = ~np.asarray(inliers, bool)
-    if rest.sum() <= 3:
-        return NO_SECOND
-    est = estimate("similarity", src[rest], dst[rest], ransac, seed=seed)
-    if est.transform is None or est.n_inliers == 0:
-        return NO_SECOND
-    r1, a1, _ = similarity_parts(t)
-    r2, a2, _ = similarity_parts(est.transform)
-    turn = abs((a2 - a1 + 180.0) % 360.0 - 180.0)
-    alike = (math.isfinite(r1) and math.isfinite(r2) and r1 > 0 and r2 > 0
-             and abs(math.log(r2 / r1)) <= math.log(params.second_scale_factor)
-             and turn <= params.second_angle_deg)
-    return Second(int(est.n_inliers), nfa(int(est.n_inliers)),
-                  mean_transfer_gap(est.transform, t, high_shape), alike)
-
-
-def repeats(second: Second, k: int, area: float, params: DecisionParams) -> bool:
-    """Whether ``second`` shows a repeated structure beside a winner of ``k`` inliers whose
+def repeats(second: Second, second_nfa: float, k: int, area: float, winner: np.ndarray,
+            params: DecisionParams) -> bool:
+    """Whether ``second`` (:func:`scalematch.stages.rivals.second_transform`, at log10 NFA
+    ``second_nfa``) shows a repeated structure beside a winner ``winner`` of ``k`` inliers whose
     footprint covers ``area`` coarser px^2: the same scale and angle, elsewhere (at least
     ``second_min_shift`` of the footprint's size away), beyond chance, with at least
     ``second_share`` of the winner's support.
 
-    >>> p = DecisionParams()
-    >>> repeats(Second(40, -90.0, 120.0, True), 60, 160 * 120, p)
+    >>> from scalematch.geometry import similarity_matrix as sim
+    >>> p, t = DecisionParams(), sim(0.5, 0.0)
+    >>> repeats(Second(40, sim(0.5, 1.0, 120, 0), 120.0), -90.0, 60, 160 * 120, t, p)
     True
-    >>> repeats(Second(5, -9.0, 120.0, True), 60, 160 * 120, p)   # too few
+    >>> repeats(Second(5, sim(0.5, 1.0, 120, 0), 120.0), -9.0, 60, 160 * 120, t, p)  # too few
     False
-    >>> repeats(Second(40, -90.0, 12.0, True), 60, 160 * 120, p)  # the same scene, piecewise
+    >>> repeats(Second(40, sim(0.5, 1.0, 12, 0), 12.0), -90.0, 60, 160 * 120, t, p)  # piecewise
     False
     """
-    return (second.alike and second.gap_px >= params.second_min_shift * math.sqrt(max(area, 0.0))
-            and second.log10_nfa <= params.max_log_nfa
+    return (second.transform is not None
+            and same_scale_and_angle(winner, second.transform, params.second_scale_factor,
+                                     params.second_angle_deg)
+            and second.gap_px >= params.second_min_shift * math.sqrt(max(area, 0.0))
+            and second_nfa <= params.max_log_nfa
             and second.inliers >= max(params.min_inliers, params.second_share * k))
 
 
@@ -402,8 +406,9 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     pairs = np.hstack([best.src[inl], best.dst[inl]])
     evidence = replace(evidence, inliers=int(k), candidates=int(n), log10_nfa=lnfa, chance_p=p)
 
-    def no(reason: str) -> Decision:
-        return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence)
+    def no(reason: str, test: str) -> Decision:
+        return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence, test, t,
+                        pairs)
 
     # the second look decides only below min_inliers (the final map's pixel tests follow
     # every match, final_checks): above, it would cost a tenth of a plain pair's time for nothing
@@ -421,13 +426,14 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
         if not confirmed:
             return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
                       f"{params.min_inliers} needed, or {params.few_min_inliers} beyond chance "
-                      f"that pass the pixel check)")
+                      f"that pass the pixel check)", "too few inliers")
         if len(second.inliers) >= k:  # grown (or kept): the refit map and its inliers
             t, pairs = second.transform, second.inliers
     if lnfa > params.max_log_nfa:
         return no(f"the best transform ({k} inliers of {n} candidates at scale "
                   f"{best.row.s * shown_scale:.3g}) "
-                  f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})")
+                  f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})",
+                  "chance")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, evidence)
     poly = footprint(t, high_shape, edges=False)  # corner pixel centres, as measured
@@ -436,11 +442,14 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     evidence = replace(evidence, implied_ratio=best.row.ratio, footprint_area_px=area,
                        footprint_inside=inside)
     if folded(t, high_shape):
-        return no("the transform folds the high image over (a mirror image): not a view of it")
+        return no("the transform folds the high image over (a mirror image): not a view of it",
+                  "folded")
     if area < params.min_area_px:
-        return no(f"the high image would cover only {area:.0f} px^2 of the low image")
+        return no(f"the high image would cover only {area:.0f} px^2 of the low image",
+                  "footprint area")
     if inside < params.min_inside and lnfa > params.max_log_nfa_alone:
-        return no(f"only {inside:.0%} of the high image's footprint lies inside the low image")
+        return no(f"only {inside:.0%} of the high image's footprint lies inside the low image",
+                  "footprint inside")
     agreeing = 0
     for o in with_t:
         if o is best or o.row.inliers < spec.min_sample + 1:
@@ -450,24 +459,26 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     evidence = replace(evidence, agreeing_scales=agreeing)
     if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone and not few:
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
-                  f"{k} inliers)")
-    second = second_transform(best.src, best.dst, inl, est.transform, high_shape, params,
-                              config.ransac, config.seed,
-                              lambda k2: log10_nfa(n, k2, m, p, tests))
-    evidence = replace(evidence, second_inliers=second.inliers,
-                       second_log10_nfa=second.log10_nfa, second_gap_px=second.gap_px,
-                       second_alike=second.alike)
-    if repeats(second, k, area, params):
+                  f"{k} inliers)", "agreeing scales")
+    rival = second_transform(best.src, best.dst, inl, est.transform, high_shape,
+                             config.ransac, config.seed)
+    rival_nfa = log10_nfa(n, rival.inliers, m, p, tests)
+    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, config.seed)
+    evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
+                       second_gap_px=rival.gap_px, parallax_points=parallax,
+                       parallax=parallax >= max(params.parallax_min_points,
+                                                params.parallax_share * k))
+    if repeats(rival, rival_nfa, k, area, est.transform, params):
         return no(f"ambiguous: a second transform of the same scale and angle, "
-                  f"{second.gap_px:.0f} px away, has {second.inliers} inliers against "
-                  f"{k}: a repeated structure")
+                  f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
+                  f"{k}: a repeated structure", "repeated structure")
     return Decision(True, "", best.row.s, t, pairs, evidence)
 
 
 def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
                  params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None):
-    """(evidence, reason): the pixel tests of a match's final transform ``t`` (finer px ->
-    coarser px, refit), and why it is refused ("" when it is not).
+    """(evidence, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
+    coarser px, refit), why it is refused and by which test (:data:`TESTS`; "" when it is not).
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
@@ -498,13 +509,14 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
                        unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
                        judged_by="geometry" if geometric else "pixels")
     if geometric:
-        return evidence, ""
+        return evidence, "", ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
         return evidence, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
                           f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
-                          f"the transform found, log10 NFA {evidence.log10_nfa:.1f})")
+                          f"the transform found, log10 NFA {evidence.log10_nfa:.1f})"), \
+            "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
         return evidence, (f"the pixels do not confirm it: the transform found fits the low "
                           f"image no better than nearby wrong placements (ZNCC margin "
-                          f"{near.margin:+.2f})")
-    return evidence, ""
+                          f"{near.margin:+.2f})"), "pixels"
+    return evidence, "", ""

@@ -122,11 +122,11 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)  # 4x finer
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
     unique = raccoon[170:350, 260:500]  # the place, and other (unrelated) texture around it
-    evidence, reason = final_checks(unique, high, t, Evidence(), params)
+    evidence, reason, _ = final_checks(unique, high, t, Evidence(), params)
     assert reason == "" and evidence.unique_ratio > 3 * params.min_unique_ratio
     tiled = np.tile(base, (3, 3))  # the same structure nine times over
     t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
-    evidence, reason = final_checks(tiled, high, t_tiled, Evidence(), params)
+    evidence, reason, _ = final_checks(tiled, high, t_tiled, Evidence(), params)
     assert reason.startswith("ambiguous") and evidence.unique_ratio < params.min_unique_ratio
 
 
@@ -149,11 +149,11 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
     low = raccoon[170:350, 260:500]
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
-    evidence, reason = final_checks(low, high, t, Evidence(), params)
+    evidence, reason, _ = final_checks(low, high, t, Evidence(), params)
     assert reason == "" and evidence.final_margin > 0.3  # measured 0.6-0.7
     turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)  # about the footprint's centre
     alone = replace(params, min_unique_ratio=0.0)
-    evidence, reason = final_checks(low, high, compose(turn, t), Evidence(), alone)
+    evidence, reason, _ = final_checks(low, high, compose(turn, t), Evidence(), alone)
     assert evidence.final_margin < params.min_final_margin
     assert reason.startswith("the pixels do not confirm it"), reason
 
@@ -190,3 +190,44 @@ def test_a_perspective_map_is_folded_only_where_it_turns_the_image_over(raccoon)
     horizon = pair.truth.copy()
     horizon[2] = [2.0 / ww, 0.0, -1.0]  # w = 2x / W - 1: zero across the middle of the image
     assert folded(horizon, pair.high.shape)
+
+
+# --------------------------------------------------------------- what the candidates show
+
+def _facade(shift, k=60, k2=40):
+    """One scale where k candidates fit a similarity and k2 fit the same one shifted by
+    ``shift`` (a repeated structure: the copy's candidates) at ratio 2, and a neighbour scale
+    that agrees."""
+    from scalematch.result import ScaleRow
+    from scalematch.search import ScaleOutcome
+    from scalematch.stages.estimator import Estimate
+
+    t = similarity_matrix(0.5, 15.0, 300.0, 200.0)
+    rng = np.random.default_rng(0)
+    src = rng.uniform(0, 640, (k + k2, 2))
+    dst = src @ t[:, :2].T + t[:, 2]
+    dst[k:] += shift
+    inl = np.arange(k + k2) < k
+    est = Estimate("similarity", t, inl, np.where(inl, 0.5, 50.0))
+    row = ScaleRow(s=2.0, ratio=2.0, points=200, initial=k + k2, kept=k + k2, inliers=k,
+                   outlier_pct=40.0)
+    near = ScaleRow(s=2.52, ratio=2.0, points=150, initial=k, kept=k, inliers=k // 2,
+                    outlier_pct=50.0)
+    est2 = Estimate("similarity", t, inl, np.where(inl, 0.5, 50.0))
+    return (ScaleOutcome(row, est, src, dst, k + k2), ScaleOutcome(near, est2, src, dst, k))
+
+
+def test_a_repeated_facade_shows_a_second_transform_and_is_refused_as_ambiguous():
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+
+    verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), Config())
+    assert not verdict.matched and verdict.test == "repeated structure"
+    assert "second transform" in verdict.reason and "repeated structure" in verdict.reason
+    assert verdict.evidence.second_inliers == 40 and verdict.candidate is not None
+    # the same support for a copy only a few px away is one scene fitted piecewise
+    near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), Config())
+    assert near.matched and near.evidence.second_inliers == 40
+    # a copy with a fifth of the support is not comparable: the winner stands
+    weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640), Config())
+    assert weak.matched and weak.evidence.second_inliers == 12
