@@ -93,7 +93,11 @@ def canonical(pair: Pair, t: Optional[np.ndarray], maps_high_to_low: bool) -> Op
     t = as_matrix3(t)
     # the truth maps high -> low when the pair is not swapped, low -> high when it is
     same = maps_high_to_low != pair.swapped
-    return t if same else invert(t)
+    if same:
+        return t
+    if not abs(np.linalg.det(t)) > 1e-12:  # a degenerate claim (a peer's collapsed fit)
+        return np.full((3, 3), np.nan)
+    return invert(t)
 
 
 def pair_error(pair: Pair, t: Optional[np.ndarray]) -> float:
@@ -615,6 +619,7 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
             done = [r for r in rows if r["set"] == s and r["method"] == m]
             log(f"{s:15s} {m:10s} {sum(r['success'] for r in done)}/{len(done)} solved, "
                 f"{sum(r['false_claim'] for r in done)} false, {time.perf_counter() - t0:.0f} s")
+            (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
     meta["command"] = ("scalematch lab real-pairs " + " ".join(sys.argv[3:])).strip()
     runs = []
     if names:
