@@ -72,20 +72,22 @@ class Config:
     mode: str = "default"  #: "default" or "paper" (see MODES)
     model: str = "similarity"  #: similarity | affine | homography | fundamental
     #: scales s of the high-resolution image to try: 1 to 16 by third octaves (13 scales;
-    #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 16 (issue 18) need scales
-    #: past 8; a scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves
-    #: measured 1 more success in 38 at ratio 10 for 12 % more time (docs/ABLATION.md).
+    #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 16 need scales past 8; a
+    #: scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves measured 1
+    #: more success in 38 at ratio 10 for 12 % more time (docs/ABLATION.md; docs/DESIGN.md,
+    #: "Descriptors, matching and scales").
     #: A scale at which the finer image would span fewer than ``min_footprint_px`` coarser px
     #: is not searched (the search's reach follows the image sizes).
     scales: Tuple[float, ...] = geometric_scales(1.0, 16.0, 3)
     #: smallest footprint searched, coarser px along the finer image's longer side: a scale s
-    #: is searched when that side / s is at least this (issue 18: "the largest ratio whose
-    #: footprint is still about 32 low pixels wide"; the descriptor window is 16 px)
+    #: is searched when that side / s is at least this: the largest ratio is the one whose
+    #: footprint is still about 32 coarser pixels wide (the descriptor window is 16 px)
     min_footprint_px: float = 32.0
     seed: int = 0  #: the one seed for all randomness (RANSAC)
-    #: the finer image, every scale. The threshold follows the image's contrast (issue 18: a
-    #: 12-bit image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the
-    #: absolute threshold); capped at 1, so it is only ever lowered (stages/detector.py)
+    #: the finer image, every scale. The threshold follows the image's contrast (a 12-bit
+    #: image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the absolute
+    #: threshold; docs/design/DECISION.md, "Adaptive detection"); capped at 1, so it is only
+    #: ever lowered (stages/detector.py)
     harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=True))
     #: the coarser image, at s = 1 only: the same detector; more points allowed, since the
     #: finer image's footprint may be a small part of it
@@ -115,14 +117,14 @@ class Config:
     #: the same for the high image (None: its full size). Shrinking it can make it the coarser
     #: image, found then in the other order, so it applies only with ``order="auto"``. At 2048
     #: px a 24 MP high image was matched 2.1-5.9 times faster, 0.008-0.021 px from the truth
-    #: at ratios 1.5 to 10 (full size: 0.008-0.041 px; docs/PERFORMANCE.md, section 5).
+    #: at ratios 1.5 to 10 (full size: 0.008-0.041 px; docs/design/SPEED.md, "Working size").
     high_max_side: Optional[int] = 2048
     #: seconds after which no further step of the search plan is started (None: no limit).
     #: Checked between steps, never before the first (the given order's plain search), so a
     #: step under way finishes: a "no" comes sooner, but a pair only a later step would solve
     #: (the other order, tilted views) is then missed, and the answer depends on the machine's
-    #: speed. docs/STEEP.md section 5 and docs/NULLS-BUDGET.md measure what a 1 s budget saves on
-    #: the null set and what it costs on tilted pairs (issues 16 and 19)
+    #: speed. docs/design/VIEWS.md, "The time budget", and docs/NULLS.md, "Mode budget-1s",
+    #: measure what a 1 s budget saves on the null set and what it costs on tilted pairs
     time_budget_s: Optional[float] = None
 
     def __post_init__(self) -> None:
@@ -186,20 +188,20 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # the default on 15 scales 1-11.3 (quarter octaves)
     "default-quarter-octaves": lambda: Config(scales=geometric_scales(1.0, 12.0, 4)),
     # the default without its third pass of views (t = 6 and 8): tilts up to about 6 solved, a
-    # "no" about 2.3x sooner (issue 19; docs/STEEP.md section 11). The default until the third
-    # pass joined it (it was then the ``steep`` preset)
+    # "no" about 2.3x sooner (docs/design/VIEWS.md, "The third pass")
     "tilt-4": lambda: Config(views=ViewParams(passes=TILT4_PASSES)),
-    # the default with a time budget of 1 s (issues 16 and 19): no step of the plan starts
-    # after 1 s, so a "no" costs about that much; docs/NULLS-BUDGET.md measures it on the null
-    # set (what a "no" then costs, and that no claim appears)
+    # the default with a time budget of 1 s (docs/design/VIEWS.md, "The time budget"): no step
+    # of the plan starts after 1 s, so a "no" costs about that much; docs/NULLS.md, "Mode
+    # budget-1s", measures it on the null set (what a "no" then costs, and that no claim
+    # appears)
     "budget-1s": lambda: Config(time_budget_s=1.0),
     # the default without tilted views (``--no-views``): the plain search in both orders only.
     # A "no" at SIFT's speed for batches over archives of mostly unrelated pairs, at the cost
-    # of the tilted pairs only views solve (issue 16; docs/NULLS-NO-VIEWS.md, PERFORMANCE.md
-    # section 10)
+    # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
+    # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
     # the default searching for a homography (``--model homography``: Oxford, perspective
-    # pairs), so that the null set can be run with it (docs/NULLS-HOMOGRAPHY.md)
+    # pairs), so that the null set can be run with it (docs/NULLS.md, "Mode homography")
     "homography": lambda: Config(model="homography"),
     # the default without the rotation-consistency filter: one group holding every candidate
     "default-no-rotation-check": lambda: Config(
