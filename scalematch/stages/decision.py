@@ -57,7 +57,8 @@ class DecisionParams:
     scale_agreement: float = 1.6  #: implied ratio within this factor of the winning scale
     #: fraction of the high image's footprint inside the low image, required only when the
     #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
-    #: normal for real pairs (issue 9: 912 inliers at log10 NFA -4681 were refused at 50 %)
+    #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
+    #: docs/DESIGN.md, "What real pairs need")
     min_inside: float = 0.5
     #: another scale agrees when its transform maps the high image within this many low px of
     #: the winner's (mean over a grid, as EVALUATION.md measures error)
@@ -72,26 +73,29 @@ class DecisionParams:
     #: ``min_inliers``, gets a second look (guided growth and the pixel check,
     #: :func:`look_again`), recorded in the evidence
     look_min_inliers: int = 3
-    #: the second look may accept a transform with fewer than ``min_inliers`` (issue 18: the
-    #: right answer at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13), down to this many ...
+    #: the second look may accept a transform with fewer than ``min_inliers`` (the right answer
+    #: at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13; docs/design/DECISION.md, "The
+    #: ground for each threshold"), down to this many ...
     few_min_inliers: int = 4
     #: ... when its log10 NFA is at most this (null runs' best transforms: median +4, none
     #: below -6 but the repeated structures, docs/NULLS.md) ...
     few_max_log_nfa: float = -6.0
     #: ... its guided growth keeps at least this many inliers (0: growth is recorded, not
     #: required: at the coarse scales where few points remain there is nothing to grow into;
-    #: measured 5 -> 5 on the true 5-inlier answers at ratio 10-16, docs/FEWPOINTS.md) ...
+    #: measured 5 -> 5 on the true 5-inlier answers at ratio 10-16, docs/design/DECISION.md,
+    #: "The ground for each threshold") ...
     few_min_grown: int = 0
     #: ... and its pixel check beats every nearby wrong placement by this much ZNCC (true
     #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
-    #: docs/FEWPOINTS.md); the uniqueness check (``min_unique_ratio``) follows, as for all
+    #: docs/design/DECISION.md, "The ground for each threshold" and "Guided growth and the
+    #: pixel check, alone"); the uniqueness check (``min_unique_ratio``) follows, as for all
     few_min_margin: float = 0.1
     #: ... or, with a pixel margin of at least ``few_strong_margin``, a log10 NFA of at most
     #: ``few_strong_max_log_nfa``: the NFA counts every search made (32 for a pair that reaches
     #: the views in both orders), which pushes a true 4-inlier answer at ratio 16 to -4.5
     #: (hard set, cathedral x16: pixel margin 0.47) while the pixels speak clearly. On the null
     #: set no best transform of 3 or more inliers reached a margin of 0.13, those of 4-5
-    #: inliers 0.018 (docs/NULLS.md, docs/FEWPOINTS.md section 4)
+    #: inliers 0.018 (docs/NULLS.md; docs/design/DECISION.md, "The ground for each threshold")
     few_strong_margin: float = 0.3
     few_strong_max_log_nfa: float = -4.0
     #: a transform about to be accepted must place the finer image better than anywhere else in
@@ -107,7 +111,8 @@ class DecisionParams:
     #: placements by more than this ZNCC (``Evidence.final_margin``). The search's own check
     #: (``pixel_margin``) cannot serve: it measures the similarity found in a view, which a
     #: tilted scene's true map is not (true tilted claims measured down to -0.56 there).
-    #: Measured (scripts/margin_study.py, docs/FEWPOINTS.md section 5) on the 686 right claims
+    #: Measured (scripts/margin_study.py; docs/design/DECISION.md, "The final map: fitting
+    #: best, and better than its neighbours") on the 686 right claims
     #: of true pairs (zoom, hard set, Oxford, tilted to t = 8): 0.035 at the least (p5 0.07 to
     #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
     #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
@@ -251,7 +256,8 @@ def folded(t: np.ndarray, high_shape=None) -> bool:
     keeps the orientation over the image (``high_shape``; None: at its origin only) when ``w``
     has one sign at every corner (the horizon w = 0 does not cross the image: ``w`` is affine)
     and ``det(H)`` has that sign too. (The top-left 2x2 block is that Jacobian only when H is
-    affine: a steep perspective map 0.7 px from the truth was called folded, issue 19.)
+    affine: a steep perspective map 0.7 px from the truth was called folded; docs/design/VIEWS.md,
+    "Perspective pairs".)
 
     >>> folded(np.array([[1.0, 0, 0], [0, -1.0, 0]]))  # a mirror
     True

@@ -14,10 +14,11 @@ threshold serves every scale. (The paper writes the s^4 both inside ``M_s`` and 
 Derivatives are taken in full-resolution units even when a level is decimated: a level gradient
 is divided by ``d``, so ``M`` on a level is multiplied by ``(s / d)^2``.
 
-**Adaptive detection (issue 18, off by default).** ``C`` scales as ``gain^4`` under
-``I -> gain * I``, so the absolute threshold lets contrast decide what the detector sees (a
-12-bit image read as 0-15 grey levels finds almost nothing). Two options, both measured on the
-s = 1 image once (:func:`image_contrast`) and applied at every scale:
+**Adaptive detection (off by default; docs/design/DECISION.md, "Adaptive detection").**
+``C`` scales as ``gain^4`` under ``I -> gain * I``, so the absolute threshold lets contrast
+decide what the detector sees (a 12-bit image read as 0-15 grey levels finds almost nothing).
+Two options, both measured on the s = 1 image once (:func:`image_contrast`) and applied at
+every scale:
 
 * ``contrast_relative``: the threshold is multiplied by ``min(contrast_cap, (c / c_ref)^4)``,
   ``c`` the 90th percentile of the gradient magnitude and ``c_ref`` = ``REFERENCE_CONTRAST``
@@ -64,7 +65,7 @@ class HarrisParams:
     subpixel: bool = True  #: refine positions by a quadratic fit of the 3x3 response
     decimate: bool = True  #: compute coarse scales on decimated levels (same response)
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
-    #: adaptive detection (issue 18; False = the absolute threshold above, as before): multiply
+    #: adaptive detection (False: the paper's absolute threshold above): multiply
     #: ``threshold`` by ``min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, ``c`` the image's
     #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`)
     contrast_relative: bool = False
@@ -73,7 +74,7 @@ class HarrisParams:
     contrast_cap: float = 1.0
     #: per-scale point budget (0 = off): when fewer points pass the threshold, the strongest local
     #: maxima above the noise floor are kept up to this many (the footprint at ratio 8-10 had
-    #: 5-14 points at the winning scale: issue 18)
+    #: 5-14 points at the winning scale)
     min_points: int = 0
 
     @property
@@ -112,12 +113,14 @@ class Keypoints:
 #: Percentile of the gradient magnitude (Gaussian derivatives of std sigma = 1 px, s = 1) taken
 #: as an image's contrast. The median measures the flat parts: on the low images cut from the
 #: shared photos it ranged 0.05 to 5.7 grey levels/px (sky, walls) while the 90th percentile
-#: ranged 6.4 to 17.9 (measured on 19 pairs at ratio 8, seed 0; docs/FEWPOINTS.md).
+#: ranged 6.4 to 17.9 (measured on 19 pairs at ratio 8, seed 0; docs/design/DECISION.md,
+#: "Adaptive detection").
 CONTRAST_PERCENTILE = 90.0
 #: The percentile is taken over every CONTRAST_SAMPLE_STEP-th pixel along each axis: a quarter
 #: of the pixels (77k at 640x480) gives the full image's 90th percentile within 1.2 % (median
 #: 0.16 %, 120 images of 60 zoom pairs, seed 0), and the full sort was half the measure's cost
-#: (8.0 ms -> 3.2 ms a 640x480 image; a match measures two; issue 18's plain-pair cost)
+#: (8.0 ms -> 3.2 ms a 640x480 image; a match measures two; docs/design/DECISION.md, "What
+#: the pixel tests cost")
 CONTRAST_SAMPLE_STEP = 2
 #: The contrast the absolute ``threshold`` = 100 was tuned at, grey levels/px: the median
 #: ``image_contrast`` of the 76 images (high crop and low image) cut from the 38 photos of

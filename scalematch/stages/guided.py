@@ -1,4 +1,4 @@
-"""Guided growth of a hypothesis (issue 18; paper section 4.2, "establish many other matches").
+"""Guided growth of a hypothesis (paper section 4.2, "establish many other matches").
 
 Given a transform found at one scale (high px -> low px), every high point of that scale is
 mapped into the low image; the low point with the nearest *compatible* descriptor within a

@@ -1,4 +1,4 @@
-"""A check with the pixels (issue 18; paper eq. 3 and 5: grey-level correlation after the map).
+"""A check with the pixels (paper eq. 3 and 5: grey-level correlation after the map).
 
 The high image, blurred for its resolution ratio ``r`` (the camera model of EVALUATION.md: a
 Gaussian of std ``0.5 sqrt(r^2 - 1)`` high px before shrinking by ``r``), is warped by the
@@ -68,8 +68,8 @@ class PixelParams:
     max_side_px: float = 128.0
     #: the same for the uniqueness test, which slides the footprint over the whole low image
     #: (its cost grows with the low image's area over this side squared). 64 px keep a 4k-pixel
-    #: template, ample to tell a copy from the original (docs/FEWPOINTS.md section 6: the
-    #: misfit ratios of true claims and of null claims, at 128 and at 64 px)
+    #: template, ample to tell a copy from the original (docs/design/DECISION.md, "What the
+    #: pixel tests cost": the misfit ratios of true claims and of null claims, at 64 and 32 px)
     unique_side_px: float = 64.0
     #: the uniqueness test compares the pixels within this fraction of the footprint's size
     #: (sqrt of its area) of the inliers, where the points vouch for the map: an occluder, a

@@ -10,7 +10,8 @@ Three refinements, in this order, each keeping the answer unless the evidence sa
 3. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
 4. :func:`union_homography`: a homography fitted afresh to those pooled candidates replaces an
    answer that explains clearly fewer of them (perspective: each scale matches the part of the
-   footprint at its own local ratio, so only the union sees the whole of it; issue 19).
+   footprint at its own local ratio, so only the union sees the whole of it;
+   docs/design/VIEWS.md, "Perspective pairs").
 
 Each takes the winning scale's outcome (``best``: its candidates ``src`` -> ``dst``) or all the
 outcomes of the winning search, and returns ``(transform, inliers (N, 4), model)``. A search
@@ -53,7 +54,8 @@ class ModelCheckParams:
     #: pool the candidates of every scale matched in full and fit a homography to them afresh
     #: (:func:`union_homography`, same ``min_gain`` and ``min_extra``): on perspective zoom pairs
     #: whose local ratio spans 4x across the footprint the winning scale sees one band of it,
-    #: and its similarity was 4.6-6.8 px off at the far ends (docs/STEEP.md, section 4)
+    #: and its similarity was 4.6-6.8 px off at the far ends (docs/design/VIEWS.md,
+    #: "Perspective pairs")
     union: bool = True
 
     def clearly_more(self, n: int, k: int) -> bool:

@@ -1,4 +1,4 @@
-"""Threads for independent pieces of numpy and OpenCV work (issue 12).
+"""Threads for independent pieces of numpy and OpenCV work (docs/design/SPEED.md, "Threads").
 
 numpy's matrix products and reductions and OpenCV's functions release the GIL, so independent
 pieces of work (chunks of a descriptor match, the scales of the full pass) run in parallel on

@@ -27,12 +27,13 @@ from ..geometry import apply, compose, invert, resize_map
 from .nodata import away_from, distance_inside
 
 
-#: The passes of views (issue 19): t = 2, then 4, then 6 and 8 together (longitude steps 72/t:
-#: 5, 10, then 15 + 20 views), as far as MODS's steepest view synthesis (t = 8). Each pass runs
-#: only when every earlier one found nothing, so only a "no" pays for all of them
-#: (docs/STEEP.md section 11: 2.3x the time of a "no" with t = 2 and 4 only)
+#: The passes of views (docs/design/VIEWS.md, "The passes"): t = 2, then 4, then 6 and 8
+#: together (longitude steps 72/t: 5, 10, then 15 + 20 views), as far as MODS's steepest view
+#: synthesis (t = 8). Each pass runs only when every earlier one found nothing, so only a "no"
+#: pays for all of them
+#: (docs/design/VIEWS.md, "The third pass": 2.3x the time of a "no" with t = 2 and 4 only)
 PASSES: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,), (6.0, 8.0))
-#: The passes before issue 19's third one (the ``tilt-4`` preset): tilts up to about 6 solved
+#: The passes without the third one (the ``tilt-4`` preset): tilts up to about 6 solved
 TILT4_PASSES: Tuple[Tuple[float, ...], ...] = PASSES[:2]
 #: ``ViewParams.coarser_directions``: the coarser image's views in one direction of the search
 #: (the one whose coarser image is the smaller), or in both
@@ -48,7 +49,8 @@ class ViewParams:
     #: t = sqrt(2)^k; the gradient descriptor tolerates a tilt of about 2 on its own (measured
     #: on tilted zoom pairs, docs/BENCHMARKS.md), so views at t = 2 then 4 (a sampling ratio of
     #: 2) cover tilts up to about 6 with 15 views instead of 27; t = 6 and 8 reach 8 and more
-    #: (docs/STEEP.md: 92 % of the pairs at t = 6 and at t = 8, ratio 2, both orders)
+    #: (docs/design/VIEWS.md, "The third pass": 92 % of the pairs at t = 6 and at t = 8,
+    #: ratio 2, both orders)
     passes: Tuple[Tuple[float, ...], ...] = PASSES
     #: longitude step at tilt t is ``longitude_step_deg / t`` over [0, 180) (Morel & Yu: 72)
     longitude_step_deg: float = 72.0
@@ -57,14 +59,16 @@ class ViewParams:
     #: each pass also views the coarser image (after the finer one's views, both directions):
     #: where the finer image is the oblique one (a telephoto seen obliquely against a frontal
     #: wide shot) its directional ratios are r and r / t, and below 1 no scale searched reaches
-    #: them; a view of the coarser image compressed by t along that axis does (issue 19)
+    #: them; a view of the coarser image compressed by t along that axis does
+    #: (docs/design/VIEWS.md, "Views of the coarser image")
     coarser: bool = True
     #: ... in "both" directions of the automatic order, or in "one": the one whose coarser
     #: image is the smaller (shorter longer side; the given one on a tie), cheaper to detect.
     #: Both reach the same pairs in principle (a pair whose finer image maps with singular
     #: values s1 > 1 > s2: the given direction's views of tilt s1 / s2 at scale s1, the other's
-    #: at 1 / s2; docs/STEEP.md section 11), but not always in practice: "one" made a "no"
-    #: 0.84x as long (122 null runs) and solved 74 of the oblique set's 104 runs, "both" 80
+    #: at 1 / s2; docs/design/VIEWS.md, "Views of the coarser image"), but not always in
+    #: practice: "one" made a "no" 0.84x as long (122 null runs) and solved 74 of the oblique
+    #: set's 104 runs, "both" 80
     coarser_directions: str = "both"
     #: views of a pass matched in full: the ones whose probe scores best (the others are only
     #: detected and probed, which costs about half a search)
@@ -82,8 +86,8 @@ class ViewParams:
     #: the ``full_searches`` views that score best are then probed at every scale, so the views
     #: matched in full are chosen as with N = 1 wherever those few include the right one.
     #: Detection is most of a view's cost and most views are only probed. N = 2: a "no" 0.86x
-    #: as long, the tilted zoom pairs and Oxford solved as before (docs/PERFORMANCE.md
-    #: section 8); without the completion 3 tilted pairs of 104 were lost (the right view's
+    #: as long, the tilted zoom pairs and Oxford solved as before (docs/design/VIEWS.md,
+    #: "The passes"); without the completion 3 tilted pairs of 104 were lost (the right view's
     #: probe score fell from 7-12 to 4, under ``min_probe_score``, its best scale not probed)
     probe_every: int = 2
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
