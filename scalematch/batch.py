@@ -366,7 +366,7 @@ def _fsync_folder(folder: Path) -> None:
 
 def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
                kind: str = INPUT) -> Dict[str, Any]:
-    """The line of a pair that could not be matched (README.md, "## Output"); ``kind`` is
+    """The line of a pair that could not be matched (docs/GUIDE.md, "JSON"); ``kind`` is
     ``INPUT`` or ``INTERNAL`` (whose message then starts "internal error")."""
     return {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": False,
             "error": error, "error_kind": kind, "seconds": round(seconds, 3),

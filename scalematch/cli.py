@@ -823,7 +823,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
 
     An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
     --no-views a "no" takes a median 0.14 s of matching instead of 2.7 s (1 MP images;
-    docs/NULLS-NO-VIEWS.md, docs/NULLS.md), but oblique pairs that only a tilted view solves
+    docs/NULLS.md, "Mode no-views"), but oblique pairs that only a tilted view solves
     are missed.
 
     \b

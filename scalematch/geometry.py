@@ -1,6 +1,6 @@
 """Plane geometry shared by the stages, the pictures and the lab: one definition of each map.
 
-Conventions (README "Conventions"): points are (x, y) in OpenCV pixels, pixel centres at
+Conventions (docs/GUIDE.md, "Conventions"): points are (x, y) in OpenCV pixels, pixel centres at
 integers, so a W x H image's edge runs through (-0.5, -0.5) .. (W - 0.5, H - 0.5). A transform
 is a 2x3 affine (similarity) or a 3x3 homography mapping a high-resolution pixel to a
 low-resolution pixel. Angles are degrees, counter-clockwise in (x, y) with y down (so clockwise

@@ -441,13 +441,14 @@ def _room_for(p: Path, size: Tuple[int, int]) -> None:
 #: (:mod:`scalematch.working`). Measured on a 16 MP photo of ../shared (snowpeak_IMG_2282):
 #: equal to the full decode shrunk by ``cv2.INTER_AREA`` within 0.35 grey levels rms (the
 #: decoder's own rounding to 8 bits is 0.29), shifted by less than 0.001 px (phase
-#: correlation), at 1/2, 1/4 and 1/8 alike (docs/PERFORMANCE.md section 9).
+#: correlation), at 1/2, 1/4 and 1/8 alike (docs/design/SPEED.md, "Working size").
 REDUCED_FLAGS = {8: cv2.IMREAD_REDUCED_GRAYSCALE_8, 4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
                  2: cv2.IMREAD_REDUCED_GRAYSCALE_2}
 #: A reduced decode may fall this much short of the side asked for: the photos of 12 MP cameras
 #: and phones, 4000 and 4032 px, then decode at half size (2000 and 2016 px against a working
 #: size of 2048) -- the commonest size of photo, 2.3 % less resolution for half the decoding
-#: time and a quarter of the memory (docs/PERFORMANCE.md section 9: the answers measured)
+#: time and a quarter of the memory (docs/design/SPEED.md, "Working size": the answers
+#: measured)
 REDUCED_SLACK = 0.03
 
 

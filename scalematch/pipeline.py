@@ -47,8 +47,8 @@ __all__ = ["match", "distinct_pairs"]
 
 #: OpenBLAS allocates its work buffers at its first matrix product, and when that allocation
 #: fails (a process near its memory limit) it ends the process with exit code 1 from native code,
-#: which reads as "no reliable match" (issue 17). One small product at import takes them while
-#: memory is there; later products reuse them.
+#: which reads as "no reliable match". One small product at import takes them while memory is
+#: there; later products reuse them.
 _BLAS_WARM_UP = np.ones((128, 128), np.float32) @ np.ones((128, 128), np.float32)
 
 #: Largest view of the high image, px, whose scale-space levels are kept from detection to the
@@ -631,7 +631,8 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     pixels up best (ZNCC, :func:`stages.pixelcheck.pixel_check`) wins; the lowest log10 NFA
     (:func:`search.strongest`) decides where the pixels cannot (no overlap, no ratio). The NFA
     alone favours few candidates that all agree: on a smooth least-textured crop (popos_jad
-    x3, docs/FEWPOINTS.md section 5) a t = 2 view's affine map, 11 inliers of 12 candidates
+    x3; docs/design/DECISION.md, "The final map: fitting best, and better than its
+    neighbours") a t = 2 view's affine map, 11 inliers of 12 candidates
     at log10 NFA -43, 48 px off, beat the plain similarity of 11 inliers that was right; its
     pixels: ZNCC 0.963 against 0.996.
     """

@@ -185,7 +185,7 @@ def verdict(result: MatchResult) -> str:
 
 
 def evidence_line(result: MatchResult) -> str:
-    """The evidence beyond the points, one line (issue 18): the pixel check, the uniqueness."""
+    """The evidence beyond the points, one line: the pixel check, the uniqueness."""
     e = result.evidence
     parts = [f"log10 NFA {e.log10_nfa:.1f}"] if np.isfinite(e.log10_nfa) else []
     # the final map's check where there is one (a match), else the search's (few inliers)

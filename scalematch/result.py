@@ -219,7 +219,8 @@ class MatchResult:
 
     def to_dict(self, low_path: str, high_path: str, low_shape: Sequence[int],
                 high_shape: Sequence[int]) -> Dict[str, Any]:
-        """The documented JSON object of this match (README.md, "## Output"): plain types only.
+        """The documented JSON object of this match (README.md, "Output"; docs/GUIDE.md, "JSON"):
+        plain types only.
 
         ``low``/``high`` describe the coarser and the finer image as found: with ``order``
         "swapped" the first image given is the finer one, and they are exchanged.

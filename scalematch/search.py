@@ -3,9 +3,10 @@
 A match is searched for progressively (Mishkin, Matas & Perdoch 2015, "MODS"): first the
 finer image itself, then passes of simulated tilted views, each pass run only when the ones
 before found nothing; with the automatic order, each pass in both directions (which image is
-the coarser one). A pass views the finer image first, then the coarser one (issue 19: where
-the finer image is the oblique one, it is coarser than the other along one axis, and only a
-view of the coarser image brings the pair back within the scales searched).
+the coarser one). A pass views the finer image first, then the coarser one: where the finer
+image is the oblique one, it is coarser than the other along one axis, and only a view of the
+coarser image brings the pair back within the scales searched (docs/design/VIEWS.md, "Views of
+the coarser image").
 :func:`search_plan` writes that down as a tuple of :class:`Step`;
 :func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
 step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are

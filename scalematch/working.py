@@ -1,4 +1,4 @@
-"""The working size of very large images (issue 12).
+"""The working size of very large images (docs/design/SPEED.md, "Working size").
 
 An image whose longer side exceeds its ``Config`` limit (``low_max_side``, ``high_max_side``)
 is matched as a copy shrunk by ``f = side / limit`` (``cv2.INTER_AREA``, the same ``f`` on both
