@@ -81,7 +81,7 @@ ALL_METHODS = METHOD_NAMES + tuple(v for v in VARIANTS if v not in METHOD_NAMES)
 REFERENCE = "sift"
 #: Unrelated pairs (false-match test).
 UNRELATED_COUNT = 50
-#: Pairs in the batch timed with 1 and ``jobs`` worker processes (the issue: "a batch of 40").
+#: Pairs in the batch timed with 1 and ``jobs`` worker processes.
 BATCH_SIZE = 40
 #: Methods whose batch throughput is timed (when selected): the project and its reference.
 BATCH_METHODS = ("scalematch", REFERENCE)
@@ -869,7 +869,7 @@ def _command_line(ctx: click.Context) -> str:
               show_default=True, help="Where results.csv, summary.json and the plot go.")
 @click.option("--crop", type=click.Choice(CROP_PICKS), default="most", show_default=True,
               help="Which of 6 random crops each pair's high image is: the most textured "
-                   "(EVALUATION.md) or the least (the hard set of issue 18).")
+                   "(EVALUATION.md) or the least (the hard set, docs/HARDSET.md).")
 @click.option("--ratios", default=",".join(map(str, RATIOS)), show_default=True,
               callback=_csv_floats,
               help="Zoom ratios of the synthetic pairs.")

@@ -1,6 +1,7 @@
-"""The real-pair benchmark (issue 9): what users bring beyond clean synthetic zooms.
+"""The real-pair benchmark: what users bring beyond clean synthetic zooms.
 
-Sets, made once per run and given to every method (docs/EVALUATION-TILT.md):
+docs/DESIGN.md, "What real pairs need", says what each set measures. Sets, made once per run
+and given to every method (docs/EVALUATION-TILT.md):
 
 * ``oxford``: the Oxford sequences boat (zoom + rotation), graf and wall (viewpoint), img1
   against img2..img6 with the published homographies, in both directions;
@@ -9,8 +10,8 @@ Sets, made once per run and given to every method (docs/EVALUATION-TILT.md):
 * ``zoom``: plain synthetic zoom pairs (EVALUATION.md), the reference of the sets above;
 * ``*-swapped``: every pair of ``zoom`` and ``tilted`` given in the other order (finer first);
 * ``unrelated``: the low image of one photo against the high image of another scene;
-* ``steep``, ``perspective``, ``oblique`` (only when named, issue 19): tilted pairs at t = 6
-  and 8, perspective pairs, and pairs whose *finer* image is the oblique one
+* ``steep``, ``perspective``, ``oblique`` (only when named; docs/design/VIEWS.md): tilted
+  pairs at t = 6 and 8, perspective pairs, and pairs whose *finer* image is the oblique one
   (``synthetic.make_oblique_pair``: directional ratios r and r / t, one of them below 1).
 
 Every transform is judged in one canonical direction, from the pair's finer image to its
@@ -58,7 +59,7 @@ PHOTO_STEP = 3
 #: unrelated pairs (false-match test)
 UNRELATED = 50
 #: ASIFT runs on at most this many pairs of each of ``ASIFT_SETS`` (it took 5 s to 26 minutes
-#: a pair on this machine's 2 cores, issue 9)
+#: a pair on this machine's 2 cores)
 ASIFT_PAIRS = 3
 #: the sets ASIFT is tried on: where viewpoint is the difficulty
 ASIFT_SETS = ("oxford", "tilted", "steep", "oblique")
@@ -191,7 +192,7 @@ def swap(pairs: Sequence[Pair], name: str) -> List[Pair]:
             for p in pairs]
 
 
-#: Tilts of the steep sets (issue 19: "extended to t = 6 and 8"; ``scripts/steep_views.py``)
+#: Tilts of the steep sets (docs/design/VIEWS.md, "The third pass"; ``scripts/steep_views.py``)
 STEEP_TILTS = (6.0, 8.0)
 
 
@@ -422,8 +423,8 @@ def summarise(rows: Sequence[Dict[str, Any]]) -> List[Dict[str, Any]]:
 
 
 SET_ORDER = ("oxford", "zoom", "zoom-swapped", "tilted", "tilted-swapped", "unrelated")
-#: Sets run only when named (``--sets``): slower, and beyond what the default search is built
-#: for (issue 19: tilts 6 and 8, perspective, an oblique finer image); docs/STEEP.md
+#: Sets run only when named (``--sets``), being slower: tilts 6 and 8, perspective pairs, an
+#: oblique finer image (docs/design/VIEWS.md)
 EXTRA_SETS = ("steep", "steep-swapped", "perspective", "perspective-swapped", "oblique",
               "oblique-swapped")
 #: The realistic sets (``lab.realistic``, EVALUATION.md "Pairs with what real photographs
@@ -542,7 +543,8 @@ def write_section(doc: Path, text: str, section: str = "real-pairs") -> None:
               help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
 @click.option("--sets", default=",".join(SET_ORDER), show_default=True,
               help="Comma-separated sets to run; also " + ", ".join(EXTRA_SETS)
-                   + " (tilts 6 and 8, perspective pairs and oblique finer images: docs/STEEP.md)"
+                   + " (tilts 6 and 8, perspective pairs and oblique finer images: "
+                   "docs/design/VIEWS.md)"
                    " and " + ", ".join(REALISTIC_SETS) + " ('realistic': all of these; they "
                    "are written to their own section).")
 @click.option("--methods", default=",".join(METHODS), show_default=True)

@@ -51,8 +51,8 @@ def zoom_warp(image: np.ndarray, ratio: float, angle_deg: float,
 
 #: Size (width, height) of the high-resolution crop, px (EVALUATION.md step 1: "about 640x480").
 HIGH_SIZE = (640, 480)
-#: (width, height) of the high crop at ratios beyond 10 (issue 18: "ratios 12 and 16, high
-#: 960x720, footprint 60 to 80 low pixels"): a 640x480 crop at ratio 16 covers 40x30 low px
+#: (width, height) of the high crop at ratios beyond 10 (at ratios 12 and 16 a 960x720 crop
+#: has a footprint of 60 to 80 low pixels): a 640x480 crop at ratio 16 covers 40x30 low px
 HIGH_SIZE_BEYOND_10 = (960, 720)
 #: Largest low-resolution image (width, height), px (EVALUATION.md step 2: a finite sensor).
 LOW_MAX = (1024, 768)
@@ -121,7 +121,8 @@ def texture_score(crop: np.ndarray, ratio: float) -> float:
 
 
 #: Which of the candidate crops a pair takes: EVALUATION.md's "most" textured, or the "least"
-#: (issue 18's hard set: a crop of plain sky or a smooth wall is what starves the detector)
+#: (the hard set, docs/HARDSET.md: a crop of plain sky or a smooth wall is what starves the
+#: detector)
 CROP_PICKS = ("most", "least")
 
 
@@ -480,7 +481,7 @@ def make_tilted_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rando
 
 
 # --------------------------------------------------------------------------------------------
-# Oblique finer pairs (issue 19): the finer image is the one seen obliquely
+# Oblique finer pairs: the finer image is the one seen obliquely (docs/design/VIEWS.md)
 # --------------------------------------------------------------------------------------------
 
 #: (width, height) of the high crop of an oblique pair, at most: its footprint in the low image
@@ -602,11 +603,11 @@ def make_oblique_pair(photo: np.ndarray, ratio: float, tilt: float, rng: np.rand
 
 
 # --------------------------------------------------------------------------------------------
-# Perspective zoom pairs (issue 19): the local ratio varies across the footprint
+# Perspective zoom pairs: the local ratio varies across the footprint (docs/design/VIEWS.md)
 # --------------------------------------------------------------------------------------------
 
 #: Spreads of the perspective pairs: the local ratio's largest over its smallest value across
-#: the high image's footprint (issue 19: "varies across the footprint by 4x and more")
+#: the high image's footprint (docs/design/VIEWS.md, "Perspective pairs")
 SPREADS = (4.0, 8.0)
 #: Pixels whose depth factor w (the homography's third coordinate, 1 at the crop's centre) is
 #: below this are left out of the low image (black): near w = 0 lies the horizon, where the
@@ -700,7 +701,8 @@ def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
                           rng: np.random.Generator, high_size: Tuple[int, int] = HIGH_SIZE,
                           low_max: Tuple[int, int] = LOW_MAX, source: str = "") -> ZoomPair:
     """A zoom pair seen in perspective: the local ratio grows from ``ratio`` to
-    ``ratio * spread`` across the high image's footprint (issue 19), exact homography truth.
+    ``ratio * spread`` across the high image's footprint, exact homography truth
+    (docs/design/VIEWS.md, "Perspective pairs").
 
     As ``make_tilted_pair`` (most textured of 6 crops, measured at the mean shrink
     ``ratio * sqrt(spread)``; grey-level change, noise, a window of at most ``low_max``), but the
@@ -762,7 +764,8 @@ def make_perspective_pair(photo: np.ndarray, ratio: float, spread: float,
 
 
 # --------------------------------------------------------------------------------------------
-# A smooth scene (issue 18): what starves a fixed-threshold detector
+# A smooth scene: what starves a fixed-threshold detector (docs/design/DECISION.md,
+# "Adaptive detection")
 # --------------------------------------------------------------------------------------------
 
 #: Period of the stripes of ``smooth_scene``, px, and the number of soft blobs on them
