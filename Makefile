@@ -17,7 +17,8 @@ $(STAMP): pyproject.toml constraints.txt
 
 ## compile the package's bytecode: pip does it when it installs a wheel, not for an editable
 ## install, and with PYTHONDONTWRITEBYTECODE set (as on our machines) every command would compile
-## every module again at start-up (about 30 ms of each `scalematch LOW HIGH`, docs/PERFORMANCE.md)
+## every module again at start-up (about 30 ms of each `scalematch LOW HIGH`;
+## docs/design/SPEED.md, "Start-up: import only what a command needs")
 bytecode: $(STAMP)
 	$(BIN)/python -m compileall -q scalematch > /dev/null
 

@@ -53,7 +53,7 @@ def test_an_unknown_preset_names_the_known_ones():
     (lambda: Config(order="sideways"), "order must be one of"),
 ])
 def test_every_params_refuses_values_that_mean_nothing(make, message):
-    """Issue 16: the ranges live in the parameters themselves, so the library refuses what the
+    """The ranges live in the parameters themselves, so the library refuses what the
     command line refuses, with the message that names the value as --set does."""
     with pytest.raises(ValueError) as exc:
         make()

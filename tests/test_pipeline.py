@@ -18,7 +18,7 @@ from scalematch.stages.detector import HarrisParams
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
 
-#: tolerances of issue 4: ratio within 3 %, angle within 1 degree, error under 2 px
+#: the tolerances of an answer: ratio within 3 %, angle within 1 degree, error under 2 px
 RATIO_TOL = 0.03
 ANGLE_TOL_DEG = 1.0
 ERROR_TOL_PX = 2.0
@@ -204,15 +204,15 @@ def test_unusable_arrays_raise_a_clear_value_error(bad, needle):
     (np.full((2100, 100), 7.0), "constant"),
 ])
 def test_arrays_beyond_the_working_size_are_checked_before_they_are_shrunk(bad, needle):
-    """Issue 16: the check at the door runs before the working size shrinks anything."""
+    """The check at the door runs before the working size shrinks anything."""
     good = np.random.default_rng(0).uniform(0, 255, (100, 100))
     with pytest.raises(ValueError, match=f"the high image .*{needle}"):
         match(good, bad)
 
 
 def test_a_16_bit_image_beyond_the_working_size_is_scaled_like_a_small_one(raccoon):
-    """Issue 16: a uint16 image over the working size is scaled by 255/65535 before shrinking
-    (it used to be shrunk first, as floats, and then taken as 0-65535 grey levels)."""
+    """A uint16 image over the working size is scaled by 255/65535 before shrinking, not
+    shrunk first, as floats, and then taken as 0-65535 grey levels."""
     pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(5), high_size=(320, 240),
                           low_max=(400, 300))
     low8 = np.clip(pair.low, 0, 255).astype(np.uint8)
@@ -252,7 +252,7 @@ def test_the_search_record_says_what_ran(raccoon):
     assert [(r.view_pass, r.side[0]) for r in none.search] == [
         (0, "f"), (0, "f"), (1, "f"), (1, "f"), (1, "c"), (1, "c"), (2, "f"), (2, "f"),
         (2, "c"), (2, "c"), (3, "f"), (3, "f"), (3, "c"), (3, "c")]
-    # each pass's views of the finer image, then as many of the coarser one (issue 19)
+    # each pass's views of the finer image, then as many of the coarser one
     assert none.evidence.searches == sum(r.views for r in none.search) == 2 + 4 * (5 + 10 + 35)
 
 
@@ -270,7 +270,7 @@ def test_a_time_budget_stops_a_no_after_the_first_step_and_spares_a_plain_match(
     assert found.matched and _error(found, pair) < 1.0
 
 
-# ------------------------------------------------------------- issue 9: order, overlap, tilt
+# ------------------------------- what real pairs need (docs/DESIGN.md): order, overlap, tilt
 
 def _error(result, pair):
     return reprojection_error(result.transform, pair.truth, pair.high.shape, pair.low.shape)
@@ -363,7 +363,7 @@ def test_plain_zoom_pairs_keep_the_similarity(raccoon, ratio, seed):
 
 
 def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
-    """Issue 19: a zoom pair at ratio 2 seen with a tilt of 8 (directional ratios 2 and 16):
+    """A zoom pair at ratio 2 seen with a tilt of 8 (directional ratios 2 and 16):
     the views at t = 2 and 4 (the ``tilt-4`` preset) find nothing; the default's third pass
     (t = 6, 8) solves it with a view at t = 8, within 1 px (measured 0.26 px)."""
     from scalematch.lab.realpairs import Pair, canonical, pair_error
@@ -379,7 +379,7 @@ def test_a_tilt_of_8_needs_the_steep_views_and_they_solve_it(raccoon):
 
 
 def test_a_tilt_of_6_is_solved_by_a_view_at_6(raccoon):
-    """Issue 19: a zoom pair at ratio 2 seen with a tilt of 6 (directional ratios 2 and 12,
+    """A zoom pair at ratio 2 seen with a tilt of 6 (directional ratios 2 and 12,
     seed 2): the views at t = 2 and 4 (the ``tilt-4`` preset) find nothing; the default's third
     pass solves it with a view at t = 6, within 1 px (measured 0.14 px)."""
     from scalematch.lab.realpairs import Pair, canonical, pair_error
@@ -395,7 +395,7 @@ def test_a_tilt_of_6_is_solved_by_a_view_at_6(raccoon):
 
 
 def test_an_oblique_finer_image_is_solved_by_a_view_of_the_coarser_image(raccoon):
-    """Issue 19: the finer image seen obliquely (tilt 4) against a frontal coarser one at ratio 2:
+    """The finer image seen obliquely (tilt 4) against a frontal coarser one at ratio 2:
     directional ratios 2 and 0.5, so the finer image is the coarser one along one axis and no
     scale (>= 1) of any view of it reaches the pair. A t = 4 view of the coarser image does:
     within 1 px (measured 0.25 px), in either order; without the coarser image's views, no
@@ -418,7 +418,7 @@ def test_an_oblique_finer_image_is_solved_by_a_view_of_the_coarser_image(raccoon
 
 
 def test_a_perspective_pair_is_answered_with_the_homography_of_every_scale(raccoon):
-    """Issue 19: a zoom pair seen in perspective, the local ratio growing from 2 to 8 across
+    """A zoom pair seen in perspective, the local ratio growing from 2 to 8 across
     the footprint (seed 3). The winning scale alone gave a similarity 6.8 px off at the far
     ends (a claim outside the 3 px of EVALUATION.md); the homography fitted to the candidates of
     every scale matched in full is within 1 px (measured 0.28 px)."""
@@ -437,7 +437,7 @@ def pixels_off(result, pair) -> float:
     return _error(result, pair) if result.matched else math.inf
 
 
-# ------------------------------------------------------------- issue 18: few points
+# ------------------------------------------------ few points (docs/design/DECISION.md)
 
 def _smooth_photo():
     """A smooth curved facade: wide soft stripes and blobs, 1 grey level of noise."""
@@ -461,7 +461,7 @@ def test_a_smooth_scene_is_solved_by_the_point_budget():
 
 @pytest.mark.parametrize("name", ["12-bit in 16-bit PNGs", "32 grey levels"])
 def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
-    """Issue 18: a 12-bit image stored as 0-4095 in a 16-bit PNG is read as 0-16 grey levels,
+    """A 12-bit image stored as 0-4095 in a 16-bit PNG is read as 0-16 grey levels,
     and 32 grey levels as 0-31: the threshold follows the image's contrast, so they match."""
     import cv2
 

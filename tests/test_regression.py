@@ -1,4 +1,4 @@
-"""CI regression on synthetic zoom pairs (issue 6): no ../shared needed.
+"""CI regression on synthetic zoom pairs: no ../shared needed.
 
 Pairs are cut from the shipped photo (data/raccoon.jpg, 1024x768) by the project's own generator
 (EVALUATION.md protocol: random rotation, gain, offset, noise). Every pair must be matched with

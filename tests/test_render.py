@@ -231,8 +231,8 @@ def test_the_verdict_calls_no_image_finer_near_a_ratio_of_1():
 
 
 def test_the_verdict_says_which_image_the_tilted_view_was_of():
-    """Issue 19: a match found on a view of the coarser image says so; one on a view of the
-    finer image says only the tilt, as before."""
+    """A match found on a view of the coarser image says so; one on a view of the finer image
+    says only the tilt."""
     from scalematch.result import Evidence
 
     def found(view_of):

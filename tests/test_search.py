@@ -50,7 +50,8 @@ def test_the_coarser_image_is_viewed_only_when_asked():
 
 def test_one_direction_views_the_smaller_coarser_image():
     """``coarser_directions="one"``: both directions' views of the coarser image reach the same
-    pairs (docs/STEEP.md section 11), so only the smaller coarser image, cheaper, is viewed."""
+    pairs (docs/design/VIEWS.md, "Views of the coarser image"), so only the smaller coarser
+    image, cheaper, is viewed."""
     def viewed(views, finer_sides, order="auto"):
         config = Config(order=order, views=views)
         return [(s.direction, s.view_pass) for s in search_plan(config, BOTH, finer_sides)

@@ -164,8 +164,8 @@ def test_high_max_side_is_checked():
 
 
 def test_the_reason_names_a_scale_of_the_table_at_working_size(raccoon):
-    """Issue 17: the reason said "at scale 2.37176" (working pixels) next to a table in the
-    images' own scales. It names the scale the table shows, to its 3 digits."""
+    """The reason names the scale the table shows, in the images' own scales and to its 3
+    digits, not the working pixels' scale (such as "at scale 2.37176")."""
     import re
 
     low = raccoon[:600, :800]

@@ -41,7 +41,7 @@ def test_write_section_replaces_only_its_own_block(tmp_path):
 
 
 def test_the_tables_by_tilt_and_by_spread_follow_the_sets_run():
-    """by_tilt and markdown (issue 19): a table per family of sets run, labelled t or spread."""
+    """by_tilt and markdown: a table per family of sets run, labelled t or spread."""
     from scalematch.lab.realpairs import by_tilt, markdown, summarise
 
     rows = [{"set": s, "method": "scalematch", "pair": f"p{k}", "tilt": t, "success": k % 2 == 0,

@@ -1,7 +1,7 @@
 """Real data from ../shared (skipped when absent): the boat zoom sequence and real photos.
 
 Known answers: boat img1 -> imgN with the published homographies (1->6 is left out: every
-method, SIFT included, is 5-6 px from that reference, see README "Results"); synthetic pairs
+method, SIFT included, is 5-6 px from that reference, see docs/BOAT.md); synthetic pairs
 cut from real photos by the EVALUATION.md protocol; unrelated pairs must not be claimed.
 """
 
@@ -107,7 +107,7 @@ def test_oxford_viewpoint_pairs_both_ways(shared_dir):
 
 
 def test_graf_1_6_both_ways_with_the_homography_model(shared_dir):
-    """Issue 19: about 60 degrees of viewpoint change, solved through a t = 4 view once a
+    """About 60 degrees of viewpoint change, solved through a t = 4 view once a
     homography's ratio is taken where its inliers are (geometry.ratio_at: 0.95 there, 0.57 at
     the view's origin, which the scale test refused). Measured 0.93 px both ways."""
     from scalematch.geometry import ratio_at

@@ -143,7 +143,7 @@ def test_the_least_textured_crop_is_drawn_from_the_same_candidates(raccoon):
 @pytest.mark.parametrize("spread", [4.0, 8.0])
 def test_a_perspective_pair_spans_its_local_ratios_and_its_truth_lines_the_pixels_up(raccoon,
                                                                                       spread):
-    """make_perspective_pair (issue 19): over the high image the truth's local ratio (high px
+    """make_perspective_pair: over the high image the truth's local ratio (high px
     per low px, 1 / sqrt(det J)) runs from the ratio asked to ratio x spread (within 1 %, the
     extremes sit at corners), and the high image warped by it matches the low image (ZNCC > 0.8
     over the footprint: noise and blur aside, the same pixels)."""
@@ -167,7 +167,7 @@ def test_a_perspective_pair_spans_its_local_ratios_and_its_truth_lines_the_pixel
 @pytest.mark.parametrize("ratio,tilt", [(2.0, 2.83), (2.0, 4.0)])
 def test_an_oblique_pair_has_the_finer_image_foreshortened_and_its_truth_lines_the_pixels_up(
         raccoon, ratio, tilt):
-    """make_oblique_pair (issue 19): the truth's directional ratios (high px per low px) are
+    """make_oblique_pair: the truth's directional ratios (high px per low px) are
     ratio and ratio / tilt exactly (the finer image is coarser along one axis), and the high
     image warped by it matches the low image (ZNCC > 0.9 over the footprint)."""
     from scalematch.lab.synthetic import make_oblique_pair

@@ -47,7 +47,7 @@ def test_a_mirror_transform_is_folded_and_a_turn_is_not():
     assert _folded(np.array([[0.5, 0.0, 1.0], [0.0, -0.5, 2.0], [0.0, 0.0, 1.0]]))
 
 
-# --------------------------------------------------------------- issue 18: the second look
+# ------------------------------------------ the second look (docs/design/DECISION.md, test 3)
 
 def _outcomes(k: int, n: int, s: float = 8.0):
     """One scale whose similarity (ratio s) has k inliers among n candidates, and its
@@ -171,11 +171,11 @@ def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
 
 
 def test_a_perspective_map_is_folded_only_where_it_turns_the_image_over(raccoon):
-    """Issue 19: whether a homography folds the high image cannot depend on where the coarser
-    image's origin is. The exact truth of a perspective pair (local ratio 2 to 16) shifted by
-    (-3000, 2000) coarser px is the same map up to a translation: not folded, though its
-    top-left 2x2 block (the old test) has a negative determinant there. Mirrored, or with the
-    horizon (w = 0) moved into the image, it is folded."""
+    """Whether a homography folds the high image cannot depend on where the coarser image's
+    origin is. The exact truth of a perspective pair (local ratio 2 to 16) shifted by (-3000,
+    2000) coarser px is the same map up to a translation: not folded, though its top-left 2x2
+    block (its Jacobian only where the map is affine) has a negative determinant there.
+    Mirrored, or with the horizon (w = 0) moved into the image, it is folded."""
     from scalematch.lab.synthetic import make_perspective_pair
     from scalematch.stages.decision import folded
 

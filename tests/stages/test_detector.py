@@ -99,7 +99,7 @@ def test_points_are_strongest_first_and_capped(raccoon):
     assert np.all(np.diff(kp.response) <= 0)
 
 
-# ------------------------------------------------------------ adaptive detection (issue 18)
+# ------------------------------------------------------------------------ adaptive detection
 
 from scalematch.stages.detector import (REFERENCE_CONTRAST, Contrast,  # noqa: E402
                                         detect_on_level, effective_threshold, image_contrast)

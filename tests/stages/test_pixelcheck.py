@@ -29,8 +29,9 @@ def _elsewhere(pair, turn, at):
 
 def test_truth_beats_its_perturbed_placements(zoom):
     check = pixel_check(zoom.low, zoom.high, zoom.truth)
-    # measured on 21 pairs cut from ../shared photos (docs/FEWPOINTS.md): ncc >= 0.995 and
-    # margin >= 0.076; here (raccoon, ratio 4 / 8) ncc 1.00, margin 0.54 / 0.46
+    # measured on 21 pairs cut from ../shared photos (docs/design/DECISION.md, "Guided growth
+    # and the pixel check, alone"): ncc >= 0.995 and margin >= 0.076; here (raccoon, ratio
+    # 4 / 8) ncc 1.00, margin 0.54 / 0.46
     assert check.decided and check.reason == ""
     assert check.ncc > 0.95
     assert check.margin > 0.1

@@ -1,4 +1,4 @@
-"""refit: the union homography (issue 19, perspective) on fabricated outcomes with a known map."""
+"""refit: the union homography (perspective pairs) on fabricated outcomes with a known map."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ def test_the_union_is_only_tried_for_a_similarity_with_the_model_check(config):
 
 
 def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
-    """Issue 19: candidates found against a view of the coarser image (compressed by 4 at
+    """Candidates found against a view of the coarser image (compressed by 4 at
     longitude 30) are mapped back through the view and refit: the answer is the true affine map
     from finer px to coarser px to 1e-3 px (the estimator works in float32), though the view's
     own similarity could not hold it."""
