@@ -516,25 +516,27 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]],
 NULL_SETS = ("unrelated", "padded-null", "occluded-null")
 
 
-def markers(section: str) -> Tuple[str, str]:
-    """The begin and end markers of a section in the document written."""
-    return (f"<!-- {section}: begin (written by scalematch lab real-pairs) -->",
-            f"<!-- {section}: end -->")
+def markers(section: str, command: str = "scalematch lab real-pairs") -> Tuple[str, str]:
+    """The begin and end markers of a section that ``command`` writes into a document."""
+    return (f"<!-- {section}: begin (written by {command}) -->", f"<!-- {section}: end -->")
 
 
 MARK_BEGIN, MARK_END = markers("real-pairs")
 
 
-def write_section(doc: Path, text: str, section: str = "real-pairs") -> None:
-    """Put ``text`` between the markers of ``doc`` (appended when they are absent)."""
-    begin, end = markers(section)
+def write_section(doc: Path, text: str, section: str = "real-pairs",
+                  command: str = "scalematch lab real-pairs") -> None:
+    """Put ``text`` between the markers of ``section`` in ``doc`` (appended when they are
+    absent); the rest of ``doc`` is kept as it is."""
+    begin, end = markers(section, command)
     old = doc.read_text() if doc.is_file() else ""
     block = f"{begin}\n{text}{end}\n"
     if begin in old and end in old:
         head, rest = old.split(begin, 1)
-        new = head + block + rest.split(end, 1)[1].lstrip("\n")
+        tail = rest.split(end, 1)[1].lstrip("\n")
+        new = head + block + ("\n" + tail if tail else "")
     else:
-        new = old.rstrip("\n") + "\n\n" + block
+        new = (old.rstrip("\n") + "\n\n" if old.strip() else "") + block
     doc.write_text(new)
 
 

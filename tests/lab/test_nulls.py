@@ -192,6 +192,63 @@ def test_a_fixed_sample_end_to_end_makes_no_false_claim(shared_dir, tmp_path):
     assert (page.parent / "nulls.png").is_file() and "False claims: 0" in page.read_text()
 
 
+def _report(tmp_path, mode: str, text: str):
+    """A NullReport of ``mode`` with every setting the page names, a chart, and ``text``."""
+    from scalematch.lab.nulls import NullReport
+
+    chart = tmp_path / f"nulls_{mode}.png"
+    cv2.imwrite(str(chart), np.zeros((4, 4), np.uint8))
+    settings = {"command": f"scalematch lab nulls --mode {mode}", "date": "today", "commit": "abc",
+                "run_commits": {"abc": 2}, "machine": "m", "load_average_at_start": 0.5,
+                "python": "3", "opencv": "5", "numpy": "2", "jobs": 1, "mode": mode, "seed": 0,
+                "ratios": (2,), "photos": ["a.jpg"], "pairs": 1, "runs_planned": 2,
+                "sift": False, "keys_recorded": ["inliers"]}
+    return NullReport(rows=({}, {}), true_rows=(), groups=(), stats={}, settings=settings,
+                      rows_path=tmp_path / "rows.jsonl", chart_path=chart, text=text)
+
+
+def test_the_page_gets_only_its_modes_section_and_chart(tmp_path):
+    from scalematch.lab.nulls import doc_section
+    from scalematch.lab.realpairs import markers
+
+    begin, end = markers(*doc_section("no-views"))
+    assert begin == ("<!-- nulls no-views: begin (written by scalematch lab nulls --mode "
+                     "no-views) -->") and end == "<!-- nulls no-views: end -->"
+    page = tmp_path / "docs" / "NULLS.md"
+    page.parent.mkdir()
+    default_begin, default_end = markers(*doc_section("default"))
+    page.write_text(f"# The null set\n\nThe introduction.\n\n{default_begin}\n## Mode default\n"
+                    f"\nold default table\n{default_end}\n\n{begin}\n## Mode no-views\n\n"
+                    f"old no-views table\n{end}\n\nA closing line.\n")
+    write_nulls_doc(_report(tmp_path, "no-views", "new no-views table"), page)
+    text = page.read_text()
+    assert text.startswith("# The null set\n\nThe introduction.\n\n")
+    assert "old default table" in text and "A closing line." in text
+    assert "old no-views table" not in text and text.count("new no-views table") == 1
+    assert text.index(default_end) < text.index(begin) < text.index("new no-views") < text.index(
+        end) < text.index("A closing line.")
+    assert text.count("## Mode no-views") == 1 and "](nulls-no-views.png)" in text
+    assert (page.parent / "nulls-no-views.png").is_file()
+    assert not (page.parent / "nulls.png").exists()
+    # a mode without a section yet is appended; the default's chart is nulls.png
+    write_nulls_doc(_report(tmp_path, "paper", "paper table"), page)
+    write_nulls_doc(_report(tmp_path, "default", "new default table"), page)
+    text = page.read_text()
+    assert "old default table" not in text and "new no-views table" in text
+    assert text.index("A closing line.") < text.index("<!-- nulls paper: begin") < text.index(
+        "paper table") < text.index("<!-- nulls paper: end -->")
+    assert "](nulls.png)" in text and (page.parent / "nulls.png").is_file()
+    assert (page.parent / "nulls-paper.png").is_file()
+
+
+def test_a_new_page_gets_a_title_and_the_modes_section(tmp_path):
+    page = write_nulls_doc(_report(tmp_path, "default", "the table"),
+                           tmp_path / "docs" / "NULLS.md")
+    text = page.read_text()
+    assert text.startswith("# The null set: pairs with no answer\n\n<!-- nulls default: begin")
+    assert text.rstrip().endswith("<!-- nulls default: end -->") and "the table" in text
+
+
 def test_footprint_ncc_tells_the_right_placement_from_a_wrong_one():
     from scalematch.geometry import similarity_matrix
     from scalematch.lab.nulls import footprint_ncc
