@@ -816,19 +816,24 @@ def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.
         shutil.copyfile(report.plot_path, p.parent / png)
         lines += [f"![success rate against ratio]({png})", ""]
     lines += [report.table, "", "Photos: " + ", ".join(f"`{n}`" for n in s["photos"]), ""]
-    p.write_text("\n".join(lines) + _real_pairs_section(p))
+    p.write_text("\n".join(lines) + _real_pairs_sections(p))
     return p
 
 
-def _real_pairs_section(page: Path) -> str:
-    """The section ``scalematch lab real-pairs`` wrote into ``page`` (kept: another command's
-    figures), or ""."""
-    from .realpairs import MARK_BEGIN, MARK_END
+def _real_pairs_sections(page: Path) -> str:
+    """The sections ``scalematch lab real-pairs`` wrote into ``page``, each with its markers and
+    in the page's order: the real pairs, and the realistic pairs of ``--sets realistic`` (kept:
+    another command's figures), or ""."""
+    from .realpairs import SECTIONS, markers
 
     old = page.read_text() if page.is_file() else ""
-    if MARK_BEGIN not in old or MARK_END not in old.split(MARK_BEGIN, 1)[1]:
-        return ""
-    return "\n" + MARK_BEGIN + old.split(MARK_BEGIN, 1)[1].split(MARK_END, 1)[0] + MARK_END + "\n"
+    kept = []
+    for section in SECTIONS:
+        begin, end = markers(section)
+        if begin in old and end in old.split(begin, 1)[1]:
+            body = old.split(begin, 1)[1].split(end, 1)[0]
+            kept.append((old.index(begin), begin + body + end + "\n"))
+    return "".join("\n" + block for _, block in sorted(kept))
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,11 +1,12 @@
-"""The benchmark runner end to end on a tiny run (needs ../shared; skipped when absent)."""
+"""The benchmark runner end to end on a tiny run (needs ../shared; skipped when absent), and
+what a rewrite of the page keeps."""
 
 from __future__ import annotations
 
 import csv
 
-from scalematch.lab.bench import run_benchmark, write_benchmarks_doc
-from scalematch.lab.realpairs import MARK_BEGIN, MARK_END, write_section
+from scalematch.lab.bench import _real_pairs_sections, run_benchmark, write_benchmarks_doc
+from scalematch.lab.realpairs import MARK_BEGIN, MARK_END, markers, write_section
 
 
 def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
@@ -25,12 +26,36 @@ def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
     page = write_benchmarks_doc(report, tmp_path / "docs" / "TINY.md")
     assert (page.parent / "tiny.png").is_file()
     assert "![success rate against ratio](tiny.png)" in page.read_text()
-    # the section of `scalematch lab real-pairs` (another command's figures) survives a re-run
+    # the sections of `scalematch lab real-pairs` (another command's figures) survive a re-run
     write_section(page, "## Real pairs\n\n| a table |\n")
+    write_section(page, "## Realistic\n\n| b table |\n", "realistic")
     write_benchmarks_doc(report, page)
     text = page.read_text()
     assert text.count("## Real pairs") == 1 and "| a table |" in text
+    assert text.count("## Realistic") == 1 and "| b table |" in text
     assert text.index("Photos: ") < text.index(MARK_BEGIN) < text.index(MARK_END)
+    assert text.index(MARK_END) < text.index(markers("realistic")[0])
+
+
+def test_a_rewritten_page_keeps_the_real_and_the_realistic_pairs_sections(tmp_path):
+    """What ``make bench`` keeps of docs/BENCHMARKS.md: the blocks that ``scalematch lab
+    real-pairs`` wrote (the real pairs, and the realistic pairs of ``--sets realistic``), each
+    with its markers, in the page's order; nothing else of the old page."""
+    page = tmp_path / "BENCHMARKS.md"
+    assert _real_pairs_sections(page) == ""
+    page.write_text("# Benchmarks\n\nold tables\n")
+    assert _real_pairs_sections(page) == ""
+    write_section(page, "## Realistic\n\n| b table |\n", "realistic")
+    write_section(page, "## Real pairs\n\n| a table |\n")
+    kept = _real_pairs_sections(page)
+    begin, end = markers("realistic")
+    assert "old tables" not in kept and "# Benchmarks" not in kept
+    assert kept.index(begin) < kept.index("| b table |") < kept.index(end) < kept.index(
+        MARK_BEGIN) < kept.index("| a table |") < kept.index(MARK_END)
+    assert kept.startswith("\n" + begin) and kept.endswith(MARK_END + "\n")
+    # a section whose end marker is missing is not kept
+    page.write_text(page.read_text().replace(end, ""))
+    assert begin not in _real_pairs_sections(page) and MARK_BEGIN in _real_pairs_sections(page)
 
 
 def test_pair_by_pair_names_every_pair_a_peer_solves_and_scalematch_misses():
