@@ -489,7 +489,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
     times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`),
-    compared where the inliers ``vouched`` (coarser px, (N, 2)) for the map.
+    compared where the inliers ``vouched`` for the map (their finer px, (N, 2)).
     Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
     (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
     Both are measured on the final transform: a similarity found before the refit may hold on

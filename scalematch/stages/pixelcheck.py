@@ -21,6 +21,11 @@ Cheap by construction: the high image is first shrunk by an integer factor ``k ~
 all placements are warped only onto the bounding box of the footprints in the low image, at the
 low image's resolution.
 
+Where the pixels are compared: only where both images show the scene (NaN marks the rest: a
+no-data canvas, :mod:`scalematch.stages.nodata`), and for the uniqueness test only near the
+inliers (``vouch_radius``): an occluder, a foreground object or a 3-D scene's other planes hold
+no inlier, and one ZNCC over the whole footprint would count them against a true map.
+
 Pixel convention: OpenCV's, (x, y), pixel centres at integers. Used by the decision's second
 look and by the pixel tests of every match's final map (:mod:`scalematch.stages.decision`).
 """
@@ -274,9 +279,9 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     Parameters
     ----------
     low : (H, W) array
-        The low-resolution image, grey levels.
+        The low-resolution image, grey levels; NaN where it shows no scene (left out).
     high : (h, w) array
-        The high-resolution image, grey levels.
+        The high-resolution image, grey levels; NaN where it shows no scene (left out).
     t : (2, 3) or (3, 3) array
         Hypothesis, high px -> low px (similarity, affine or homography).
     params : PixelParams
@@ -429,6 +434,10 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     of it stands: the claimed placement is then no better than another one, and the claim is
     ambiguous even when many points agree with it. A true match fits its own place better than
     any copy (the pixels are the same ones, not alike ones).
+
+    ``vouched`` (finer px, (N, 2)): the inliers; only the pixels within ``vouch_radius`` of the
+    footprint's size of them are compared (None: all). Pixels that are NaN in either image (no
+    scene there, :func:`scalematch.stages.nodata.with_nan`) are left out.
 
     >>> rng = np.random.default_rng(0)
     >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
