@@ -180,8 +180,11 @@ def verdict(result: MatchResult) -> str:
         order = (", order swapped (the first image is the finer one)"
                  if result.resolution_ratio >= NEAR_ONE_RATIO else
                  ", order swapped (the transform maps the first image into the second)")
+    plane = (", parallax: the map of the scene's dominant plane" if result.evidence.parallax
+             else "")
     return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
-            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}")
+            f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}"
+            f"{plane}")
 
 
 def evidence_line(result: MatchResult) -> str:
@@ -198,8 +201,8 @@ def evidence_line(result: MatchResult) -> str:
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
     if result.matched and e.parallax:
-        parts.append(f"parallax: {e.parallax_points} matches off its plane (a 3-D scene; "
-                     f"--model fundamental gives the epipolar geometry)")
+        parts.append(f"{e.parallax_points} matches off its plane fit an epipolar geometry "
+                     f"(--model fundamental gives it)")
     return "; ".join(parts)
 
 

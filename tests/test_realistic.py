@@ -124,3 +124,40 @@ def test_each_change_keeps_an_exact_truth(raccoon, change):
     else:
         assert np.array_equal(moved.truth, pair.truth) and moved.low.shape == pair.low.shape
         assert np.abs(moved.low - pair.low).mean() > 5  # relit
+
+
+def _epipolar_distance(f: np.ndarray, finer: np.ndarray, coarser: np.ndarray) -> float:
+    """Mean symmetric epipolar distance (px) of point pairs under F (x_coarser^T F x_finer = 0),
+    as ../shared/data/ef/SOURCES.md scores a fundamental matrix."""
+    hf = np.column_stack([finer, np.ones(len(finer))])
+    hc = np.column_stack([coarser, np.ones(len(coarser))])
+    to_coarser, to_finer = hf @ f.T, hc @ f
+    num = np.abs(np.sum(hc * to_coarser, axis=1))
+    return float(np.mean(0.5 * (num / np.hypot(*to_coarser[:, :2].T)
+                                + num / np.hypot(*to_finer[:, :2].T))))
+
+
+@pytest.mark.shared
+def test_a_3d_desk_scene_is_answered_with_its_dominant_plane_and_says_parallax(shared_dir):
+    """../shared/data/ef/zoom: a desk scene at a zoom of about 2.6, 13 clicked points and no
+    plane through them all. By default: the map of its dominant plane, holding at least 4 of
+    the clicked points within 3 px, with the parallax said; ``--model fundamental``: the
+    epipolar geometry, under 3 px from the clicked points (measured: 4 points, 0.8 px)."""
+    from scalematch.config import Config
+    from scalematch.imageio import read_grey
+
+    folder = shared_dir / "data" / "ef"
+    a, b = read_grey(folder / "zoom_A.png"), read_grey(folder / "zoom_B.png")
+    clicked = np.loadtxt(folder / "zoom_points.txt")
+    plane = match(a, b)
+    assert plane.matched, plane.reason
+    assert plane.evidence.parallax and plane.evidence.parallax_points >= 50
+    finer, coarser = (clicked[:, 2:], clicked[:, :2]) if plane.order == "given" else \
+        (clicked[:, :2], clicked[:, 2:])
+    near = np.linalg.norm(apply(plane.transform, finer) - coarser, axis=1) < SUCCESS_PX
+    assert near.sum() >= 4
+    epipolar = match(a, b, Config(model="fundamental"))
+    assert epipolar.matched, epipolar.reason
+    finer, coarser = (clicked[:, 2:], clicked[:, :2]) if epipolar.order == "given" else \
+        (clicked[:, :2], clicked[:, 2:])
+    assert _epipolar_distance(np.asarray(epipolar.transform), finer, coarser) < SUCCESS_PX
