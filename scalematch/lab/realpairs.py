@@ -433,20 +433,25 @@ REALISTIC_SETS = ("padded", "padded-swapped", "occluded", "occluded-swapped", "p
                   "partial-swapped", "relit", "relit-swapped", "oxford-zoom", "padded-null",
                   "occluded-null")
 #: The sets reported by tilt (or spread), with the values and the column label
-BY_TILT = (("tilted", TILTS, "t"), ("steep", STEEP_TILTS, "t"),
-           ("perspective", SPREADS, "spread"),
-           ("oblique", tuple(t for _, t in OBLIQUE_CASES), "t"))
+BY_TILT = (("tilted", TILTS, "t", "tilt"), ("steep", STEEP_TILTS, "t", "tilt"),
+           ("perspective", SPREADS, "spread", "tilt"),
+           ("oblique", tuple(t for _, t in OBLIQUE_CASES), "t", "tilt"),
+           ("padded", REALISTIC_RATIOS, "ratio", "ratio"),
+           ("occluded", REALISTIC_RATIOS, "ratio", "ratio"),
+           ("partial", REALISTIC_RATIOS, "ratio", "ratio"),
+           ("relit", REALISTIC_RATIOS, "ratio", "ratio"))
 
 
 def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, int]]:
-    """(set, method, tilt or spread, solved, pairs) for the tilted, steep and perspective sets."""
+    """(set, method, value, solved, pairs) for the sets of ``BY_TILT``: the tilted, steep and
+    perspective sets by tilt (or spread), the realistic ones by ratio."""
     out = []
-    for family, values, _ in BY_TILT:
+    for family, values, _, key in BY_TILT:
         for s in (family, f"{family}-swapped"):
             for m in METHODS:
                 for t in values:
                     rs = [r for r in rows if r["set"] == s and r["method"] == m
-                          and r["tilt"] == t]
+                          and r[key] == t]
                     if rs:
                         out.append((s, m, t, sum(r["success"] for r in rs), len(rs)))
     return out
@@ -495,7 +500,7 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]],
         solved = "-" if null else str(r["solved"])
         lines.append(f"| {r['set']} | {r['method']} | {r['pairs']} | {solved} | {rate} | {err} | "
                      f"{r['false_claims']} | {r['median_s']:.2f} |")
-    for family, values, label in BY_TILT:
+    for family, values, label, _ in BY_TILT:
         sets = (family, f"{family}-swapped")
         if not any(ss in sets for ss, *_ in tilt_rows):
             continue
