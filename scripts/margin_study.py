@@ -26,7 +26,6 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
 import cv2  # noqa: E402
-import numpy as np  # noqa: E402
 
 from scalematch import Config, match  # noqa: E402
 from scalematch.geometry import as_matrix3, invert  # noqa: E402
