@@ -71,8 +71,6 @@ PathLike = Union[str, Path]
 DEFAULT_FACTORS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
 #: Repeatability tolerance, low-resolution px (Schmid, Mohr & Bauckhage 2000: eps = 1.5).
 EPS_PX = 1.5
-#: Reference level of the paper's claim: the standard detector is "less than 40 %" past 2.
-PAPER_STANDARD_LEVEL = 0.40
 
 
 @dataclass(frozen=True)
