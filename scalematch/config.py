@@ -87,12 +87,12 @@ class Config:
     #: the finer image, every scale. The threshold follows the image's contrast (a 12-bit
     #: image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the absolute
     #: threshold; docs/design/DECISION.md, "Adaptive detection"); capped at 1, so it is only
-    #: ever lowered (stages/detector.py)
-    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=True))
+    #: ever lowered (stages/detector.py). ``HarrisParams()`` is this detector, so
+    #: ``scalematch.detect`` and ``match`` agree
+    harris: HarrisParams = field(default_factory=HarrisParams)
     #: the coarser image, at s = 1 only: the same detector; more points allowed, since the
     #: finer image's footprint may be a small part of it
-    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(
-        max_points=12000, contrast_relative=True))
+    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
     gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
     jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
     #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged
