@@ -15,7 +15,9 @@ from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
 from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
+from .stages.guided import GuidedParams
 from .stages.matcher import MatcherParams
+from .stages.pixelcheck import PixelParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
 from .stages.views import TILT4_PASSES, ViewParams
@@ -104,6 +106,12 @@ class Config:
     ransac: RansacParams = field(default_factory=RansacParams)
     probe: ProbeParams = field(default_factory=ProbeParams)
     decision: DecisionParams = field(default_factory=DecisionParams)
+    #: the decision's second look at a hypothesis short of inliers: guided growth (the paper
+    #: mode's jets carry no orientation, so there it never tests one)
+    guided: GuidedParams = field(default_factory=GuidedParams)
+    #: the pixel tests: the second look's check, the final transform's uniqueness and nearby
+    #: placements, and the choice between several matched searches
+    pixel: PixelParams = field(default_factory=PixelParams)
     order: str = "auto"  #: see ORDERS
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)

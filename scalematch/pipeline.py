@@ -650,7 +650,7 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
         winner = strongest(attempts)
         return winner, (final_fit(winner, config) if winner is not None else None), None
     fits = [final_fit(a, config) for a in matched]
-    checks = [pixel_check(*work.shown(a.step.direction), fit[0])
+    checks = [pixel_check(*work.shown(a.step.direction), fit[0], config.pixel)
               for a, fit in zip(matched, fits)]
 
     def fitness(k: int) -> Tuple[float, float]:
@@ -723,7 +723,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
         coarse, fine = work.shown(winner.step.direction)
         common["evidence"], reason, test = final_checks(coarse, fine, t, evidence,
                                                         config.decision, near,
-                                                        vouched=inliers[:, :2])
+                                                        vouched=inliers[:, :2],
+                                                        pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
                 t, inliers, model, winner.step.direction, test, common["evidence"], config),
