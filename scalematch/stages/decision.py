@@ -292,7 +292,7 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
 class Look:
     """A second look at a hypothesis: guided growth, then the pixel check of the grown map."""
 
-    transform: np.ndarray = field(repr=False)  #: the grown transform (high px -> low px)
+    transform: np.ndarray = field(repr=False)  #: the grown transform (finer px -> coarser px)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) its distinct inliers
     chance: float  #: guided matches to expect by chance around the predictions
     ncc: float  #: ZNCC of the pixels under the grown map (nan: cannot tell)

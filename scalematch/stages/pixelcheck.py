@@ -170,7 +170,7 @@ def zncc(a: np.ndarray, b: np.ndarray, min_std: float = PixelParams.min_std) -> 
 
 def perturbations(t: np.ndarray, high_shape: Tuple[int, int],
                   params: PixelParams = PixelParams()) -> Tuple[np.ndarray, ...]:
-    """The nearby wrong placements of ``t`` (each a 3x3 high px -> low px map).
+    """The nearby wrong placements of ``t`` (each a 3x3 finer px -> coarser px map).
 
     Four shifts (+-x, +-y) by ``shift_fraction`` of the footprint's size, two turns by
     ``+-rotation_deg`` and two scalings by ``scale_step^+-1`` about the footprint's centre.
@@ -293,7 +293,8 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     high : (h, w) array
         The high-resolution image, grey levels; NaN where it shows no scene (left out).
     t : (2, 3) or (3, 3) array
-        Hypothesis, high px -> low px (similarity, affine or homography).
+        Hypothesis, finer px -> coarser px (``high``'s to ``low``'s; similarity, affine or
+        homography).
     params : PixelParams
 
     Returns
