@@ -28,15 +28,6 @@ Traceback (most recent call last):
 scalematch.imageio.ImageError: the low image is constant (every pixel 128): there is nothing to match in it
 """
 
-import os as _os
-
-# The matcher multiplies small matrices (a few hundred descriptors against a few thousand): a
-# multi-threaded BLAS spends more time waking threads than computing, 4x slower measured on 2
-# busy cores. One BLAS thread unless the user says otherwise; this only takes effect when
-# scalematch is imported before numpy (as the command line does).
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
-
 __version__ = "0.1.0"
 
 #: The public names, each loaded from its module on first use (PEP 562), so that

@@ -20,6 +20,7 @@ them into exit code 2.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import csv
 import json
@@ -40,7 +41,7 @@ from . import __version__
 from .config import Config
 from .errors import internal_error
 from .imageio import to_grey
-from .pipeline import match
+from .pipeline import match, warm_up_blas
 from .result import dumps, to_jsonable
 from .working import read_pair
 
@@ -70,6 +71,11 @@ LINE_START = b'{"'
 #: alone. A second death while it ran alone is its own; a third try would cost another worker
 #: start for nothing.
 MAX_WORKER_DEATHS_PER_PAIR = 2
+#: BLAS threads of a worker process, where the user set none: the processes are the parallelism
+#: (as OpenCV's one thread in ``_init_worker``). BLAS reads them when numpy loads, which a
+#: spawned worker does before any of its code runs, so they are put in the environment the
+#: worker starts with (``worker_environment``).
+WORKER_BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: How long a worker that was told to end (or has ended) is waited for before it is killed, s.
 WORKER_EXIT_WAIT_S = 5.0
 #: ``error_kind`` of an error line: the pair's files or values (a ``ValueError``: missing file,
@@ -490,14 +496,31 @@ def die_with_parent(parent_pid: int) -> None:
                      daemon=True).start()
 
 
+@contextlib.contextmanager
+def worker_environment() -> Iterator[None]:
+    """``os.environ`` with ``WORKER_BLAS_THREADS`` added where unset, for the worker processes
+    started inside; as it was, after."""
+    added = [name for name in WORKER_BLAS_THREADS if name not in os.environ]
+    for name in added:
+        os.environ[name] = WORKER_BLAS_THREADS[name]
+    try:
+        yield
+    finally:
+        for name in added:
+            os.environ.pop(name, None)
+
+
 def _init_worker(parent_pid: int) -> None:
     """Worker set-up: die with the main process; one OpenCV thread (the processes are the
-    parallelism); Ctrl-C is left to the main process, which stops the workers."""
+    parallelism; its BLAS threads are set as it starts, ``worker_environment``); Ctrl-C is left
+    to the main process, which stops the workers; BLAS's buffers taken while memory is there
+    (``warm_up_blas``)."""
     import cv2
 
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     cv2.setNumThreads(1)
+    warm_up_blas()
 
 
 def _worker_main(conn: Any, parent_pid: int, task: Callable[..., Dict[str, Any]]) -> None:
@@ -532,7 +555,8 @@ class _Worker:
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(target=_worker_main, args=(child, os.getpid(), task),
                                    name="scalematch-worker", daemon=True)
-        self.process.start()
+        with worker_environment():
+            self.process.start()
         child.close()  # the worker's end: EOF here when the worker ends
 
     def line(self) -> Optional[Dict[str, Any]]:

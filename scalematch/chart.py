@@ -23,7 +23,6 @@ DEFAULT_SIZE = (900, 600)
 #: Bar colours, BGR: ordinary bars and the highlighted (winning) bar.
 BAR_COLOUR = (200, 170, 130)
 HIGHLIGHT_COLOUR = (40, 39, 214)
-WHITE = (255, 255, 255)
 BLACK = (0, 0, 0)
 GRID = (225, 225, 225)
 TEXT = (40, 40, 40)

@@ -22,6 +22,14 @@ from pathlib import Path
 from typing import (Any, Callable, Dict, FrozenSet, Iterable, Iterator, List, Optional, Sequence,
                     Tuple)
 
+# The matcher multiplies small matrices (a few hundred descriptors against a few thousand): a
+# multi-threaded BLAS spends more time waking threads than computing, 4x slower measured on 2
+# busy cores. The command line uses one BLAS thread unless the user says otherwise. BLAS reads
+# these when numpy loads, which the imports below do, so they are set here and not in main().
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
 import click
 import numpy as np
 

@@ -15,7 +15,9 @@ from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
 from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
+from .stages.guided import GuidedParams
 from .stages.matcher import MatcherParams
+from .stages.pixelcheck import PixelParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
 from .stages.views import TILT4_PASSES, ViewParams
@@ -87,12 +89,12 @@ class Config:
     #: the finer image, every scale. The threshold follows the image's contrast (a 12-bit
     #: image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the absolute
     #: threshold; docs/design/DECISION.md, "Adaptive detection"); capped at 1, so it is only
-    #: ever lowered (stages/detector.py)
-    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=True))
+    #: ever lowered (stages/detector.py). ``HarrisParams()`` is this detector, so
+    #: ``scalematch.detect`` and ``match`` agree
+    harris: HarrisParams = field(default_factory=HarrisParams)
     #: the coarser image, at s = 1 only: the same detector; more points allowed, since the
     #: finer image's footprint may be a small part of it
-    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(
-        max_points=12000, contrast_relative=True))
+    harris_low: HarrisParams = field(default_factory=lambda: HarrisParams(max_points=12000))
     gradients: GradientParams = field(default_factory=GradientParams)  #: default descriptor
     jets: JetParams = field(default_factory=JetParams)  #: paper descriptor
     #: Lambda for the jets: a file written by `scalematch lab covariance` (None: the packaged
@@ -104,6 +106,12 @@ class Config:
     ransac: RansacParams = field(default_factory=RansacParams)
     probe: ProbeParams = field(default_factory=ProbeParams)
     decision: DecisionParams = field(default_factory=DecisionParams)
+    #: the decision's second look at a hypothesis short of inliers: guided growth (the paper
+    #: mode's jets carry no orientation, so there it never tests one)
+    guided: GuidedParams = field(default_factory=GuidedParams)
+    #: the pixel tests: the second look's check, the final transform's uniqueness and nearby
+    #: placements, and the choice between several matched searches
+    pixel: PixelParams = field(default_factory=PixelParams)
     order: str = "auto"  #: see ORDERS
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)

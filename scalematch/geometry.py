@@ -2,9 +2,9 @@
 
 Conventions (docs/GUIDE.md, "Conventions"): points are (x, y) in OpenCV pixels, pixel centres at
 integers, so a W x H image's edge runs through (-0.5, -0.5) .. (W - 0.5, H - 0.5). A transform
-is a 2x3 affine (similarity) or a 3x3 homography mapping a high-resolution pixel to a
-low-resolution pixel. Angles are degrees, counter-clockwise in (x, y) with y down (so clockwise
-on screen).
+is a 2x3 affine (similarity) or a 3x3 homography mapping a pixel of the finer (high-resolution)
+image to one of the coarser (low-resolution) image, whichever order the images were given in.
+Angles are degrees, counter-clockwise in (x, y) with y down (so clockwise on screen).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
     Parameters
     ----------
     t : (2, 3) or (3, 3) array
-        High px -> low px.
+        Finer px -> coarser px.
 
     Returns
     -------
@@ -262,7 +262,7 @@ def footprint(t: np.ndarray, high_shape: Tuple[int, ...], edges: bool = True
     Parameters
     ----------
     t : (2, 3) or (3, 3) array
-        High px -> low px.
+        Finer px -> coarser px.
     high_shape : tuple
         (H, W, ...) of the high image.
     edges : bool

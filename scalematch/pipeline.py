@@ -12,6 +12,7 @@ whether the evidence is enough; the winner is refit in the finer image's pixels
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -44,12 +45,6 @@ from .stages.views import View, identity_view, tilt_view, valid_in
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
-
-#: OpenBLAS allocates its work buffers at its first matrix product, and when that allocation
-#: fails (a process near its memory limit) it ends the process with exit code 1 from native code,
-#: which reads as "no reliable match". One small product at import takes them while memory is
-#: there; later products reuse them.
-_BLAS_WARM_UP = np.ones((128, 128), np.float32) @ np.ones((128, 128), np.float32)
 
 #: Largest view of the high image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
@@ -100,6 +95,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         ``order`` says whether the images were found in the order given; ``transform`` always
         maps the finer image's pixels to the coarser image's; ``search`` lists the steps run.
     """
+    warm_up_blas()
     t0 = time.perf_counter()
     # the one check at the door, before anything is shrunk: ValueError for what cannot match
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
@@ -134,6 +130,19 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     result = build_result(attempts, tuple(records), plan, stopped, config,
                           cov.source if cov is not None else "", timings, work)
     return in_original(result, work, config)
+
+
+@functools.cache
+def warm_up_blas() -> None:
+    """Run one small matrix product, once per process.
+
+    OpenBLAS allocates its work buffers at its first matrix product, and when that allocation
+    fails (a process near its memory limit) it ends the process with exit code 1 from native
+    code, which reads as "no reliable match". One small product before the images are worked on
+    (at the start of ``match``, and when a batch worker starts) takes them while memory is
+    there; later products reuse them.
+    """
+    np.ones((128, 128), np.float32) @ np.ones((128, 128), np.float32)
 
 
 class Meter:
@@ -641,7 +650,7 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
         winner = strongest(attempts)
         return winner, (final_fit(winner, config) if winner is not None else None), None
     fits = [final_fit(a, config) for a in matched]
-    checks = [pixel_check(*work.shown(a.step.direction), fit[0])
+    checks = [pixel_check(*work.shown(a.step.direction), fit[0], config.pixel)
               for a, fit in zip(matched, fits)]
 
     def fitness(k: int) -> Tuple[float, float]:
@@ -714,7 +723,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
         coarse, fine = work.shown(winner.step.direction)
         common["evidence"], reason, test = final_checks(coarse, fine, t, evidence,
                                                         config.decision, near,
-                                                        vouched=inliers[:, :2])
+                                                        vouched=inliers[:, :2],
+                                                        pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
                 t, inliers, model, winner.step.direction, test, common["evidence"], config),

@@ -173,7 +173,8 @@ class MatchResult:
     matched: bool
     model: str  #: similarity | affine | homography | fundamental
     reason: str = ""  #: why not matched ("" when matched)
-    #: high px -> low px (None when not matched)
+    #: finer px -> coarser px (None when not matched): the second image given to the first,
+    #: or with ``order`` "swapped" the first to the second
     transform: Optional[np.ndarray] = field(default=None, repr=False)
     #: 1/h: high-res pixels per low-res pixel (a homography's: where its inliers are,
     #: :func:`scalematch.geometry.answer_parts`)

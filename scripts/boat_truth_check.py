@@ -12,8 +12,13 @@ normalised cross-correlation of img1 warped into imgN by each (over the warped f
 from __future__ import annotations
 
 import argparse
+import os
 
-import scalematch  # noqa: F401  (first: sets the BLAS threads before numpy loads)
+# one BLAS thread, as the command line uses: read when numpy loads, so set before the imports
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
 import cv2
 import numpy as np
 

@@ -34,10 +34,15 @@ import time
 from pathlib import Path
 from typing import Sequence, Tuple
 
-import scalematch  # first: sets the BLAS threads before numpy loads
+# one BLAS thread, as the command line uses: read when numpy loads, so set before the imports
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
 import cv2
 import numpy as np
 
+import scalematch
 from scalematch.lab.baselines import match_baseline
 from scalematch.lab.evaluation import is_success, reprojection_error
 from scalematch.lab.synthetic import pairs_from_photos, zoom_pair_from_crop

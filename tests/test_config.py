@@ -8,7 +8,9 @@ from scalematch.config import MODES, PRESETS, Config, ProbeParams
 from scalematch.stages.decision import DecisionParams
 from scalematch.stages.detector import PAPER_SCALES, HarrisParams
 from scalematch.stages.estimator import RansacParams
+from scalematch.stages.guided import GuidedParams
 from scalematch.stages.matcher import MatcherParams
+from scalematch.stages.pixelcheck import PixelParams
 from scalematch.stages.views import ViewParams
 
 
@@ -51,6 +53,10 @@ def test_an_unknown_preset_names_the_known_ones():
     (lambda: Config(scales=()), "scales must hold at least one scale"),
     (lambda: Config(low_max_side=10), "low_max_side must be an integer >= 64, got 10"),
     (lambda: Config(order="sideways"), "order must be one of"),
+    (lambda: GuidedParams(radius_px=0.0), "guided.radius_px must be > 0, got 0.0"),
+    (lambda: GuidedParams(max_rounds=0), "guided.max_rounds must be an integer >= 1, got 0"),
+    (lambda: PixelParams(scale_step=0.8), "pixel.scale_step must be >= 1, got 0.8"),
+    (lambda: PixelParams(min_overlap_px=2.5), "pixel.min_overlap_px must be an integer >= 1"),
 ])
 def test_every_params_refuses_values_that_mean_nothing(make, message):
     """The ranges live in the parameters themselves, so the library refuses what the
@@ -76,3 +82,21 @@ def test_the_defaults_and_presets_pass_their_own_checks():
     for name in PRESETS:
         Config.preset(name)  # would raise
     assert Config().ransac == RansacParams()
+
+
+def test_guided_growth_and_the_pixel_tests_are_set_and_recorded_as_the_rest():
+    """They decide match or no match: fields of Config (defaults as the stages'), set with
+    --set guided.X / pixel.X, recorded in the result's config."""
+    from scalematch.batch import config_json
+    from scalematch.cli import build_config
+
+    assert Config().guided == GuidedParams() and Config().pixel == PixelParams()
+    config = build_config("default", None, None, None, {},
+                          ["guided.radius_px=5", "guided.use_orientation=off",
+                           "pixel.min_overlap_px=300"])
+    assert config.guided == GuidedParams(radius_px=5.0, use_orientation=False)
+    assert config.pixel == PixelParams(min_overlap_px=300)
+    recorded = config_json(config)
+    assert recorded["guided"]["radius_px"] == 5.0 and recorded["pixel"]["min_overlap_px"] == 300
+    with pytest.raises(ValueError, match="pixel.vouch_radius must be > 0"):
+        build_config("default", None, None, None, {}, ["pixel.vouch_radius=0"])

@@ -21,6 +21,10 @@ from ..stages.detector import HarrisParams, detect_on_level
 from ..stages.mahalanobis import Covariance, save_covariance
 from ..stages.scalespace import Level
 
+#: The detector the packaged covariance was estimated with: the absolute threshold (the product's
+#: detector, ``HarrisParams()``, follows the image's contrast)
+ABSOLUTE = HarrisParams(contrast_relative=False)
+
 
 @dataclass(frozen=True)
 class CovarianceRecipe:
@@ -38,7 +42,7 @@ class CovarianceRecipe:
 
 def tracked_differences(image: np.ndarray, rng: np.random.Generator,
                         recipe: CovarianceRecipe = CovarianceRecipe(),
-                        harris: HarrisParams = HarrisParams(), jets: JetParams = JetParams()
+                        harris: HarrisParams = ABSOLUTE, jets: JetParams = JetParams()
                         ) -> np.ndarray:
     """Descriptor differences (N, D) of points re-detected after one random synthetic change."""
     import cv2
@@ -78,7 +82,7 @@ def tracked_differences(image: np.ndarray, rng: np.random.Generator,
 
 def estimate_covariance(images: Iterable[np.ndarray], seed: int = 0,
                         recipe: CovarianceRecipe = CovarianceRecipe(),
-                        harris: HarrisParams = HarrisParams(), jets: JetParams = JetParams(),
+                        harris: HarrisParams = ABSOLUTE, jets: JetParams = JetParams(),
                         provenance: Optional[dict] = None) -> Covariance:
     """Estimate Lambda from grey photos by tracking points through random synthetic changes."""
     rng = np.random.default_rng(seed)

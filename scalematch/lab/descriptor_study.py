@@ -3,9 +3,10 @@
 For each photo, a crop and a changed copy *at the same resolution* (so the descriptors alone are
 measured, not the scale selection): the copy is the crop rotated about its centre by a random
 angle, re-lit and noised. Points are detected in both (the library's Harris detector at s = 1,
-default ``HarrisParams``); a point of the crop is *identified* when its nearest neighbour in
-descriptor space, among **all** the points of the copy, is its true partner (the copy's point
-nearest its mapped position, within ``match_px``). Protocol, all numbers ``StudyParams`` fields:
+``HarrisParams`` with the absolute threshold); a point of the crop is *identified* when its
+nearest neighbour in descriptor space, among **all** the points of the copy, is its true partner
+(the copy's point nearest its mapped position, within ``match_px``). Protocol, all numbers
+``StudyParams`` fields:
 
 * crop = ``crop_w`` x ``crop_h`` of the photo: of ``crop_candidates`` random positions (seeded
   from ``seed`` and the photo's file name) the most textured
@@ -163,7 +164,7 @@ def measure_photo(photo: np.ndarray, name: str, seed: int,
     offset = float(rng.uniform(*params.offset))
     copy, a = changed_copy(crop, angle, gain, offset, params.noise_std, rng)
 
-    harris = HarrisParams()
+    harris = HarrisParams(contrast_relative=False)  # the absolute threshold, as measured
     k0 = detect_one(crop, 1.0, harris).xy
     k1 = detect_one(copy, 1.0, harris).xy
     mapped = apply(a, k0)
@@ -310,8 +311,8 @@ random angle (uniform in [-180, 180), `cv2.warpAffine`, INTER_CUBIC, reflected b
 {params.offset[1]:g}]), noised (std {params.noise_std:g} grey levels), rounded to 8 bits. The
 crop, angle, gain, offset and noise are drawn from the seed and the photo's file name.
 
-Harris points of both images at s = 1 (default `HarrisParams`). A crop point counts when it and
-its mapped position are at least {params.margin_px:g} px inside their image; its **true
+Harris points of both images at s = 1 (`HarrisParams`, absolute threshold). A crop point counts
+when it and its mapped position are at least {params.margin_px:g} px inside their image; its **true
 partner** is the copy point nearest its mapped position, if within {params.match_px:g} px. A
 point is **identified** when its nearest neighbour in descriptor space, among *all* the points
 of the copy, is its true partner. Columns (percent of the counted points):

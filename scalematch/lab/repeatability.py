@@ -19,9 +19,10 @@ Protocol, for each photo and each factor r (all numbers are ``StudyParams`` fiel
 * ``truth`` = the 2x3 similarity mapping a ``high`` pixel to a ``low`` pixel (crop offset composed
   with the warp), OpenCV pixel centres at integer coordinates.
 * Points: ``detector.detect_one`` with the *same* ``HarrisParams`` for all three detections (the
-  library defaults: threshold 100 on the s^4-normalised cornerness, NMS radius 2 s px, cap
-  6000 points per scale): standard = s = 1 on ``high`` and on ``low``; adapted = s = r on
-  ``high`` and s = 1 on ``low`` (the low-resolution points are the same for both).
+  library defaults with the absolute threshold, ``contrast_relative`` off: threshold 100 on the
+  s^4-normalised cornerness, NMS radius 2 s px, cap 6000 points per scale): standard = s = 1 on
+  ``high`` and on ``low``; adapted = s = r on ``high`` and s = 1 on ``low`` (the low-resolution
+  points are the same for both).
 * Common region (Schmid, Mohr & Bauckhage 2000): a point of one image counts only when its true
   position in the other image lies inside that image, at least ``margin_low_px`` = 6 low px
   (3 sigma~, the integration Gaussian's support at s = 1 in ``low`` and at s = r in ``high``)
@@ -71,8 +72,6 @@ PathLike = Union[str, Path]
 DEFAULT_FACTORS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
 #: Repeatability tolerance, low-resolution px (Schmid, Mohr & Bauckhage 2000: eps = 1.5).
 EPS_PX = 1.5
-#: Reference level of the paper's claim: the standard detector is "less than 40 %" past 2.
-PAPER_STANDARD_LEVEL = 0.40
 
 
 @dataclass(frozen=True)
@@ -90,7 +89,9 @@ class StudyParams:
     #: context band around the crop that goes into ``low``, low px (>= margin + 3 sigma~ + blur)
     context_low_px: float = 16.0
     angle_deg: Optional[float] = None  #: rotation of ``low``; None = uniform in [-180, 180)
-    harris: HarrisParams = field(default_factory=HarrisParams)  #: same for every detection
+    #: same for every detection: the paper's absolute threshold (``HarrisParams()`` follows the
+    #: image's contrast)
+    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=False))
 
     def __post_init__(self) -> None:
         if self.crop_w < 64 or self.crop_h < 64:

@@ -104,18 +104,6 @@ class SemiLocalParams:
         in_range("semi_local", "correlation_min", self.correlation_min, lo=-1, hi=1)
 
 
-def _similarity_from_pairs(p0, q0, p1, q1):
-    """Similarities mapping p0->q0 and p1->q1 (arrays (K, 2)); complex form q = a p + b."""
-    zp0 = p0[..., 0] + 1j * p0[..., 1]
-    zq0 = q0[..., 0] + 1j * q0[..., 1]
-    zp1 = p1[..., 0] + 1j * p1[..., 1]
-    zq1 = q1[..., 0] + 1j * q1[..., 1]
-    dp = zp1 - zp0
-    a = (zq1 - zq0) / np.where(np.abs(dp) < 1e-9, 1e-9, dp)
-    b = zq0 - a * zp0
-    return a, b
-
-
 def semi_local_support(p: np.ndarray, q: np.ndarray, s: float,
                        params: SemiLocalParams = SemiLocalParams()):
     """Support of each candidate (K,) and its best local similarity (a, b) (complex, (K,)).

@@ -40,6 +40,8 @@ from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .descriptors import Described
 from .estimator import model_of
+from .guided import grow
+from .pixelcheck import PixelParams, pixel_check, uniqueness
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
                      Second)
 from .threads import thread_map
@@ -290,7 +292,7 @@ def chance_probability(threshold_px: float, low_shape, model: str, oriented: boo
 class Look:
     """A second look at a hypothesis: guided growth, then the pixel check of the grown map."""
 
-    transform: np.ndarray = field(repr=False)  #: the grown transform (high px -> low px)
+    transform: np.ndarray = field(repr=False)  #: the grown transform (finer px -> coarser px)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) its distinct inliers
     chance: float  #: guided matches to expect by chance around the predictions
     ncc: float  #: ZNCC of the pixels under the grown map (nan: cannot tell)
@@ -306,14 +308,11 @@ def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.nd
     ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
     coarser image's points; the images at the search's working size.
     """
-    from .guided import GuidedParams, grow
-    from .pixelcheck import pixel_check
-
-    oriented = config.mode == "default"
-    growth = grow(t, high, low, config.model, GuidedParams(use_orientation=oriented),
-                  config.ransac)
+    guided = config.guided if config.mode == "default" else replace(config.guided,
+                                                                     use_orientation=False)
+    growth = grow(t, high, low, config.model, guided, config.ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
-    check = pixel_check(low_image, high_image, grown)
+    check = pixel_check(low_image, high_image, grown, config.pixel)
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
@@ -482,7 +481,8 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
 
 
 def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
-                 params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None):
+                 params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None,
+                 pixel: PixelParams = PixelParams()):
     """(evidence, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
     coarser px, refit), why it is refused and by which test (:data:`TESTS`; "" when it is not).
 
@@ -501,15 +501,14 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     its pixel figures are recorded, not decisive: an occluder, parallax or relighting lowers
     them where the points prove the map (``evidence.judged_by`` says which test decided).
     ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
+    ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
-    from .pixelcheck import pixel_check, uniqueness
-
     if near is None:  # side by side: neither needs the other
         u, near = thread_map(lambda job: job(), [
-            lambda: uniqueness(coarser, finer, t, vouched=vouched),
-            lambda: pixel_check(coarser, finer, t)])
+            lambda: uniqueness(coarser, finer, t, pixel, vouched=vouched),
+            lambda: pixel_check(coarser, finer, t, pixel)])
     else:
-        u = uniqueness(coarser, finer, t, vouched=vouched)
+        u = uniqueness(coarser, finer, t, pixel, vouched=vouched)
     geometric = evidence.log10_nfa <= params.max_log_nfa_geometry
     evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
                        unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,

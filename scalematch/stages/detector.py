@@ -14,18 +14,21 @@ threshold serves every scale. (The paper writes the s^4 both inside ``M_s`` and 
 Derivatives are taken in full-resolution units even when a level is decimated: a level gradient
 is divided by ``d``, so ``M`` on a level is multiplied by ``(s / d)^2``.
 
-**Adaptive detection (off by default; docs/design/DECISION.md, "Adaptive detection").**
+**Adaptive detection (docs/design/DECISION.md, "Adaptive detection").**
 ``C`` scales as ``gain^4`` under ``I -> gain * I``, so the absolute threshold lets contrast
 decide what the detector sees (a 12-bit image read as 0-15 grey levels finds almost nothing).
 Two options, both measured on the s = 1 image once (:func:`image_contrast`) and applied at
 every scale:
 
-* ``contrast_relative``: the threshold is multiplied by ``min(contrast_cap, (c / c_ref)^4)``,
-  ``c`` the 90th percentile of the gradient magnitude and ``c_ref`` = ``REFERENCE_CONTRAST``
-  (that of the benchmark photos), never below the noise floor (:func:`noise_floor`: ten times
-  the largest response pure noise of the image's estimated noise std gives);
-* ``min_points``: when fewer points pass the threshold at a scale, the strongest local maxima
-  above the noise floor make up a floor of ``min_points`` (a per-scale point budget).
+* ``contrast_relative`` (on by default, as ``Config`` uses it, so :func:`detect` is the
+  detector of :func:`scalematch.match`; off, the paper's absolute threshold): the threshold is
+  multiplied by ``min(contrast_cap, (c / c_ref)^4)``, ``c`` the 90th percentile of the
+  gradient magnitude and ``c_ref`` = ``REFERENCE_CONTRAST`` (that of the benchmark photos),
+  never below the noise floor (:func:`noise_floor`: ten times the largest response pure noise
+  of the image's estimated noise std gives);
+* ``min_points`` (off by default): when fewer points pass the threshold at a scale, the
+  strongest local maxima above the noise floor make up a floor of ``min_points`` (a per-scale
+  point budget).
 """
 
 from __future__ import annotations
@@ -67,8 +70,10 @@ class HarrisParams:
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
     #: adaptive detection (False: the paper's absolute threshold above): multiply
     #: ``threshold`` by ``min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, ``c`` the image's
-    #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`)
-    contrast_relative: bool = False
+    #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`).
+    #: On, as ``Config`` uses it: a 12-bit image stored as 0-4095 in 16 bits, or 32 grey levels,
+    #: found no point at the absolute threshold (docs/design/DECISION.md, "Adaptive detection")
+    contrast_relative: bool = True
     #: largest factor the contrast may put on ``threshold`` (1: it only ever lowers it, so images
     #: at least as contrasted as the reference photos keep today's points; inf: fully relative)
     contrast_cap: float = 1.0

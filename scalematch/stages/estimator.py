@@ -1,4 +1,4 @@
-"""Stage 6: robust estimation of the high -> low transform (ALGORITHM.md step 6, paper 4.2).
+"""Stage 6: robust estimation of the finer -> coarser transform (ALGORITHM.md step 6, paper 4.2).
 
 RANSAC through OpenCV for the four models of the paper: similarity (default,
 ``cv2.estimateAffinePartial2D``), affine (``cv2.estimateAffine2D``), plane homography
@@ -41,7 +41,8 @@ class RansacParams:
 
 @dataclass(frozen=True)
 class Estimate:
-    """A fitted model: ``transform`` maps high px -> low px; ``inliers`` is a boolean mask."""
+    """A fitted model: ``transform`` maps ``src`` to ``dst`` (finer px -> coarser px);
+    ``inliers`` is a boolean mask."""
 
     model: str
     transform: Optional[np.ndarray] = field(repr=False)  #: 2x3 or 3x3, None when failed

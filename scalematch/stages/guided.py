@@ -1,8 +1,9 @@
 """Guided growth of a hypothesis (paper section 4.2, "establish many other matches").
 
-Given a transform found at one scale (high px -> low px), every high point of that scale is
-mapped into the low image; the low point with the nearest *compatible* descriptor within a
-radius of the prediction becomes its match; the model is refitted on the matches it explains
+Given a transform found at one scale (finer px -> coarser px: here ``high`` is the finer image
+and ``low`` the coarser), every high point of that scale is mapped into the low image; the low
+point with the nearest *compatible* descriptor within a radius of the prediction becomes its
+match; the model is refitted on the matches it explains
 (:func:`scalematch.stages.estimator.refine`), and the round is repeated with the refitted
 transform while the number of inliers grows (at most ``GuidedParams.max_rounds`` rounds).
 
@@ -29,6 +30,7 @@ from typing import Tuple
 
 import numpy as np
 
+from ..checks import in_range
 from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
@@ -61,13 +63,19 @@ class GuidedParams:
     threshold_px: float = RansacParams.threshold_px  #: refit inlier threshold, low px
     max_rounds: int = 5  #: guided rounds at most (each: match, refit, recount)
 
+    def __post_init__(self) -> None:
+        for name in ("radius_px", "max_distance", "threshold_px"):
+            in_range("guided", name, getattr(self, name), lo=0, lo_open=True)
+        in_range("guided", "angle_tolerance_deg", self.angle_tolerance_deg, lo=0, hi=180)
+        in_range("guided", "max_rounds", self.max_rounds, lo=1, integer=True)
+
 
 @dataclass(frozen=True)
 class Growth:
     """What guided growth made of a hypothesis."""
 
     model: str
-    transform: np.ndarray = field(repr=False)  #: (2, 3) or (3, 3) high px -> low px, final
+    transform: np.ndarray = field(repr=False)  #: (2, 3) or (3, 3) finer px -> coarser px, final
     inliers: np.ndarray = field(repr=False)  #: (N, 4) float64: x, y in high px, x, y in low px
     rounds: int  #: guided rounds run (0 when the hypothesis found no match at all)
     counts: Tuple[int, ...]  #: distinct inliers after each round
@@ -101,7 +109,7 @@ def guided_matches(t: np.ndarray, high: Described, low: Described,
     Parameters
     ----------
     t : (2, 3) or (3, 3) array
-        Hypothesis, high px -> low px.
+        Hypothesis, finer px -> coarser px (``high``'s to ``low``'s).
     high : Described
         Points of the high image at the hypothesis' scale (``xy`` in high px).
     low : Described
@@ -206,7 +214,8 @@ def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarit
     Parameters
     ----------
     t : (2, 3) or (3, 3) array
-        Hypothesis, high px -> low px (for example RANSAC's winner on 5 inliers at scale s).
+        Hypothesis, finer px -> coarser px (``high``'s to ``low``'s; for example RANSAC's winner
+        on 5 inliers at scale s).
     high : Described
         The high image's points at the scale the hypothesis was found at (high px).
     low : Described

@@ -39,6 +39,7 @@ from typing import NamedTuple, Optional, Tuple, Union
 import cv2
 import numpy as np
 
+from ..checks import in_range
 from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
 from .scalespace import CAMERA_BLUR_PX
 
@@ -82,6 +83,15 @@ class PixelParams:
     #: (16 px of a 64 px footprint) is twice the descriptor window's radius (8 of its 16 px
     #: at the point's scale), so most of what is compared was not what the descriptors matched
     vouch_radius: float = 0.25
+
+    def __post_init__(self) -> None:
+        for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
+            in_range("pixel", name, getattr(self, name), lo=0, lo_open=True)
+        in_range("pixel", "rotation_deg", self.rotation_deg, lo=0, hi=180)
+        in_range("pixel", "scale_step", self.scale_step, lo=1)
+        in_range("pixel", "min_overlap_px", self.min_overlap_px, lo=1, integer=True)
+        in_range("pixel", "min_std", self.min_std, lo=0)
+        in_range("pixel", "edge_px", self.edge_px, lo=0, integer=True)
 
 
 @dataclass(frozen=True)
@@ -160,7 +170,7 @@ def zncc(a: np.ndarray, b: np.ndarray, min_std: float = PixelParams.min_std) -> 
 
 def perturbations(t: np.ndarray, high_shape: Tuple[int, int],
                   params: PixelParams = PixelParams()) -> Tuple[np.ndarray, ...]:
-    """The nearby wrong placements of ``t`` (each a 3x3 high px -> low px map).
+    """The nearby wrong placements of ``t`` (each a 3x3 finer px -> coarser px map).
 
     Four shifts (+-x, +-y) by ``shift_fraction`` of the footprint's size, two turns by
     ``+-rotation_deg`` and two scalings by ``scale_step^+-1`` about the footprint's centre.
@@ -283,7 +293,8 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     high : (h, w) array
         The high-resolution image, grey levels; NaN where it shows no scene (left out).
     t : (2, 3) or (3, 3) array
-        Hypothesis, high px -> low px (similarity, affine or homography).
+        Hypothesis, finer px -> coarser px (``high``'s to ``low``'s; similarity, affine or
+        homography).
     params : PixelParams
 
     Returns

@@ -107,6 +107,7 @@ from scalematch.stages.scalespace import scale_space  # noqa: E402
 from scalematch.lab.synthetic import smooth_scene  # noqa: E402
 
 ADAPTIVE = HarrisParams(contrast_relative=True)
+ABSOLUTE = HarrisParams(contrast_relative=False)  # the paper's threshold, whatever the contrast
 LOW_CONTRAST_SCALES = (1.0, 2.0, 4.0)
 
 
@@ -115,12 +116,19 @@ def _twelve_bit(img):
     return (np.rint(img * (4095.0 / 255.0)) * (255.0 / 65535.0)).astype(np.float32)
 
 
-def test_adaptive_options_are_off_by_default(raccoon):
+def test_the_default_detector_is_the_matchers(raccoon):
+    """``HarrisParams()`` is ``Config``'s detector (relative to the contrast, capped at 1, no
+    point budget), so ``detect`` and ``match`` agree."""
+    from dataclasses import replace
+
+    from scalematch.config import Config
+
     p = HarrisParams()
-    assert not p.contrast_relative and p.min_points == 0 and not p.adaptive
+    assert p.contrast_relative and p.contrast_cap == 1.0 and p.min_points == 0 and p.adaptive
+    assert p == Config().harris and replace(p, max_points=12000) == Config().harris_low
     img = raccoon[:400, :500]
-    a = detect(img, (1.0, 3.0))
-    b = detect(img, (1.0, 3.0), HarrisParams(contrast_cap=0.5))  # cap alone changes nothing
+    a = detect(img, (1.0, 3.0), ABSOLUTE)
+    b = detect(img, (1.0, 3.0), replace(ABSOLUTE, contrast_cap=0.5))  # cap alone changes nothing
     for ka, kb in zip(a, b):
         assert np.array_equal(ka.xy, kb.xy)
 
@@ -130,8 +138,8 @@ def test_adaptive_options_are_off_by_default(raccoon):
 def test_low_contrast_images_keep_their_points(raccoon, name, convert):
     img = raccoon[100:580, 150:790]
     low = convert(img).astype(np.float32)
-    full = [len(k) for k in detect(img, LOW_CONTRAST_SCALES)]
-    off = [len(k) for k in detect(low, LOW_CONTRAST_SCALES)]
+    full = [len(k) for k in detect(img, LOW_CONTRAST_SCALES, ABSOLUTE)]
+    off = [len(k) for k in detect(low, LOW_CONTRAST_SCALES, ABSOLUTE)]
     on = [len(k) for k in detect(low, LOW_CONTRAST_SCALES, ADAPTIVE)]
     # measured (raccoon crop; full 2036 / 525 / 129 points at s = 1, 2, 4): off finds none, on
     # finds 1667 / 450 / 117 (12-bit) and 1686 / 454 / 117 (32 levels), 82-91 %: the crop's
@@ -168,7 +176,7 @@ def test_adaptive_detector_finds_no_points_on_noise(gain):
 def test_budget_keeps_points_on_a_smooth_scene():
     img = smooth_scene()
     scales = (2.0, 2.52, 3.175, 4.0, 5.04)
-    off = [len(k) for k in detect(img, scales)]
+    off = [len(k) for k in detect(img, scales, ABSOLUTE)]
     rel = [len(k) for k in detect(img, scales, ADAPTIVE)]
     budget = [len(k) for k in detect(img, scales, HarrisParams(contrast_relative=True,
                                                                min_points=100))]
@@ -180,7 +188,7 @@ def test_budget_keeps_points_on_a_smooth_scene():
 
 def test_budget_points_are_the_strongest_maxima(raccoon):
     img = raccoon[:300, :400] / 16.0  # few points pass the absolute threshold
-    kp = detect_one(img, 2.0, HarrisParams(min_points=50))
+    kp = detect_one(img, 2.0, HarrisParams(contrast_relative=False, min_points=50))
     assert len(kp) == 50 and np.all(np.diff(kp.response) <= 0)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,8 @@ from scalematch.stages.guided import GuidedParams, grow, guided_matches
 from scalematch.stages.scalespace import Level, scale_space
 
 RATIO = 6.0
+#: the detector these tests were measured with: the absolute threshold (no contrast needed at s = 6)
+ABSOLUTE = HarrisParams(contrast_relative=False)
 
 
 @pytest.fixture(scope="module")
@@ -21,10 +25,10 @@ def zoom(raccoon):
     """A ratio-6 zoom pair of data/raccoon.jpg, described at s = 6 (high) and s = 1 (low)."""
     pair = make_zoom_pair(raccoon, RATIO, np.random.default_rng(0))
     level = next(scale_space(pair.high, (RATIO,)))
-    high = describe_gradients(level, detect_on_level(level, HarrisParams()).xy)
+    high = describe_gradients(level, detect_on_level(level, ABSOLUTE).xy)
     low_level = Level(1.0, 1.0, 0.0, pair.low)
     low = describe_gradients(low_level,
-                             detect_on_level(low_level, HarrisParams(max_points=12000)).xy)
+                             detect_on_level(low_level, replace(ABSOLUTE, max_points=12000)).xy)
     return pair, high, low
 
 
