@@ -107,6 +107,8 @@ class DecisionParams:
     #: (docs/NULLS.md): the 12 claims of the hardest nulls (two halves of one photo; 6 to 13
     #: inliers, log10 NFA down to -38) 0.48 to 1.1; 152 true zoom pairs 3.75 to 898 (median
     #: 148); Oxford pairs 4.8 to 12.6; tilted pairs 10.7 and more. 2 sits between 1.1 and 3.75.
+    #: Compared near the inliers (``PixelParams.vouch_radius``) the facades score 0.70 to 1.83
+    #: (600 null runs, docs/design/DECISION.md, "Why the geometry can outweigh the pixels")
     #: nan (the finer image covers the coarser one: no room elsewhere) passes.
     min_unique_ratio: float = 2.0
     #: the final (refit) transform must line the pixels up better than its nearby wrong
@@ -123,9 +125,9 @@ class DecisionParams:
     #: the pixel tests above are measured and recorded, not decisive, unless a second transform
     #: (``second_share``) shows a repeated structure. The pixels of a real pair are broken by
     #: what the points never see: an occluder, a relit or parallax-ridden scene, a no-data
-    #: border. Measured (docs/NULLS.md): the lowest log10 NFA of any null run's best transform
-    #: is -38 (a repeated facade, refused as ambiguous by its pixels and by its second
-    #: transform); true answers refused by the pixels alone had -135 to -2080 (occluded,
+    #: border. Measured (docs/NULLS.md, docs/design/DECISION.md): the lowest log10 NFA of any
+    #: null run's best transform is -38 (a facade cut in two, refused as ambiguous by its
+    #: pixels); true answers refused by the pixels alone had -135 to -2080 (occluded,
     #: padded and 3-D pairs, docs/BENCHMARKS.md). -60 leaves 22 orders of magnitude below the
     #: worst null
     max_log_nfa_geometry: float = -60.0
