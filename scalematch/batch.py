@@ -6,7 +6,9 @@ In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``un
 output file: the pairs done and which of them errored; it refuses a file holding anything but
 result lines, or results made with another configuration), ``drop_error_lines`` (with
 ``--retry-errors``: the error lines of pairs to match again removed, the file replaced in one
-step), ``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
+step; ``resume_output`` does this or cuts a torn last line), ``plan_run`` (the ``Plan``: the
+pairs to match, those skipped, those retried), ``Counts`` (the lines written, by verdict),
+``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
 ``run_pool`` and ``run_dask``: each yields the lines in the order pairs finish and keeps at most
 a few pairs per worker in flight, so the main process stays the same size however many pairs
 there are (docs/BATCH.md). ``run_pool``'s workers are processes of its own, one pair each at a
@@ -32,7 +34,7 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
                     List, Optional, Sequence, Set, Tuple)
@@ -366,6 +368,71 @@ def _fsync_folder(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+# --------------------------------------------------------------------------- what a run does
+
+def errors_to_retry(done: Done, pairs: Iterable[Pair]) -> FrozenSet[Tuple[str, str]]:
+    """The pairs of ``pairs`` whose line in the output is an error (``--retry-errors``): an
+    error line of a pair no longer in the CSV stays."""
+    return done.errors & {p.key for p in pairs}
+
+
+def resume_output(path: Path, done: Done, retry: FrozenSet[Tuple[str, str]],
+                  config: Dict[str, Any]) -> Tuple[Done, FrozenSet[Tuple[str, str]]]:
+    """Make the batch output ``path`` (``done``: ``scan_output``'s reading of it) ready to
+    append to: with pairs to ``retry``, their error lines removed (``drop_error_lines``), else a
+    torn last line cut (``cut_torn_line``). Returns what the file holds then and the pairs to
+    match again: those of ``retry`` with no good line (a pair with a good line too keeps it and
+    is not redone). Call it once nothing else can refuse the run: the file is changed."""
+    if retry:
+        done = drop_error_lines(path, retry, config)
+        return done, retry - done.pairs
+    cut_torn_line(path, done)
+    return done, frozenset()
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a batch run does with the pairs of its CSV, given what its output already holds."""
+
+    pairs: Tuple[Pair, ...]  #: the distinct pairs of the CSV, in first-seen order
+    todo: Tuple[Pair, ...]  #: those to match now: without a line in the output
+    repeated_rows: int  #: rows of the CSV that repeat an earlier row (matched once)
+    skipped: int  #: pairs whose line is in the output already
+    errors_before: int  #: of the pairs, those whose line in the output is an error
+    retried: FrozenSet[Tuple[str, str]]  #: pairs whose error line was removed, matched again
+
+
+def plan_run(rows: int, pairs: Sequence[Pair], done: Done = NOTHING_DONE,
+             retried: FrozenSet[Tuple[str, str]] = frozenset()) -> Plan:
+    """The ``Plan`` of ``pairs`` (from ``rows`` rows of the CSV) when the output holds ``done``
+    (after ``resume_output``) and the error lines of ``retried`` were removed."""
+    todo = tuple(p for p in pairs if p.key not in done.pairs)
+    return Plan(pairs=tuple(pairs), todo=todo, repeated_rows=rows - len(pairs),
+                skipped=len(pairs) - len(todo),
+                errors_before=sum(p.key in done.errors for p in pairs), retried=retried)
+
+
+@dataclass(frozen=True)
+class Counts:
+    """The lines a run wrote, by what they say."""
+
+    matched: int = 0
+    no_match: int = 0  #: lines with no reliable match
+    errors: int = 0  #: error lines
+    internal: int = 0  #: of the error lines, unexpected errors (``error_kind`` ``INTERNAL``)
+
+    @property
+    def lines(self) -> int:
+        """All the lines counted."""
+        return self.matched + self.no_match + self.errors
+
+    def add(self, line: Dict[str, Any]) -> "Counts":
+        """These counts with the result line ``line`` counted too."""
+        kind = "errors" if "error" in line else "matched" if line["matched"] else "no_match"
+        return replace(self, internal=self.internal + (line.get("error_kind") == INTERNAL),
+                       **{kind: getattr(self, kind) + 1})
 
 
 # --------------------------------------------------------------------------- one pair
