@@ -713,31 +713,59 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
-    from .render import OUTPUT_FILES
-
     config = _config_from(kwargs)
+    json_file = Path(json_path) if json_path and json_path != "-" else None
     # the outputs are checked before the match, not after a minute's work, and before the
     # inputs are read: an output never overwrites an input
+    _check_not_inputs(out_dir, json_file, (low, high))
+    low_read, high_read = _load(low, high, config, max_pixels)
+    factors = (float(low_read.factor), float(high_read.factor))
+    _check_writable(out_dir, json_file)
+    result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config, factors,
+                           quiet)
+    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
+        _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
+    written: Dict[str, Path] = {}
+    if out_dir is not None:
+        written = _write_pictures(out_dir, low, high, low_read.image, high_read.image, result,
+                                  factors)
+    if not quiet:
+        json_written = json_path if json_file is not None else None
+        for text in _match_report(result, written, json_written, verbose):
+            click.echo(text, err=True)
+    sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+
+def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
+                      inputs: Sequence[str]) -> None:
+    """Refuse (exit 2) an output file of ``-o`` or ``--json`` that is one of ``inputs``."""
+    from .render import OUTPUT_FILES
+
     if out_dir is not None:
         for name in OUTPUT_FILES:
-            check_not_an_input(out_dir / name, (low, high), "--out-dir", "folder")
-    if json_path and json_path != "-":
-        check_not_an_input(Path(json_path), (low, high), "--json")
-    low_read, high_read = _load(low, high, config, max_pixels)
-    low_img, high_img = low_read.image, high_read.image
-    factors = (float(low_read.factor), float(high_read.factor))
+            check_not_an_input(out_dir / name, inputs, "--out-dir", "folder")
+    if json_file is not None:
+        check_not_an_input(json_file, inputs, "--json")
+
+
+def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> None:
+    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2)."""
     if out_dir is not None:
         check_out_dir(out_dir)
-    if json_path and json_path != "-":
-        check_out_file(Path(json_path), "--json")
-    low_grey, high_grey = to_grey(low_img), to_grey(high_img)
+    if json_file is not None:
+        check_out_file(json_file, "--json")
 
+
+def _match_images(low: np.ndarray, high: np.ndarray, config: Config,
+                  factors: Tuple[float, float], quiet: bool) -> MatchResult:
+    """The match of the grey images, with a progress bar unless ``quiet`` (or not a terminal);
+    an input the pipeline refuses, or a file the configuration names that is missing, is exit
+    2."""
     try:
         if _show_progress(quiet):
             with PlanBar() as bar:
-                result = _run_match(low_grey, high_grey, config, bar, factors)
-        else:
-            result = _run_match(low_grey, high_grey, config, factors=factors)
+                return _run_match(low, high, config, bar, factors)
+        return _run_match(low, high, config, factors=factors)
     except ImageError as exc:
         raise InputError(str(exc))
     except ValueError as exc:  # the pipeline refuses the input (e.g. an image too small)
@@ -745,32 +773,40 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     except OSError as exc:  # a file the configuration names is missing (e.g. --set ..._path=)
         raise InputError(str(exc))
 
-    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        text = result.to_json(low, high, low_read.shape, high_read.shape)
-        if json_path == "-":
-            click.echo(text, nl=False)
-        else:
-            write_text(Path(json_path), text, "--json")
-    written: Dict[str, Path] = {}
-    if out_dir is not None:
-        from .render import write_outputs
 
-        try:
-            written = write_outputs(out_dir, low, high, low_img, high_img, result, factors)
-        except OSError as exc:
-            raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
+def _write_json(text: str, json_file: Optional[Path]) -> None:
+    """The result's JSON to ``json_file``, or to stdout when None (``--json -``)."""
+    if json_file is None:
+        click.echo(text, nl=False)
+    else:
+        write_text(json_file, text, "--json")
 
-    if not quiet:
-        if verbose:
-            click.echo(scale_table(result), err=True)
-            click.echo("timings: " + ", ".join(f"{k} {v:.2f} s"
-                                               for k, v in result.timings.items()), err=True)
-            for path in written.values():
-                click.echo(f"wrote {path}", err=True)
-            if json_path and json_path != "-":
-                click.echo(f"wrote {json_path}", err=True)
-        click.echo(summary(result), err=True)
-    sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+def _write_pictures(out_dir: Path, low: str, high: str, low_img: np.ndarray, high_img: np.ndarray,
+                    result: MatchResult, factors: Tuple[float, float]) -> Dict[str, Path]:
+    """The files of ``-o`` (``render.write_outputs``), by name; exit 2 when they cannot be
+    written."""
+    from .render import write_outputs
+
+    try:
+        return write_outputs(out_dir, low, high, low_img, high_img, result, factors)
+    except OSError as exc:
+        raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
+
+
+def _match_report(result: MatchResult, written: Dict[str, Path], json_written: Optional[str],
+                  verbose: bool) -> List[str]:
+    """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
+    the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
+    path as given) when ``verbose``."""
+    lines = []
+    if verbose:
+        lines.append(scale_table(result))
+        lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
+        lines += [f"wrote {path}" for path in written.values()]
+        if json_written is not None:
+            lines.append(f"wrote {json_written}")
+    return lines + [summary(result)]
 
 
 # --------------------------------------------------------------------------- batch
