@@ -684,60 +684,86 @@ def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int, jobs: int,
     them. No ``multiprocessing`` queue or lock is made: nothing of the batch is left for the
     resource tracker to clean up (and warn about) after ``kill -9``.
     """
-    task = match_pair if task is None else task
-    idle: List[_Worker] = []  # started, holding no pair
-    deaths: Dict[Tuple[str, str], int] = {}  # pair -> times its worker died while matching it
-    retrying: Set[Tuple[str, str]] = set()  # its worker died, not yet finished: run alone
-    busy: Set[_Worker] = set()
+    pool = _Pool(match_pair if task is None else task, config)
+    try:
+        yield from bounded(pairs, submit=lambda pair: pool.submit(pair, max_pixels),
+                           wait_first=_wait_first, outcome=pool.outcome,
+                           limit=lambda: 1 if pool.retrying else jobs, stop=pool.stop)
+    finally:
+        pool.close()
 
-    def submit(pair: Pair) -> _Worker:
+
+def _wait_first(workers: List[_Worker]) -> List[_Worker]:
+    """Those of ``workers`` that sent a line or ended, once one has (``bounded``'s wait)."""
+    ready = set(multiprocessing.connection.wait(
+        [w.conn for w in workers] + [w.process.sentinel for w in workers]))
+    return [w for w in workers if w.conn in ready or w.process.sentinel in ready]
+
+
+class _Pool:
+    """The worker processes of ``run_pool`` and what it knows of them: the idle ones, the busy
+    ones, and the pairs whose worker died (how many times; those not finished yet, which run
+    alone). Its methods are ``bounded``'s submit, outcome and stop."""
+
+    def __init__(self, task: Callable[..., Dict[str, Any]], config: Config) -> None:
+        self.task, self.config = task, config
+        self.idle: List[_Worker] = []  # started, holding no pair
+        self.busy: Set[_Worker] = set()
+        self.deaths: Dict[Tuple[str, str], int] = {}  # pair -> its worker's deaths while on it
+        self.retrying: Set[Tuple[str, str]] = set()  # its worker died, not yet finished
+
+    def submit(self, pair: Pair, max_pixels: int) -> _Worker:
+        """Hand ``pair`` to an idle worker, or a new one; the worker stands for the pair."""
         while True:
-            worker = idle.pop() if idle else _Worker(task)
+            worker = self.idle.pop() if self.idle else _Worker(self.task)
             try:
-                worker.conn.send((pair, config, max_pixels))
+                worker.conn.send((pair, self.config, max_pixels))
                 break
             except OSError:  # it ended while idle (killed): another one
                 worker.close(stop_now=True)
-        busy.add(worker)
+        self.busy.add(worker)
         return worker
 
-    def wait_first(workers: List[_Worker]) -> List[_Worker]:
-        ready = set(multiprocessing.connection.wait(
-            [w.conn for w in workers] + [w.process.sentinel for w in workers]))
-        return [w for w in workers if w.conn in ready or w.process.sentinel in ready]
-
-    def outcome(worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
-        busy.discard(worker)
+    def outcome(self, worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
+        """The line of ``pair`` from its ``worker``, which sent it or ended; None to submit the
+        pair again. A worker that had an internal error ends (a fresh one takes the next
+        pair); one that sent a line waits for the next."""
+        self.busy.discard(worker)
         line = worker.line()
-        if line is not None:
-            retrying.discard(pair.key)
-            if line.get("error_kind") == INTERNAL:
-                worker.close()  # it ends by itself: a fresh one takes the next pair
-            else:
-                idle.append(worker)
-            return line
-        code = worker.exit_code()
-        worker.close(stop_now=True)
-        deaths[pair.key] = deaths.get(pair.key, 0) + 1
-        line = after_worker_death(pair, deaths[pair.key], config, how=_how_it_ended(code))
         if line is None:
-            retrying.add(pair.key)
+            return self._died(worker, pair)
+        self.retrying.discard(pair.key)
+        if line.get("error_kind") == INTERNAL:
+            worker.close()  # it ends by itself: a fresh one takes the next pair
         else:
-            retrying.discard(pair.key)
+            self.idle.append(worker)
         return line
 
-    def stop(workers: List[_Worker]) -> None:
+    def _died(self, worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
+        """``worker`` ended without the line of ``pair``: count the death; None to try the pair
+        again (alone), else its internal error line (``after_worker_death``)."""
+        code = worker.exit_code()
+        worker.close(stop_now=True)
+        self.deaths[pair.key] = self.deaths.get(pair.key, 0) + 1
+        line = after_worker_death(pair, self.deaths[pair.key], self.config,
+                                  how=_how_it_ended(code))
+        if line is None:
+            self.retrying.add(pair.key)
+        else:
+            self.retrying.discard(pair.key)
+        return line
+
+    def stop(self, workers: List[_Worker]) -> None:
+        """End ``workers`` at once, mid-pair (the iteration stopped early)."""
         for worker in workers:
-            busy.discard(worker)
+            self.busy.discard(worker)
             worker.close(stop_now=True)
 
-    try:
-        yield from bounded(pairs, submit=submit, wait_first=wait_first, outcome=outcome,
-                           limit=lambda: 1 if retrying else jobs, stop=stop)
-    finally:
-        for worker in list(busy):
+    def close(self) -> None:
+        """End every worker: the busy ones at once, the idle ones after telling them."""
+        for worker in list(self.busy):
             worker.close(stop_now=True)
-        for worker in idle:
+        for worker in self.idle:
             worker.close()
 
 
