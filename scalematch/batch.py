@@ -6,7 +6,9 @@ In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``un
 output file: the pairs done and which of them errored; it refuses a file holding anything but
 result lines, or results made with another configuration), ``drop_error_lines`` (with
 ``--retry-errors``: the error lines of pairs to match again removed, the file replaced in one
-step), ``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
+step; ``resume_output`` does this or cuts a torn last line), ``plan_run`` (the ``Plan``: the
+pairs to match, those skipped, those retried), ``Counts`` (the lines written, by verdict),
+``match_pair`` (one pair -> one JSON line, never raises), and the runners ``run_serial``,
 ``run_pool`` and ``run_dask``: each yields the lines in the order pairs finish and keeps at most
 a few pairs per worker in flight, so the main process stays the same size however many pairs
 there are (docs/BATCH.md). ``run_pool``'s workers are processes of its own, one pair each at a
@@ -32,7 +34,7 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
                     List, Optional, Sequence, Set, Tuple)
@@ -368,6 +370,71 @@ def _fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
+# --------------------------------------------------------------------------- what a run does
+
+def errors_to_retry(done: Done, pairs: Iterable[Pair]) -> FrozenSet[Tuple[str, str]]:
+    """The pairs of ``pairs`` whose line in the output is an error (``--retry-errors``): an
+    error line of a pair no longer in the CSV stays."""
+    return done.errors & {p.key for p in pairs}
+
+
+def resume_output(path: Path, done: Done, retry: FrozenSet[Tuple[str, str]],
+                  config: Dict[str, Any]) -> Tuple[Done, FrozenSet[Tuple[str, str]]]:
+    """Make the batch output ``path`` (``done``: ``scan_output``'s reading of it) ready to
+    append to: with pairs to ``retry``, their error lines removed (``drop_error_lines``), else a
+    torn last line cut (``cut_torn_line``). Returns what the file holds then and the pairs to
+    match again: those of ``retry`` with no good line (a pair with a good line too keeps it and
+    is not redone). Call it once nothing else can refuse the run: the file is changed."""
+    if retry:
+        done = drop_error_lines(path, retry, config)
+        return done, retry - done.pairs
+    cut_torn_line(path, done)
+    return done, frozenset()
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a batch run does with the pairs of its CSV, given what its output already holds."""
+
+    pairs: Tuple[Pair, ...]  #: the distinct pairs of the CSV, in first-seen order
+    todo: Tuple[Pair, ...]  #: those to match now: without a line in the output
+    repeated_rows: int  #: rows of the CSV that repeat an earlier row (matched once)
+    skipped: int  #: pairs whose line is in the output already
+    errors_before: int  #: of the pairs, those whose line in the output is an error
+    retried: FrozenSet[Tuple[str, str]]  #: pairs whose error line was removed, matched again
+
+
+def plan_run(rows: int, pairs: Sequence[Pair], done: Done = NOTHING_DONE,
+             retried: FrozenSet[Tuple[str, str]] = frozenset()) -> Plan:
+    """The ``Plan`` of ``pairs`` (from ``rows`` rows of the CSV) when the output holds ``done``
+    (after ``resume_output``) and the error lines of ``retried`` were removed."""
+    todo = tuple(p for p in pairs if p.key not in done.pairs)
+    return Plan(pairs=tuple(pairs), todo=todo, repeated_rows=rows - len(pairs),
+                skipped=len(pairs) - len(todo),
+                errors_before=sum(p.key in done.errors for p in pairs), retried=retried)
+
+
+@dataclass(frozen=True)
+class Counts:
+    """The lines a run wrote, by what they say."""
+
+    matched: int = 0
+    no_match: int = 0  #: lines with no reliable match
+    errors: int = 0  #: error lines
+    internal: int = 0  #: of the error lines, unexpected errors (``error_kind`` ``INTERNAL``)
+
+    @property
+    def lines(self) -> int:
+        """All the lines counted."""
+        return self.matched + self.no_match + self.errors
+
+    def add(self, line: Dict[str, Any]) -> "Counts":
+        """These counts with the result line ``line`` counted too."""
+        kind = "errors" if "error" in line else "matched" if line["matched"] else "no_match"
+        return replace(self, internal=self.internal + (line.get("error_kind") == INTERNAL),
+                       **{kind: getattr(self, kind) + 1})
+
+
 # --------------------------------------------------------------------------- one pair
 
 def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
@@ -617,60 +684,86 @@ def run_pool(pairs: Iterable[Pair], config: Config, max_pixels: int, jobs: int,
     them. No ``multiprocessing`` queue or lock is made: nothing of the batch is left for the
     resource tracker to clean up (and warn about) after ``kill -9``.
     """
-    task = match_pair if task is None else task
-    idle: List[_Worker] = []  # started, holding no pair
-    deaths: Dict[Tuple[str, str], int] = {}  # pair -> times its worker died while matching it
-    retrying: Set[Tuple[str, str]] = set()  # its worker died, not yet finished: run alone
-    busy: Set[_Worker] = set()
+    pool = _Pool(match_pair if task is None else task, config)
+    try:
+        yield from bounded(pairs, submit=lambda pair: pool.submit(pair, max_pixels),
+                           wait_first=_wait_first, outcome=pool.outcome,
+                           limit=lambda: 1 if pool.retrying else jobs, stop=pool.stop)
+    finally:
+        pool.close()
 
-    def submit(pair: Pair) -> _Worker:
+
+def _wait_first(workers: List[_Worker]) -> List[_Worker]:
+    """Those of ``workers`` that sent a line or ended, once one has (``bounded``'s wait)."""
+    ready = set(multiprocessing.connection.wait(
+        [w.conn for w in workers] + [w.process.sentinel for w in workers]))
+    return [w for w in workers if w.conn in ready or w.process.sentinel in ready]
+
+
+class _Pool:
+    """The worker processes of ``run_pool`` and what it knows of them: the idle ones, the busy
+    ones, and the pairs whose worker died (how many times; those not finished yet, which run
+    alone). Its methods are ``bounded``'s submit, outcome and stop."""
+
+    def __init__(self, task: Callable[..., Dict[str, Any]], config: Config) -> None:
+        self.task, self.config = task, config
+        self.idle: List[_Worker] = []  # started, holding no pair
+        self.busy: Set[_Worker] = set()
+        self.deaths: Dict[Tuple[str, str], int] = {}  # pair -> its worker's deaths while on it
+        self.retrying: Set[Tuple[str, str]] = set()  # its worker died, not yet finished
+
+    def submit(self, pair: Pair, max_pixels: int) -> _Worker:
+        """Hand ``pair`` to an idle worker, or a new one; the worker stands for the pair."""
         while True:
-            worker = idle.pop() if idle else _Worker(task)
+            worker = self.idle.pop() if self.idle else _Worker(self.task)
             try:
-                worker.conn.send((pair, config, max_pixels))
+                worker.conn.send((pair, self.config, max_pixels))
                 break
             except OSError:  # it ended while idle (killed): another one
                 worker.close(stop_now=True)
-        busy.add(worker)
+        self.busy.add(worker)
         return worker
 
-    def wait_first(workers: List[_Worker]) -> List[_Worker]:
-        ready = set(multiprocessing.connection.wait(
-            [w.conn for w in workers] + [w.process.sentinel for w in workers]))
-        return [w for w in workers if w.conn in ready or w.process.sentinel in ready]
-
-    def outcome(worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
-        busy.discard(worker)
+    def outcome(self, worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
+        """The line of ``pair`` from its ``worker``, which sent it or ended; None to submit the
+        pair again. A worker that had an internal error ends (a fresh one takes the next
+        pair); one that sent a line waits for the next."""
+        self.busy.discard(worker)
         line = worker.line()
-        if line is not None:
-            retrying.discard(pair.key)
-            if line.get("error_kind") == INTERNAL:
-                worker.close()  # it ends by itself: a fresh one takes the next pair
-            else:
-                idle.append(worker)
-            return line
-        code = worker.exit_code()
-        worker.close(stop_now=True)
-        deaths[pair.key] = deaths.get(pair.key, 0) + 1
-        line = after_worker_death(pair, deaths[pair.key], config, how=_how_it_ended(code))
         if line is None:
-            retrying.add(pair.key)
+            return self._died(worker, pair)
+        self.retrying.discard(pair.key)
+        if line.get("error_kind") == INTERNAL:
+            worker.close()  # it ends by itself: a fresh one takes the next pair
         else:
-            retrying.discard(pair.key)
+            self.idle.append(worker)
         return line
 
-    def stop(workers: List[_Worker]) -> None:
+    def _died(self, worker: _Worker, pair: Pair) -> Optional[Dict[str, Any]]:
+        """``worker`` ended without the line of ``pair``: count the death; None to try the pair
+        again (alone), else its internal error line (``after_worker_death``)."""
+        code = worker.exit_code()
+        worker.close(stop_now=True)
+        self.deaths[pair.key] = self.deaths.get(pair.key, 0) + 1
+        line = after_worker_death(pair, self.deaths[pair.key], self.config,
+                                  how=_how_it_ended(code))
+        if line is None:
+            self.retrying.add(pair.key)
+        else:
+            self.retrying.discard(pair.key)
+        return line
+
+    def stop(self, workers: List[_Worker]) -> None:
+        """End ``workers`` at once, mid-pair (the iteration stopped early)."""
         for worker in workers:
-            busy.discard(worker)
+            self.busy.discard(worker)
             worker.close(stop_now=True)
 
-    try:
-        yield from bounded(pairs, submit=submit, wait_first=wait_first, outcome=outcome,
-                           limit=lambda: 1 if retrying else jobs, stop=stop)
-    finally:
-        for worker in list(busy):
+    def close(self) -> None:
+        """End every worker: the busy ones at once, the idle ones after telling them."""
+        for worker in list(self.busy):
             worker.close(stop_now=True)
-        for worker in idle:
+        for worker in self.idle:
             worker.close()
 
 

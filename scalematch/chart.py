@@ -101,6 +101,27 @@ class Frame:
         v = b - (y - self.ylim[0]) / (self.ylim[1] - self.ylim[0]) * (b - t)
         return np.stack([u, v], axis=-1)
 
+@dataclass(frozen=True)
+class Ticks:
+    """The ticks of one axis: their data values and their labels."""
+
+    at: Tuple[float, ...]  #: data values, increasing
+    labels: Tuple[str, ...]  #: one label per tick
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What a chart writes around its plot area, and at what size: ``_frame`` leaves room for
+    it, ``_axes`` draws it."""
+
+    size: Tuple[int, int]  #: canvas (width, height), px
+    f: float  #: font size factor, 1 at the default canvas (``_font_scale``)
+    yticks: Ticks  #: the y ticks: the width of their labels sets the left margin
+    title: str = ""
+    xlabel: str = ""
+    ylabel: str = ""
+
+
 def _finite(values: np.ndarray) -> np.ndarray:
     values = np.asarray(values, dtype=np.float64).ravel()
     return values[np.isfinite(values)]
@@ -148,52 +169,56 @@ def _vertical_text(img: np.ndarray, text: str, centre: Tuple[float, float], scal
         sub = patch[ya - y0:yb - y0, xa - x0:xb - x0]
         np.minimum(region, sub, out=region)  # dark text over a white background
 
-def _frame(size: Tuple[int, int], f: float, has_title: bool, has_xlabel: bool,
-           has_ylabel: bool, ytick_width: int, xlim, ylim) -> Frame:
-    w, h = size
-    left = int(ytick_width + 18 * f + (30 * f if has_ylabel else 0))
-    top = int((55 if has_title else 25) * f)
-    bottom = int(h - (70 if has_xlabel else 45) * f)
+def _frame(layout: Layout, xlim: Tuple[float, float], ylim: Tuple[float, float]) -> Frame:
+    """The plot area of ``layout``'s canvas, with room for its title, axis titles and y tick
+    labels, showing ``xlim`` and ``ylim``."""
+    w, h = layout.size
+    f = layout.f
+    ytick_width = max((_text_size(s, 0.5 * f)[0] for s in layout.yticks.labels), default=0)
+    left = int(ytick_width + 18 * f + (30 * f if layout.ylabel else 0))
+    top = int((55 if layout.title else 25) * f)
+    bottom = int(h - (70 if layout.xlabel else 45) * f)
     right = int(w - 30 * f)
     if right - left < 20 or bottom - top < 20:
         raise ValueError(f"canvas {w}x{h} is too small for a chart; use at least 300x200")
     return Frame(left, top, right, bottom, tuple(map(float, xlim)), tuple(map(float, ylim)))
 
 
-def _axes(img: np.ndarray, fr: Frame, xticks: Sequence[float], xtick_labels: Sequence[str],
-          yticks: Sequence[float], ytick_labels: Sequence[str], f: float, title: str,
-          xlabel: str, ylabel: str, vertical_grid: bool = True) -> None:
+def _axes(img: np.ndarray, fr: Frame, layout: Layout, xticks: Ticks,
+          vertical_grid: bool = True) -> None:
     """Grid, frame, ticks with labels, axis titles and the chart title."""
+    f = layout.f
     fs = 0.5 * f
     tick = max(int(5 * f), 3)
-    for y in yticks:
+    for y in layout.yticks.at:
         v = int(round(fr.px(fr.xlim[0], y)[1]))
         cv2.line(img, (fr.left, v), (fr.right, v), GRID, 1, cv2.LINE_AA)
     if vertical_grid:
-        for x in xticks:
+        for x in xticks.at:
             u = int(round(fr.px(x, fr.ylim[0])[0]))
             cv2.line(img, (u, fr.top), (u, fr.bottom), GRID, 1, cv2.LINE_AA)
     cv2.rectangle(img, (fr.left, fr.top), (fr.right, fr.bottom), BLACK, 1, cv2.LINE_AA)
     _, th = _text_size("0", fs)
-    for y, lab in zip(yticks, ytick_labels):
+    for y, lab in zip(layout.yticks.at, layout.yticks.labels):
         v = int(round(fr.px(fr.xlim[0], y)[1]))
         cv2.line(img, (fr.left - tick, v), (fr.left, v), BLACK, 1, cv2.LINE_AA)
         _text(img, lab, (fr.left - tick - 4, v + th / 2 - 2), fs, anchor="right")
-    for x, lab in zip(xticks, xtick_labels):
+    for x, lab in zip(xticks.at, xticks.labels):
         u = int(round(fr.px(x, fr.ylim[0])[0]))
         cv2.line(img, (u, fr.bottom), (u, fr.bottom + tick), BLACK, 1, cv2.LINE_AA)
         _text(img, lab, (u, fr.bottom + tick + th + 3), fs, anchor="centre")
     w = img.shape[1]
-    if title:
+    if layout.title:
         ts = 0.7 * f
-        while ts > 0.35 and _text_size(title, ts, 2)[0] > w - 20:
+        while ts > 0.35 and _text_size(layout.title, ts, 2)[0] > w - 20:
             ts *= 0.9
-        _text(img, title, (w / 2, 35 * f), ts, BLACK, 2 if f >= 0.8 else 1, anchor="centre")
-    if xlabel:
-        _text(img, xlabel, ((fr.left + fr.right) / 2, fr.bottom + tick + 2 * th + 22 * f),
+        _text(img, layout.title, (w / 2, 35 * f), ts, BLACK, 2 if f >= 0.8 else 1,
+              anchor="centre")
+    if layout.xlabel:
+        _text(img, layout.xlabel, ((fr.left + fr.right) / 2, fr.bottom + tick + 2 * th + 22 * f),
               0.55 * f, anchor="centre")
-    if ylabel:
-        _vertical_text(img, ylabel, (16 * f, (fr.top + fr.bottom) / 2), 0.55 * f)
+    if layout.ylabel:
+        _vertical_text(img, layout.ylabel, (16 * f, (fr.top + fr.bottom) / 2), 0.55 * f)
 
 
 def _no_data(img: np.ndarray, fr: Frame, f: float) -> None:
@@ -249,31 +274,49 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
     f = _font_scale((w, h))
     img = np.full((h, w, 3), 255, np.uint8)
     fin = _finite(vals)
+    layout = Layout((w, h), f, _bar_yticks(fin, annotate), title, xlabel, ylabel)
+    n = len(labs)
+    fr = _frame(layout, (-0.5, n - 0.5) if n else (-0.5, 0.5),
+                (layout.yticks.at[0], layout.yticks.at[-1]))
+    slot = (fr.right - fr.left) / max(n, 1)  # canvas px per bar
+    _axes(img, fr, layout, _bar_xticks(labs, slot, f, highlight), vertical_grid=False)
+    if not fin.size:
+        _no_data(img, fr, f)
+    _draw_bars(img, fr, vals, highlight)
+    # values are drawn after all bars so a tall neighbour never covers them
+    if annotate and (_text_size("0000", 0.45 * f)[0] <= slot or n <= 20):
+        _draw_values(img, fr, vals, highlight, f)
+    cv2.rectangle(img, (fr.left, fr.top), (fr.right, fr.bottom), BLACK, 1, cv2.LINE_AA)
+    save(img, path)
+    return img
+
+
+def _bar_yticks(fin: np.ndarray, annotate: bool) -> Ticks:
+    """The y ticks of bars of the finite heights ``fin``: from 0 or below to the highest bar,
+    with room above it for its value when ``annotate``; 0 to 1 without data."""
     lo = min(0.0, float(fin.min())) if fin.size else 0.0
     hi = max(0.0, float(fin.max())) if fin.size else 1.0
     if hi <= lo:
         hi = lo + 1.0
     yt = nice_ticks(lo, hi * (1.08 if annotate and hi > 0 else 1.0))
     ystep = float(yt[1] - yt[0]) if yt.size > 1 else 1.0
-    ylabels = [format_tick(v, ystep) for v in yt]
-    n = len(labs)
-    xlim = (-0.5, n - 0.5) if n else (-0.5, 0.5)
-    ytw = max((_text_size(s, 0.5 * f)[0] for s in ylabels), default=0)
-    fr = _frame((w, h), f, bool(title), bool(xlabel), bool(ylabel), ytw, xlim,
-                (float(yt[0]), float(yt[-1])))
-    # thin the x labels when they would overlap
-    slot = (fr.right - fr.left) / max(n, 1)
+    return Ticks(tuple(float(v) for v in yt), tuple(format_tick(v, ystep) for v in yt))
+
+
+def _bar_xticks(labs: Sequence[str], slot: float, f: float, highlight: Optional[int]) -> Ticks:
+    """The x ticks of bars ``slot`` px apart: every bar's label, thinned to one in k when they
+    would overlap; the highlighted bar's always shown."""
     widest = max((_text_size(s, 0.5 * f)[0] for s in labs), default=0)
     every = max(1, int(math.ceil((widest + 6) / max(slot, 1))))
-    shown = [i for i in range(n) if i % every == 0 or i == highlight]
-    _axes(img, fr, [float(i) for i in shown], [labs[i] for i in shown], yt, ylabels, f, title,
-          xlabel, ylabel, vertical_grid=False)
-    if not fin.size:
-        _no_data(img, fr, f)
-    half = 0.38
+    shown = [i for i in range(len(labs)) if i % every == 0 or i == highlight]
+    return Ticks(tuple(float(i) for i in shown), tuple(labs[i] for i in shown))
+
+
+def _draw_bars(img: np.ndarray, fr: Frame, vals: np.ndarray, highlight: Optional[int]) -> None:
+    """Bar i of height ``vals[i]`` centred on data x = i (none where the value is not finite),
+    bar ``highlight`` in the highlight colour."""
+    half = 0.38  # half a bar's width, data units (a slot is 1)
     base_v = fr.px(0.0, 0.0)[1]
-    fs = 0.45 * f
-    show_values = annotate and (_text_size("0000", fs)[0] <= slot or n <= 20)
     for i, v in enumerate(vals):
         if not math.isfinite(v):
             continue
@@ -282,17 +325,19 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
         y_a, y_b = sorted((int(round(vv)), int(round(base_v))))
         cv2.rectangle(img, (int(round(ua)), y_a), (int(round(ub)), max(y_b, y_a + 1)), colour, -1,
                       cv2.LINE_AA)
-    # values are drawn after all bars so a tall neighbour never covers them
-    if show_values:
-        for i, v in enumerate(vals):
-            u = fr.px(float(i), 0.0)[0]
-            if math.isfinite(v):
-                vv = min(fr.px(float(i), float(v))[1], base_v)
-                text = format_tick(v, 1.0 if float(v).is_integer() else 0.01)
-            else:
-                vv, text = base_v, "-"
-            _text(img, text, (u, vv - 5 * f), fs, BLACK if i == highlight else TEXT,
-                  2 if i == highlight else 1, anchor="centre")
-    cv2.rectangle(img, (fr.left, fr.top), (fr.right, fr.bottom), BLACK, 1, cv2.LINE_AA)
-    save(img, path)
-    return img
+
+
+def _draw_values(img: np.ndarray, fr: Frame, vals: np.ndarray, highlight: Optional[int],
+                 f: float) -> None:
+    """Each bar's value above it ("-" for a missing one), the highlighted bar's in bold."""
+    base_v = fr.px(0.0, 0.0)[1]
+    fs = 0.45 * f
+    for i, v in enumerate(vals):
+        u = fr.px(float(i), 0.0)[0]
+        if math.isfinite(v):
+            vv = min(fr.px(float(i), float(v))[1], base_v)
+            text = format_tick(v, 1.0 if float(v).is_integer() else 0.01)
+        else:
+            vv, text = base_v, "-"
+        _text(img, text, (u, vv - 5 * f), fs, BLACK if i == highlight else TEXT,
+              2 if i == highlight else 1, anchor="centre")

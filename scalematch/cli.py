@@ -19,8 +19,8 @@ import re
 import sys
 import traceback
 from pathlib import Path
-from typing import (Any, Callable, Dict, FrozenSet, Iterable, Iterator, List, Optional, Sequence,
-                    Tuple)
+from typing import (TYPE_CHECKING, Any, Callable, Dict, Iterable, Iterator, List, Optional,
+                    Sequence, Tuple)
 
 # The matcher multiplies small matrices (a few hundred descriptors against a few thousand): a
 # multi-threaded BLAS spends more time waking threads than computing, 4x slower measured on 2
@@ -38,6 +38,9 @@ from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, to_grey
 from .result import MatchResult, dumps
+
+if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
+    from .batch import Counts, Plan
 
 #: Exit codes (the table in --help and README.md). 130 = 128 + SIGINT and 141 = 128 + SIGPIPE,
 #: the codes a shell reports for a process those signals end. 4 is not 1: a script must not read
@@ -710,31 +713,59 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
-    from .render import OUTPUT_FILES
-
     config = _config_from(kwargs)
+    json_file = Path(json_path) if json_path and json_path != "-" else None
     # the outputs are checked before the match, not after a minute's work, and before the
     # inputs are read: an output never overwrites an input
+    _check_not_inputs(out_dir, json_file, (low, high))
+    low_read, high_read = _load(low, high, config, max_pixels)
+    factors = (float(low_read.factor), float(high_read.factor))
+    _check_writable(out_dir, json_file)
+    result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config, factors,
+                           quiet)
+    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
+        _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
+    written: Dict[str, Path] = {}
+    if out_dir is not None:
+        written = _write_pictures(out_dir, low, high, low_read.image, high_read.image, result,
+                                  factors)
+    if not quiet:
+        json_written = json_path if json_file is not None else None
+        for text in _match_report(result, written, json_written, verbose):
+            click.echo(text, err=True)
+    sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+
+def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
+                      inputs: Sequence[str]) -> None:
+    """Refuse (exit 2) an output file of ``-o`` or ``--json`` that is one of ``inputs``."""
+    from .render import OUTPUT_FILES
+
     if out_dir is not None:
         for name in OUTPUT_FILES:
-            check_not_an_input(out_dir / name, (low, high), "--out-dir", "folder")
-    if json_path and json_path != "-":
-        check_not_an_input(Path(json_path), (low, high), "--json")
-    low_read, high_read = _load(low, high, config, max_pixels)
-    low_img, high_img = low_read.image, high_read.image
-    factors = (float(low_read.factor), float(high_read.factor))
+            check_not_an_input(out_dir / name, inputs, "--out-dir", "folder")
+    if json_file is not None:
+        check_not_an_input(json_file, inputs, "--json")
+
+
+def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> None:
+    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2)."""
     if out_dir is not None:
         check_out_dir(out_dir)
-    if json_path and json_path != "-":
-        check_out_file(Path(json_path), "--json")
-    low_grey, high_grey = to_grey(low_img), to_grey(high_img)
+    if json_file is not None:
+        check_out_file(json_file, "--json")
 
+
+def _match_images(low: np.ndarray, high: np.ndarray, config: Config,
+                  factors: Tuple[float, float], quiet: bool) -> MatchResult:
+    """The match of the grey images, with a progress bar unless ``quiet`` (or not a terminal);
+    an input the pipeline refuses, or a file the configuration names that is missing, is exit
+    2."""
     try:
         if _show_progress(quiet):
             with PlanBar() as bar:
-                result = _run_match(low_grey, high_grey, config, bar, factors)
-        else:
-            result = _run_match(low_grey, high_grey, config, factors=factors)
+                return _run_match(low, high, config, bar, factors)
+        return _run_match(low, high, config, factors=factors)
     except ImageError as exc:
         raise InputError(str(exc))
     except ValueError as exc:  # the pipeline refuses the input (e.g. an image too small)
@@ -742,32 +773,40 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     except OSError as exc:  # a file the configuration names is missing (e.g. --set ..._path=)
         raise InputError(str(exc))
 
-    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        text = result.to_json(low, high, low_read.shape, high_read.shape)
-        if json_path == "-":
-            click.echo(text, nl=False)
-        else:
-            write_text(Path(json_path), text, "--json")
-    written: Dict[str, Path] = {}
-    if out_dir is not None:
-        from .render import write_outputs
 
-        try:
-            written = write_outputs(out_dir, low, high, low_img, high_img, result, factors)
-        except OSError as exc:
-            raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
+def _write_json(text: str, json_file: Optional[Path]) -> None:
+    """The result's JSON to ``json_file``, or to stdout when None (``--json -``)."""
+    if json_file is None:
+        click.echo(text, nl=False)
+    else:
+        write_text(json_file, text, "--json")
 
-    if not quiet:
-        if verbose:
-            click.echo(scale_table(result), err=True)
-            click.echo("timings: " + ", ".join(f"{k} {v:.2f} s"
-                                               for k, v in result.timings.items()), err=True)
-            for path in written.values():
-                click.echo(f"wrote {path}", err=True)
-            if json_path and json_path != "-":
-                click.echo(f"wrote {json_path}", err=True)
-        click.echo(summary(result), err=True)
-    sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+def _write_pictures(out_dir: Path, low: str, high: str, low_img: np.ndarray, high_img: np.ndarray,
+                    result: MatchResult, factors: Tuple[float, float]) -> Dict[str, Path]:
+    """The files of ``-o`` (``render.write_outputs``), by name; exit 2 when they cannot be
+    written."""
+    from .render import write_outputs
+
+    try:
+        return write_outputs(out_dir, low, high, low_img, high_img, result, factors)
+    except OSError as exc:
+        raise InputError(f"cannot write the outputs to {out_dir}: {exc}")
+
+
+def _match_report(result: MatchResult, written: Dict[str, Path], json_written: Optional[str],
+                  verbose: bool) -> List[str]:
+    """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
+    the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
+    path as given) when ``verbose``."""
+    lines = []
+    if verbose:
+        lines.append(scale_table(result))
+        lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
+        lines += [f"wrote {path}" for path in written.values()]
+        if json_written is not None:
+            lines.append(f"wrote {json_written}")
+    return lines + [summary(result)]
 
 
 # --------------------------------------------------------------------------- batch
@@ -846,8 +885,6 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     Exit codes (4 before 3 when a pair of this run had an internal error):
     {exit_codes}
     """
-    from . import batch
-
     ctx = click.get_current_context()
     if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
         raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
@@ -856,9 +893,29 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
         raise click.UsageError("--retry-errors matches again the pairs whose line in the output "
                                "file is an error; give that file with --output.")
     config = _config_from(kwargs)
-    done = batch.NOTHING_DONE
-    retried: FrozenSet[Tuple[str, str]] = frozenset()  # pairs whose error line is removed
-    client = None
+    plan, client = _batch_plan(pairs_csv, output, retry_errors, scheduler, config)
+    if not quiet:
+        for note in _batch_notes(plan, pairs_csv, output):
+            click.echo(note, err=True)
+    counts = _write_batch(plan, _batch_lines(list(plan.todo), config, max_pixels, jobs, client),
+                          output, quiet, client)
+    if not quiet:
+        click.echo(_batch_summary(plan, counts), err=True)
+    code = _batch_exit_code(plan, counts)
+    if code != EXIT_MATCHED:
+        sys.exit(code)
+
+
+def _batch_plan(pairs_csv: Path, output: Optional[Path], retry_errors: bool,
+                scheduler: Optional[str], config: Config) -> Tuple[Plan, Any]:
+    """The run's ``batch.Plan`` and its Dask client (None: local processes). What refuses the
+    run is exit 2: the scheduler's address, the CSV, the output file (an input, not writable,
+    not a batch output of these options). The output file is changed (``batch.resume_output``)
+    only once nothing else can refuse the run."""
+    from . import batch
+
+    recorded = batch.config_json(config)
+    done, retried, client = batch.NOTHING_DONE, frozenset(), None
     try:
         if scheduler is not None:  # its form first: a malformed address fails at once
             batch.check_scheduler_address(scheduler)
@@ -869,50 +926,56 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
                                                       for f in (p.low_file, p.high_file)],
                                "--output")
             check_out_file(output, "--output")
-            done = batch.scan_output(output, batch.config_json(config))
+            done = batch.scan_output(output, recorded)
         client = batch.connect(scheduler) if scheduler is not None else None
-        if retry_errors:  # the file is changed only once nothing else can refuse the run
-            retried = done.errors & {p.key for p in pairs}
-        if retried:
-            done = batch.drop_error_lines(output, retried, batch.config_json(config))
-            retried -= done.pairs  # a pair with a good line too keeps it and is not redone
-        elif output is not None:
-            batch.cut_torn_line(output, done)
+        if output is not None:
+            retry = batch.errors_to_retry(done, pairs) if retry_errors else frozenset()
+            done, retried = batch.resume_output(output, done, retry, recorded)
     except batch.BatchError as exc:
         if client is not None:
             client.close()
         raise InputError(str(exc))
-    todo = [p for p in pairs if p.key not in done.pairs]
-    skipped = len(pairs) - len(todo)
-    errors_before = sum(p.key in done.errors for p in pairs)
-    if not quiet and len(rows) > len(pairs):
-        click.echo(f"rows repeated in {pairs_csv}: {len(rows) - len(pairs)} (each pair is "
-                   f"matched once)", err=True)
-    if not quiet and skipped:
-        click.echo(f"resuming: {skipped} of {len(pairs)} pairs already in {output}", err=True)
-    if not quiet and retried:
-        click.echo(f"retrying {len(retried)} pairs whose line was an error (removed from "
-                   f"{output})", err=True)
+    return batch.plan_run(len(rows), pairs, done, retried), client
 
-    counts = {"matched": 0, "no match": 0, "error": 0}
-    internal = 0  # of the errors: unexpected ones (error_kind "internal")
+
+def _batch_notes(plan: Plan, pairs_csv: Path, output: Optional[Path]) -> List[str]:
+    """What the run says on stderr before it starts: repeated rows, pairs skipped, retried."""
+    notes = []
+    if plan.repeated_rows:
+        notes.append(f"rows repeated in {pairs_csv}: {plan.repeated_rows} (each pair is "
+                     f"matched once)")
+    if plan.skipped:
+        notes.append(f"resuming: {plan.skipped} of {len(plan.pairs)} pairs already in {output}")
+    if plan.retried:
+        notes.append(f"retrying {len(plan.retried)} pairs whose line was an error (removed from "
+                     f"{output})")
+    return notes
+
+
+def _write_batch(plan: Plan, lines: Iterator[Dict[str, Any]], output: Optional[Path],
+                 quiet: bool, client: Any) -> Counts:
+    """Write each of ``lines`` to ``output`` (appended; stdout when None) as it comes, with a
+    progress bar unless ``quiet``; the ``batch.Counts`` of the lines. Ctrl-C exits 130 with how
+    many pairs were done. The workers, the file and the Dask ``client`` are closed at the end,
+    however it comes."""
+    from . import batch
+
+    counts = batch.Counts()
     out_fh = open(output, "a") if output is not None else sys.stdout
-    bar = click.progressbar(length=len(todo), label="matching pairs", file=sys.stderr,
+    bar = click.progressbar(length=len(plan.todo), label="matching pairs", file=sys.stderr,
                             show_pos=True) if _show_progress(quiet) else None
-    lines = _batch_lines(todo, config, max_pixels, jobs, client)
     try:
         if bar is not None:
             bar.__enter__()
         for line in lines:
             out_fh.write(dumps(line) + "\n")
             out_fh.flush()
-            counts["error" if "error" in line else "matched" if line["matched"] else "no match"] += 1
-            internal += line.get("error_kind") == batch.INTERNAL
+            counts = counts.add(line)
             if bar is not None:
                 bar.update(1)
     except KeyboardInterrupt:
         hint = "; run the same command again to resume" if output is not None else ""
-        click.echo(f"\ninterrupted: {sum(counts.values())} of {len(todo)} pairs done{hint}",
+        click.echo(f"\ninterrupted: {counts.lines} of {len(plan.todo)} pairs done{hint}",
                    err=True)
         sys.exit(EXIT_INTERRUPTED)
     finally:
@@ -923,17 +986,27 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
             out_fh.close()
         if client is not None:
             client.close()
-    if not quiet:
-        before = (f" ({skipped} done before, {errors_before} of them "
-                  f"{'an error' if errors_before == 1 else 'errors'})" if skipped else "")
-        click.echo(f"{len(todo)} {plural(len(todo), 'pair')}: {counts['matched']} matched, "
-                   f"{counts['no match']} no reliable match, {counts['error']} "
-                   f"{plural(counts['error'], 'error')}"
-                   f"{f' ({internal} internal)' if internal else ''}{before}", err=True)
-    if internal:
-        sys.exit(EXIT_INTERNAL_ERROR)
-    if counts["error"] or errors_before:
-        sys.exit(EXIT_PAIR_ERRORS)
+    return counts
+
+
+def _batch_summary(plan: Plan, counts: Counts) -> str:
+    """The run's last line on stderr: the pairs of this run by verdict, and those done before."""
+    before = (f" ({plan.skipped} done before, {plan.errors_before} of them "
+              f"{'an error' if plan.errors_before == 1 else 'errors'})" if plan.skipped else "")
+    n = len(plan.todo)
+    return (f"{n} {plural(n, 'pair')}: {counts.matched} matched, {counts.no_match} no reliable "
+            f"match, {counts.errors} {plural(counts.errors, 'error')}"
+            f"{f' ({counts.internal} internal)' if counts.internal else ''}{before}")
+
+
+def _batch_exit_code(plan: Plan, counts: Counts) -> int:
+    """4 when a pair of this run had an internal error, else 3 when any pair's line is an error
+    (this run's or an earlier one's), else 0."""
+    if counts.internal:
+        return EXIT_INTERNAL_ERROR
+    if counts.errors or plan.errors_before:
+        return EXIT_PAIR_ERRORS
+    return EXIT_MATCHED
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:

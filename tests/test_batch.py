@@ -25,9 +25,10 @@ import pytest
 
 from scalematch import batch
 from scalematch.batch import match_pair as real_match_pair  # the worker's own
-from scalematch.batch import (NOTHING_DONE, BatchError, Pair, after_worker_death, bounded,
-                              config_changes, config_json, cut_torn_line, drop_error_lines,
-                              read_pairs, scan_output, unique_pairs)
+from scalematch.batch import (NOTHING_DONE, BatchError, Counts, Done, Pair, after_worker_death,
+                              bounded, config_changes, config_json, cut_torn_line,
+                              drop_error_lines, errors_to_retry, plan_run, read_pairs,
+                              resume_output, scan_output, unique_pairs)
 from scalematch.config import Config
 from scalematch.imageio import DEFAULT_MAX_PIXELS
 from scalematch.result import dumps
@@ -194,6 +195,72 @@ def test_drop_error_lines_refuses_a_file_with_other_lines_and_leaves_it(tmp_path
     with pytest.raises(BatchError, match="line 2 is not a scalematch result"):
         drop_error_lines(out, {("c", "d")}, config_json(Config()))
     assert out.read_text() == text and [p.name for p in tmp_path.iterdir()] == ["r.jsonl"]
+
+
+# --------------------------------------------------------------------------- what a run does
+
+def _pairs(*names):
+    return [Pair(n, n + "'", n, n + "'") for n in names]
+
+
+def test_plan_run_of_a_new_output_matches_every_pair():
+    pairs = _pairs("a", "b", "c")
+    plan = plan_run(5, pairs)
+    assert plan.pairs == tuple(pairs) and plan.todo == tuple(pairs)
+    assert (plan.repeated_rows, plan.skipped, plan.errors_before, plan.retried) == (2, 0, 0, set())
+
+
+def test_plan_run_skips_the_pairs_done_and_counts_their_errors():
+    pairs = _pairs("a", "b", "c", "d")
+    # the output holds a, b (an error) and a pair no longer in the CSV, x (an error)
+    done = Done(frozenset({("a", "a'"), ("b", "b'"), ("x", "x'")}),
+                frozenset({("b", "b'"), ("x", "x'")}), 100)
+    plan = plan_run(4, pairs, done)
+    assert [p.low for p in plan.todo] == ["c", "d"]
+    assert (plan.repeated_rows, plan.skipped, plan.errors_before) == (0, 2, 1)
+
+
+def test_errors_to_retry_are_the_error_lines_of_the_csv_pairs_only():
+    done = Done(frozenset({("a", "a'"), ("b", "b'"), ("x", "x'")}),
+                frozenset({("b", "b'"), ("x", "x'")}), 100)
+    assert errors_to_retry(done, _pairs("a", "b", "c")) == {("b", "b'")}
+    assert errors_to_retry(NOTHING_DONE, _pairs("a")) == frozenset()
+
+
+def test_resume_output_removes_the_retried_error_lines_and_redoes_only_pairs_without_a_good_line(
+        tmp_path):
+    good, bad, bad_twice, good_too = (_line("a", "b"), _line("c", "d", error=True),
+                                      _line("g", "h", error=True), _line("g", "h"))
+    out = write(tmp_path / "r.jsonl", good + bad + bad_twice + good_too)
+    config = config_json(Config())
+    done = scan_output(out, config)
+    retry = errors_to_retry(done, [Pair("c", "d", "c", "d"), Pair("g", "h", "g", "h")])
+    assert retry == {("c", "d"), ("g", "h")}
+    done, retried = resume_output(out, done, retry, config)
+    assert out.read_text() == good + good_too
+    assert retried == {("c", "d")}  # ("g", "h") has a good line: kept, not redone
+    plan = plan_run(2, [Pair("c", "d", "c", "d"), Pair("g", "h", "g", "h")], done, retried)
+    assert [p.key for p in plan.todo] == [("c", "d")] and plan.errors_before == 0
+
+
+def test_resume_output_without_retries_cuts_a_torn_line_only(tmp_path):
+    text = _line("a", "b") + _line("c", "d", error=True)
+    out = write(tmp_path / "r.jsonl", text + _line("e", "f")[:30])
+    config = config_json(Config())
+    done, retried = resume_output(out, scan_output(out, config), frozenset(), config)
+    assert out.read_text() == text and retried == frozenset()
+    assert done.errors == {("c", "d")}
+
+
+def test_counts_add_each_line_by_its_verdict():
+    counts = Counts()
+    for line in ({"matched": True}, {"matched": False}, {"matched": True},
+                 {"matched": False, "error": "no such file", "error_kind": batch.INPUT},
+                 {"matched": False, "error": "internal error: MemoryError",
+                  "error_kind": batch.INTERNAL}):
+        counts = counts.add(line)
+    assert counts == Counts(matched=2, no_match=1, errors=2, internal=1)
+    assert counts.lines == 5 and Counts().lines == 0
 
 
 # --------------------------------------------------------------------------- bounded in-flight

@@ -51,3 +51,18 @@ def test_format_tick():
     assert format_tick(0.25, 0.25) == "0.25"
     assert format_tick(2.0, 0.5) == "2.0"
     assert format_tick(100.0, 25.0) == "100"
+
+
+def test_bar_ticks_leave_room_for_the_values_and_thin_crowded_labels():
+    from scalematch.chart import Ticks, _bar_xticks, _bar_yticks
+
+    # 120 * 1.08 = 129.6: steps of 25 up to 150, room above the tallest bar for its value
+    assert _bar_yticks(np.array([3.0, 120.0]), annotate=True) == Ticks(
+        (0.0, 25.0, 50.0, 75.0, 100.0, 125.0, 150.0), ("0", "25", "50", "75", "100", "125", "150"))
+    empty = _bar_yticks(np.array([]), annotate=False)  # no data: 0 to 1
+    assert empty.labels == ("0.0", "0.2", "0.4", "0.6", "0.8", "1.0") and empty.at[-1] == 1.0
+    labels = [f"{i}" for i in range(10)]
+    assert _bar_xticks(labels, slot=100.0, f=1.0, highlight=None).labels == tuple(labels)
+    # 2 px per bar: one label in k, and the highlighted bar's too
+    thin = _bar_xticks(labels, slot=2.0, f=1.0, highlight=7)
+    assert thin.at[0] == 0.0 and 7.0 in thin.at and len(thin.at) < 4
