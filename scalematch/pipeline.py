@@ -27,13 +27,11 @@ from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
-from .stages.constraints import orientation_groups, semi_local_filter
 from .stages.decision import Look, decide, figures, final_checks, look_again
-from .stages.descriptors import Described, describe_gradients, describe_jets
+from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
 from .stages.estimator import Estimate, estimate, model_of
-from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
@@ -42,6 +40,7 @@ from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homog
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
 from .stages.views import View, identity_view, tilt_view, valid_in
+from .modes import Mode, mode_of
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
@@ -100,8 +99,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # the one check at the door, before anything is shrunk: ValueError for what cannot match
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
                            decoded_factors)
-    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
-    whitening = cov.whitening() if cov is not None else None
+    mode = mode_of(config)  # the describe/constrain strategy (the paper's reads Lambda)
     plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
                                              for d in Direction})
     meter = Meter(progress, sum(step.cost for step in plan))
@@ -117,7 +115,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         if out_of_time(time.perf_counter() - t0, len(records), config):
             stopped = "time budget"
             break
-        found, record, seconds = run_step(step, work, config, whitening, memo, meter,
+        found, record, seconds = run_step(step, work, config, mode, memo, meter,
                                           searches=sum(r.views for r in records))
         attempts += found
         records.append(record)
@@ -128,7 +126,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     meter.finish()
     timings["total"] = time.perf_counter() - t0
     result = build_result(attempts, tuple(records), plan, stopped, config,
-                          cov.source if cov is not None else "", timings, work)
+                          mode.covariance_used, timings, work)
     return in_original(result, work, config)
 
 
@@ -163,29 +161,8 @@ class Meter:
             self.tick(self.total - self.done)
 
 
-def _describe(level: Level, kp: Keypoints, config: Config, whitening) -> Described:
-    if config.mode == "paper":
-        desc = describe_jets(level, kp.xy, config.harris.sigma_tilde, config.jets)
-        ok = np.all(np.isfinite(desc), axis=1)
-        rows = np.nonzero(ok)[0]
-        return Described(s=level.s, xy=kp.xy[rows], index=rows,
-                         angle=np.full(rows.size, np.nan), desc=whiten(desc[rows], whitening))
-    return describe_gradients(level, kp.xy, config.gradients)
-
-
-def _constrain(config: Config, high: Described, low: Described, cand, level: Level,
-               low_image: np.ndarray) -> List[np.ndarray]:
-    """Candidate subsets to hand to the estimator (each a boolean mask over the candidates)."""
-    p = high.xy[cand.i]
-    q = low.xy[cand.j]
-    if config.mode == "paper":
-        return [semi_local_filter(p, q, level, low_image, config.semi_local)]
-    dtheta = low.angle[cand.j] - high.angle[cand.i]
-    return orientation_groups(dtheta, config.orientation)
-
-
 def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
-                low_image: np.ndarray, config: Config) -> ScaleOutcome:
+                low_image: np.ndarray, config: Config, mode: Mode) -> ScaleOutcome:
     """Candidate matching, constraints and robust estimation at one scale."""
     s = level.s
     cand = match_descriptors(high.desc, low.desc, config.matcher)
@@ -193,7 +170,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
     best_src = best_dst = np.zeros((0, 2))
     kept = 0
     if len(cand):
-        for mask in _constrain(config, high, low, cand, level, low_image):
+        for mask in mode.constrain(high, low, cand, level, low_image):
             src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
             est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
@@ -240,7 +217,7 @@ class LowFeatures:
         return kp, rows(min(n_described, len(kp))), rows(len(kp))
 
 
-def describe_low(low: np.ndarray, config: Config, whitening,
+def describe_low(low: np.ndarray, config: Config, mode: Mode,
                  contrast: Optional[Contrast] = None,
                  grads: Optional[Gradients] = None,
                  inside: Optional[np.ndarray] = None) -> LowFeatures:
@@ -250,7 +227,7 @@ def describe_low(low: np.ndarray, config: Config, whitening,
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
     kp = detect_on_level(level, config.harris_low, contrast, grads, inside,
                          config.views.edge_margin_px)
-    return LowFeatures(low, _describe(level, kp, config, whitening), kp)
+    return LowFeatures(low, mode.describe(level, kp), kp)
 
 
 @dataclass
@@ -346,7 +323,7 @@ class Detected(NamedTuple):
     pending: bool = False
 
 
-def detect_view(view: View, config: Config, whitening,
+def detect_view(view: View, config: Config, mode: Mode,
                 step: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
                 contrast: Optional[Contrast] = None,
@@ -383,18 +360,19 @@ def detect_view(view: View, config: Config, whitening,
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
             part = _part(kp, slice(config.probe.points)) if probing else kp
-            detected.append(Detected(kp, _describe(level, part, config, whitening),
+            detected.append(Detected(kp, mode.describe(level, part),
                                      level if keep else None))
         step()
     return tuple(detected), probing
 
 
 def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
-               config: Config) -> Probed:
+               config: Config, mode: Mode) -> Probed:
     """Score each scale of a detected view from its strongest points (paper 5)."""
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
-        scores = probe_scores([detected[i].probe for i in usable], low.described, config)
+        scores = probe_scores([detected[i].probe for i in usable], low.described, config,
+                              mode.orientation)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -414,7 +392,7 @@ def _levels(view: View, detected: Sequence[Detected], wanted: Sequence[int],
         view.image, scales[:wanted[-1] + 1], **_space(config))) if i in wanted), False
 
 
-def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
+def complete_probe(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
                    contrast: Optional[Contrast] = None) -> Probed:
     """``probed`` with the scales its probe left ``pending`` detected and probed too: the same
     as a view detected and probed at every scale (:func:`detect_view` with ``every`` = 1)."""
@@ -425,12 +403,11 @@ def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
     for i, level in _levels(view, detected, pending, config)[0]:
         kp = _detect(view, level, config, contrast)
-        detected[i] = Detected(kp, _describe(level, _part(kp, slice(config.probe.points)),
-                                             config, whitening), level if keep else None)
-    return score_view(view, tuple(detected), probed.probing, low, config)
+        detected[i] = Detected(kp, mode.describe(level, _part(kp, slice(config.probe.points))), level if keep else None)
+    return score_view(view, tuple(detected), probed.probing, low, config, mode)
 
 
-def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
+def finish_view(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
                 step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
@@ -448,10 +425,9 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
         if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
-            rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
-                             whitening)
+            rest = mode.describe(level, _part(kp, slice(config.probe.points, None)))
             desc = _joined(desc, rest, config.probe.points)
-        return _full_scale(level, kp, desc, low.described, low.image, config)
+        return _full_scale(level, kp, desc, low.described, low.image, config, mode)
 
     if kept:  # every level in memory: the scales are matched side by side on threads
         full = dict(zip(run, thread_map(one, list(levels))))
@@ -472,7 +448,7 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
 
 
 
-def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo, meter: Meter,
+def run_step(step: Step, work: WorkImages, config: Config, mode: Mode, memo: Memo, meter: Meter,
              searches: int) -> Tuple[List[Attempt], StepRecord, float]:
     """Run one step of the plan: probe its views, match the promising ones in full, decide;
     (attempts, record, seconds).
@@ -484,12 +460,12 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
     cfg = replace(config, scales=step.scales)
     start = meter.done
     if step.side == "coarser":
-        candidates = probe_coarser_views(step, work, cfg, whitening, memo, meter)
+        candidates = probe_coarser_views(step, work, cfg, mode, memo, meter)
     else:
-        candidates = probe_finer_views(step, work, cfg, whitening, memo, meter)
+        candidates = probe_finer_views(step, work, cfg, mode, memo, meter)
     if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
         memo.plain[step.direction] = candidates[0][0]
-    attempts = match_chosen(step, candidates, work, cfg, whitening, memo, meter,
+    attempts = match_chosen(step, candidates, work, cfg, mode, memo, meter,
                             searches + len(candidates))
     meter.tick(start + step.cost - meter.done)  # the views the probe left out
     record = StepRecord(step.direction, step.view_pass, len(candidates), len(attempts),
@@ -503,7 +479,7 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
 Candidate = Tuple["Probed", LowFeatures, Optional[View]]
 
 
-def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
+def probe_finer_views(step: Step, work: WorkImages, cfg: Config, mode: Mode, memo: Memo,
                       meter: Meter) -> List[Candidate]:
     """Detect and probe each view of the finer image (at every scale) against the coarser
     image, described once per direction (``memo.coarser``)."""
@@ -519,35 +495,35 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, cfg.views, hi_valid)
-        return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
+        return score_view(view, *detect_view(view, cfg, mode, meter.tick, known,
                                              memo.contrast(hi_img, cfg.harris), every),
-                          coarser[step.direction], cfg)
+                          coarser[step.direction], cfg, mode)
 
     def first_view(view: View):
         contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
-        return detect_view(view, cfg, whitening, meter.tick, known, contrast, every, grads)
+        return detect_view(view, cfg, mode, meter.tick, known, contrast, every, grads)
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
         view = tilt_view(hi_img, *keys[0], cfg.views, hi_valid)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low),
+            lambda: describe_low(lo_img, cfg, mode, *memo.measured(lo_img, cfg.harris_low),
                                  distance_inside(lo_valid)),
             lambda: first_view(view)])
-        probed.append(score_view(view, *detected, coarser[step.direction], cfg))
+        probed.append(score_view(view, *detected, coarser[step.direction], cfg, mode))
         keys = keys[1:]
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     if every > 1:  # the views whose probe of some scales scores best are probed at them all
         top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
         done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], cfg,
-                                                   whitening, memo.contrast(hi_img, cfg.harris)),
+                                                   mode, memo.contrast(hi_img, cfg.harris)),
                           top)
         for k, p in zip(top, done):
             probed[k] = p
     return [(p, coarser[step.direction], None) for p in probed]
 
 
-def describe_coarser_view(view: View, config: Config, whitening,
+def describe_coarser_view(view: View, config: Config, mode: Mode,
                           contrast: Optional[Contrast]) -> LowFeatures:
     """A view of the coarser image described as the coarser image is (at s = 1,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
@@ -555,42 +531,42 @@ def describe_coarser_view(view: View, config: Config, whitening,
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
     kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
                          config.views.edge_margin_px)
-    return LowFeatures(view.image, _describe(level, kp, config, whitening), kp)
+    return LowFeatures(view.image, mode.describe(level, kp), kp)
 
 
-def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
+def plain_probed(direction: Direction, work: WorkImages, cfg: Config, mode: Mode,
                  memo: Memo) -> Probed:
     """The finer image of ``direction`` detected at every scale, as its pass 0 did (kept in
     ``memo.plain``; detected here when that step did not run, its score unset)."""
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(work.low, work.high)[1]
         view = identity_view(hi_img, work.valid(direction)[1])
-        detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
+        detected, probing = detect_view(view, cfg, mode, contrast=memo.contrast(
             hi_img, cfg.harris), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
 
-def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
+def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, mode: Mode, memo: Memo,
                         meter: Meter) -> List[Candidate]:
     """Detect each view of the coarser image once (s = 1) and probe the finer image's own
     scales (detected by pass 0) against it: a view of the coarser image costs one detection,
     where a view of the finer image costs one per scale."""
     lo_img = step.direction.coarser_finer(work.low, work.high)[0]
-    plain = plain_probed(step.direction, work, cfg, whitening, memo)
+    plain = plain_probed(step.direction, work, cfg, mode, memo)
     contrast = memo.contrast(lo_img, cfg.harris_low)
 
     def probe(key) -> Candidate:
         view = tilt_view(lo_img, *key, cfg.views, work.valid(step.direction)[0])
-        feats = describe_coarser_view(view, cfg, whitening, contrast)
+        feats = describe_coarser_view(view, cfg, mode, contrast)
         meter.tick()
-        return score_view(plain.view, plain.detected, plain.probing, feats, cfg), feats, view
+        return score_view(plain.view, plain.detected, plain.probing, feats, cfg, mode), feats, view
 
     return thread_map(probe, list(step.views))
 
 
 def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, cfg: Config,
-                 whitening, memo: Memo, meter: Meter, searches: int) -> List[Attempt]:
+                 mode: Mode, memo: Memo, meter: Meter, searches: int) -> List[Attempt]:
     """Match in full the views the probe finds promising (of a pass of views: the
     ``step.full_searches`` best, scoring at least ``views.min_probe_score``), and decide each."""
     hi_img = step.direction.coarser_finer(work.low, work.high)[1]
@@ -600,9 +576,9 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
                   if c[0].score >= cfg.views.min_probe_score]
     attempts: List[Attempt] = []
     for p, low_feats, coarser_view in chosen:
-        p = complete_probe(p, low_feats, cfg, whitening,  # done unless a tie
+        p = complete_probe(p, low_feats, cfg, mode,  # done unless a tie
                            memo.contrast(hi_img, cfg.harris))
-        outcomes = tuple(finish_view(p, low_feats, cfg, whitening, meter.tick))
+        outcomes = tuple(finish_view(p, low_feats, cfg, mode, meter.tick))
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
                          else work.valid(step.direction)[0])
@@ -610,10 +586,10 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
         def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
             return look_again(t, outcome.described, low_feats.described,
                               with_nan(view.image, valid_in(view)),
-                              with_nan(low_feats.image, valid), cfg)
+                              with_nan(low_feats.image, valid), cfg, mode.guided)
 
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg,
-                         searches=searches, shown_scale=shown_scale(work, step.direction),
+                         orientation=mode.orientation, searches=searches, shown_scale=shown_scale(work, step.direction),
                          look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):

@@ -38,9 +38,10 @@ import numpy as np
 from ..checks import in_range
 from ..geometry import apply, footprint, grid
 from ..result import Evidence
+from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import model_of
-from .guided import grow
+from .guided import GuidedParams, grow
 from .pixelcheck import PixelParams, pixel_check, uniqueness
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
                      Second)
@@ -303,15 +304,14 @@ class Look:
 
 
 def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.ndarray,
-               low_image: np.ndarray, config) -> Look:
+               low_image: np.ndarray, config, guided: GuidedParams) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
     the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
 
     ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
-    coarser image's points; the images at the search's working size.
+    coarser image's points; the images at the search's working size. ``guided``: the growth's
+    parameters (``use_orientation`` off for descriptors without one: the paper's jets).
     """
-    guided = config.guided if config.mode == "default" else replace(config.guided,
-                                                                     use_orientation=False)
     growth = grow(t, high, low, config.model, guided, config.ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
     check = pixel_check(low_image, high_image, grown, config.pixel)
@@ -357,11 +357,14 @@ def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> b
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
+def decide(outcomes: Sequence, low_shape, high_shape, config, *,
+           orientation: Optional[OrientationParams], searches: int = 1,
            shown_scale: float = 1.0,
            look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
+    ``orientation``: the rotation groups of oriented descriptors, which make a chance candidate
+    less likely to fit and multiply the tests; None for descriptors without an orientation.
     ``searches`` is the number of whole searches made so far, this one included (each order
     and each simulated view is one): it multiplies the number of tests of the a-contrario count.
     ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
@@ -403,11 +406,11 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     k = best.row.inliers
     n = max(best.candidates, k)
     m = spec.min_sample
-    oriented = config.mode == "default"
+    oriented = orientation is not None
     p = chance_probability(config.ransac.threshold_px, low_shape, model, oriented,
-                           config.orientation.tolerance_deg)
+                           orientation.tolerance_deg if oriented else 0.0)
     tests = max(int(searches), 1) * len([o for o in outcomes if o.candidates > 0]) * max(
-        n - m, 1) * (config.orientation.max_peaks if oriented else 1)
+        n - m, 1) * (orientation.max_peaks if oriented else 1)
     lnfa = log10_nfa(n, k, m, p, tests)
     inl = est.inliers
     pairs = np.hstack([best.src[inl], best.dst[inl]])

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import List, Sequence
+from typing import List, Optional, Sequence
 
 import numpy as np
 
 from ..checks import in_range
 from ..geometry import similarity_parts
-from .constraints import orientation_groups
+from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
 from .estimator import estimate
 from .matcher import Candidates, match_descriptors
@@ -41,12 +41,13 @@ class ProbeParams:
             in_range("probe", name, getattr(self, name), lo=1, integer=True)
 
 
-def probe_scores(highs: Sequence[Described], low: Described, config) -> List[float]:
+def probe_scores(highs: Sequence[Described], low: Described, config,
+                 orientation: Optional[OrientationParams]) -> List[float]:
     """How promising each scale looks from the initial matches of its strongest points alone.
 
     Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
-    paper mode a scale's score is their number of candidate matches. In the default mode it is
-    the number of inliers of a quick similarity fit to the candidates in the dominant rotation
+    paper mode (``orientation`` None: descriptors without an orientation) a scale's score is
+    their number of candidate matches. In the default mode it is the number of inliers of a quick similarity fit to the candidates in the dominant rotation
     peak, counted only when the fit's ratio agrees with the scale: rotation alone cannot rank
     scales where the scene's edges share a few directions (facades), geometry can. One
     nearest-neighbour search serves every scale (each candidate depends on its own row only;
@@ -60,16 +61,17 @@ def probe_scores(highs: Sequence[Described], low: Described, config) -> List[flo
     for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
         rows = (cand.i >= lo) & (cand.i < hi)
         part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
-        out.append(_score(h, low, part, config))
+        out.append(_score(h, low, part, config, orientation))
     return out
 
 
-def _score(high: Described, low: Described, cand: Candidates, config) -> float:
+def _score(high: Described, low: Described, cand: Candidates, config,
+           orientation: Optional[OrientationParams]) -> float:
     if len(cand) == 0:
         return 0.0
-    if config.mode == "paper":
+    if orientation is None:  # nothing to group the candidates by: their number
         return float(len(cand))
-    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], config.orientation)
+    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], orientation)
     best = 0.0
     for mask in groups:
         est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
