@@ -371,8 +371,10 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     """Score each scale of a detected view from its strongest points (paper 5)."""
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
-        scores = probe_scores([detected[i].probe for i in usable], low.described, config,
-                              mode.orientation)
+        scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
+                              matcher=config.matcher, orientation=mode.orientation,
+                              ransac=config.ransac,
+                              scale_agreement=config.decision.scale_agreement, seed=config.seed)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -403,7 +405,8 @@ def complete_probe(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
     for i, level in _levels(view, detected, pending, config)[0]:
         kp = _detect(view, level, config, contrast)
-        detected[i] = Detected(kp, mode.describe(level, _part(kp, slice(config.probe.points))), level if keep else None)
+        detected[i] = Detected(kp, mode.describe(level, _part(kp, slice(config.probe.points))),
+                               level if keep else None)
     return score_view(view, tuple(detected), probed.probing, low, config, mode)
 
 
@@ -586,10 +589,13 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
         def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
             return look_again(t, outcome.described, low_feats.described,
                               with_nan(view.image, valid_in(view)),
-                              with_nan(low_feats.image, valid), cfg, mode.guided)
+                              with_nan(low_feats.image, valid), model=cfg.model,
+                              guided=mode.guided, ransac=cfg.ransac, pixel=cfg.pixel)
 
-        verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg,
-                         orientation=mode.orientation, searches=searches, shown_scale=shown_scale(work, step.direction),
+        verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
+                         model=cfg.model, ransac=cfg.ransac, orientation=mode.orientation,
+                         seed=cfg.seed, searches=searches,
+                         shown_scale=shown_scale(work, step.direction),
                          look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):
@@ -601,10 +607,13 @@ def final_fit(attempt: Attempt, config: Config):
     """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
-    fit = refit_in_high(view, attempt.verdict, best, config, coarser)
-    fit = richer_model(fit, view, best, config)  # a fit through a coarser view is affine already
-    fit = pooled_refit(fit, view, attempt.outcomes, config, coarser)
-    return union_homography(fit, view, attempt.outcomes, config, coarser)
+    ransac, seed = config.ransac, config.seed
+    fit = refit_in_high(view, attempt.verdict, best, config.model, ransac, seed, coarser)
+    # a fit through a coarser view is affine already
+    fit = richer_model(fit, view, best, config.model_check, ransac, seed)
+    fit = pooled_refit(fit, view, attempt.outcomes, ransac, coarser)
+    return union_homography(fit, view, attempt.outcomes, config.model_check, config.model,
+                            ransac, seed, coarser)
 
 
 def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):

@@ -40,7 +40,7 @@ from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .constraints import OrientationParams
 from .descriptors import Described
-from .estimator import model_of
+from .estimator import RansacParams, model_of
 from .guided import GuidedParams, grow
 from .pixelcheck import PixelParams, pixel_check, uniqueness
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
@@ -304,17 +304,19 @@ class Look:
 
 
 def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.ndarray,
-               low_image: np.ndarray, config, guided: GuidedParams) -> Look:
+               low_image: np.ndarray, *, model: str, guided: GuidedParams, ransac: RansacParams,
+               pixel: PixelParams) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
     the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
 
     ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
-    coarser image's points; the images at the search's working size. ``guided``: the growth's
-    parameters (``use_orientation`` off for descriptors without one: the paper's jets).
+    coarser image's points; the images at the search's working size. ``model``: the one
+    searched for; ``guided``: the growth's parameters (``use_orientation`` off for descriptors
+    without one: the paper's jets); ``ransac``: the fit's; ``pixel``: the pixel check's.
     """
-    growth = grow(t, high, low, config.model, guided, config.ransac)
+    growth = grow(t, high, low, model, guided, ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
-    check = pixel_check(low_image, high_image, grown, config.pixel)
+    check = pixel_check(low_image, high_image, grown, pixel)
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
@@ -357,12 +359,16 @@ def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> b
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, config, *,
-           orientation: Optional[OrientationParams], searches: int = 1,
+def decide(outcomes: Sequence, low_shape, high_shape, params: DecisionParams, *, model: str,
+           ransac: RansacParams, orientation: Optional[OrientationParams], seed: int,
+           searches: int = 1,
            shown_scale: float = 1.0,
            look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
+    ``params``: the decision's thresholds; ``model``: the model searched for; ``ransac``: the
+    robust fit's parameters (its threshold sets the a-contrario test's tolerance); ``seed``: the
+    one seed (:func:`scalematch.stages.rivals.second_transform`, ``off_plane``).
     ``orientation``: the rotation groups of oriented descriptors, which make a chance candidate
     less likely to fit and multiply the tests; None for descriptors without an orientation.
     ``searches`` is the number of whole searches made so far, this one included (each order
@@ -375,8 +381,6 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, *,
     ``few_min_inliers`` or more (:func:`pixels_confirm`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
     """
-    params: DecisionParams = config.decision
-    model = config.model
     spec = model_of(model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
@@ -407,7 +411,7 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, *,
     n = max(best.candidates, k)
     m = spec.min_sample
     oriented = orientation is not None
-    p = chance_probability(config.ransac.threshold_px, low_shape, model, oriented,
+    p = chance_probability(ransac.threshold_px, low_shape, model, oriented,
                            orientation.tolerance_deg if oriented else 0.0)
     tests = max(int(searches), 1) * len([o for o in outcomes if o.candidates > 0]) * max(
         n - m, 1) * (orientation.max_peaks if oriented else 1)
@@ -471,9 +475,9 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, *,
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
                   f"{k} inliers)", "agreeing scales")
     rival = second_transform(best.src, best.dst, inl, est.transform, high_shape,
-                             config.ransac, config.seed)
+                             ransac, seed)
     rival_nfa = log10_nfa(n, rival.inliers, m, p, tests)
-    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, config.seed)
+    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, seed)
     evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
                        second_gap_px=rival.gap_px, parallax_points=parallax,
                        parallax=parallax >= max(params.parallax_min_points,

@@ -79,17 +79,22 @@ def _look(grown: int, margin: float):
     return look
 
 
+def _params(config):
+    """decide's parameters after the shapes, from a Config."""
+    return dict(params=config.decision, model=config.model, ransac=config.ransac,
+                orientation=config.orientation, seed=config.seed)
+
+
 def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good_one():
     from scalematch.config import Config
     from scalematch.stages.decision import decide
 
     t, outcomes = _outcomes(k=5, n=8)
     config = Config()
-    plain = decide(outcomes, (768, 1024), (480, 640), config,
-                   orientation=config.orientation)
+    plain = decide(outcomes, (768, 1024), (480, 640), **_params(config))
     assert not plain.matched and "too few inliers: 5" in plain.reason
-    good = decide(outcomes, (768, 1024), (480, 640), config,
-                   orientation=config.orientation, look=_look(grown=25, margin=0.3))
+    good = decide(outcomes, (768, 1024), (480, 640), **_params(config),
+                   look=_look(grown=25, margin=0.3))
     assert good.matched and good.evidence.grown_inliers == 25
     assert good.evidence.pixel_margin == 0.3 and good.inliers.shape == (25, 4)
 
@@ -101,13 +106,12 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     _, outcomes = _outcomes(k=5, n=8)
     config = Config()
     for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan"))):
-        verdict = decide(outcomes, (768, 1024), (480, 640), config,
-                   orientation=config.orientation, look=look)
+        verdict = decide(outcomes, (768, 1024), (480, 640), **_params(config), look=look)
         assert not verdict.matched and "pass the pixel check" in verdict.reason
     # three inliers are never enough, whatever the look says (the evidence is recorded)
     _, three = _outcomes(k=3, n=8)
-    verdict = decide(three, (768, 1024), (480, 640), config,
-                   orientation=config.orientation, look=_look(grown=40, margin=0.6))
+    verdict = decide(three, (768, 1024), (480, 640), **_params(config),
+                   look=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
 
 
@@ -169,8 +173,8 @@ def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
     from scalematch.stages.decision import decide
 
     t, outcomes = _outcomes(k=5, n=8)
-    verdict = decide(outcomes, (768, 1024), (480, 640), Config(),
-                     orientation=Config().orientation, look=_look(grown=0, margin=0.3))
+    verdict = decide(outcomes, (768, 1024), (480, 640), **_params(Config()),
+                     look=_look(grown=0, margin=0.3))
     assert verdict.matched and verdict.inliers.shape == (5, 4)
     assert np.allclose(verdict.transform, t)
 
@@ -226,16 +230,14 @@ def test_a_repeated_facade_shows_a_second_transform_and_is_refused_as_ambiguous(
     from scalematch.config import Config
     from scalematch.stages.decision import decide
 
-    verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), Config(),
-                   orientation=Config().orientation)
+    verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
     assert not verdict.matched and verdict.test == "repeated structure"
     assert "second transform" in verdict.reason and "repeated structure" in verdict.reason
     assert verdict.evidence.second_inliers == 40 and verdict.candidate is not None
     # the same support for a copy only a few px away is one scene fitted piecewise
-    near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), Config(),
-                   orientation=Config().orientation)
+    near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
     assert near.matched and near.evidence.second_inliers == 40
     # a copy with a fifth of the support is not comparable: the winner stands
-    weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640), Config(),
-                   orientation=Config().orientation)
+    weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640),
+                  **_params(Config()))
     assert weak.matched and weak.evidence.second_inliers == 12
