@@ -1,7 +1,9 @@
 """The one-to-many matcher: every scale of the finer image against the coarser one (paper 4.2, 5).
 
 ``match(low, high, config)`` checks its inputs once, brings very large images to their working
-size, and runs the search plan (:mod:`scalematch.search`): each step detects the views of the
+size, builds one :class:`Search` (the images, the configuration, the mode's strategy from
+:mod:`scalematch.modes`, what the steps share, the progress meter) and runs the search plan
+(:mod:`scalematch.search`) with it, a step at a time: each step detects the views of the
 finer image at every scale (scale-adapted Harris), describes their strongest points, scores the
 scales with the probe, and matches the promising ones in full against the coarser image's
 points (found once, at s = 1): candidates, geometric constraints, robust estimation. The scale
@@ -99,34 +101,32 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # the one check at the door, before anything is shrunk: ValueError for what cannot match
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
                            decoded_factors)
-    mode = mode_of(config)  # the describe/constrain strategy (the paper's reads Lambda)
     plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
                                              for d in Direction})
-    meter = Meter(progress, sum(step.cost for step in plan))
-    memo = Memo()
+    # the mode's strategy chosen once (the paper's reads Lambda)
+    search = Search(work, config, mode_of(config), Memo(),
+                    Meter(progress, sum(step.cost for step in plan)))
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
     timings: Dict[str, float] = {}
     stopped = "plan done"
     for step in plan:
         if skips(step, attempts):
-            meter.tick(step.cost)
+            search.meter.tick(step.cost)
             continue
         if out_of_time(time.perf_counter() - t0, len(records), config):
             stopped = "time budget"
             break
-        found, record, seconds = run_step(step, work, config, mode, memo, meter,
-                                          searches=sum(r.views for r in records))
+        found, record, seconds = run_step(search, step, searches=sum(r.views for r in records))
         attempts += found
         records.append(record)
         timings[record.name] = seconds
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
-    meter.finish()
+    search.meter.finish()
     timings["total"] = time.perf_counter() - t0
-    result = build_result(attempts, tuple(records), plan, stopped, config,
-                          mode.covariance_used, timings, work)
+    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
     return in_original(result, work, config)
 
 
@@ -161,16 +161,17 @@ class Meter:
             self.tick(self.total - self.done)
 
 
-def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
-                low_image: np.ndarray, config: Config, mode: Mode) -> ScaleOutcome:
+def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatures",
+                search: "Search") -> ScaleOutcome:
     """Candidate matching, constraints and robust estimation at one scale."""
+    config, low, low_image = search.config, coarser.described, coarser.image
     s = level.s
     cand = match_descriptors(high.desc, low.desc, config.matcher)
     best: Optional[Estimate] = None
     best_src = best_dst = np.zeros((0, 2))
     kept = 0
     if len(cand):
-        for mask in mode.constrain(high, low, cand, level, low_image):
+        for mask in search.mode.constrain(high, low, cand, level, low_image):
             src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
             est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
@@ -217,17 +218,18 @@ class LowFeatures:
         return kp, rows(min(n_described, len(kp))), rows(len(kp))
 
 
-def describe_low(low: np.ndarray, config: Config, mode: Mode,
+def describe_low(low: np.ndarray, search: "Search",
                  contrast: Optional[Contrast] = None,
                  grads: Optional[Gradients] = None,
                  inside: Optional[np.ndarray] = None) -> LowFeatures:
     """The coarser image's points at s = 1 (``contrast``: its own, for adaptive detection;
     measured here when not given; ``grads``: its gradients, when measured with it; ``inside``:
     the distance to its no-data region, :func:`stages.nodata.distance_inside`)."""
+    config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
     kp = detect_on_level(level, config.harris_low, contrast, grads, inside,
                          config.views.edge_margin_px)
-    return LowFeatures(low, mode.describe(level, kp), kp)
+    return LowFeatures(low, search.mode.describe(level, kp), kp)
 
 
 @dataclass
@@ -268,6 +270,23 @@ class Memo:
                 self._contrasts[key] = image_contrast(image, params.sigma, grads)
                 self._gradients[key] = grads
             return self._contrasts[key], (self._gradients.pop(key, None) if take else None)
+
+
+@dataclass(frozen=True)
+class Search:
+    """What every step of one search shares, built once by :func:`match`: the images at
+    their working size, the configuration, the mode's strategy (:func:`scalematch.modes.mode_of`),
+    what the steps compute once (``memo``) and the progress meter.
+
+    The scales a step searches are its own (``Step.scales``: its direction's, within reach);
+    the functions that detect or match take them as ``scales``, never from ``config``.
+    """
+
+    work: WorkImages = field(repr=False)
+    config: Config
+    mode: Mode
+    memo: Memo = field(repr=False)
+    meter: Meter = field(repr=False)
 
 
 def shares_first_level(config: Config) -> bool:
@@ -323,15 +342,15 @@ class Detected(NamedTuple):
     pending: bool = False
 
 
-def detect_view(view: View, config: Config, mode: Mode,
-                step: Callable[[], None] = lambda: None,
+def detect_view(view: View, search: Search, scales: Sequence[float],
+                tick: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
                 contrast: Optional[Contrast] = None,
                 every: int = 1,
                 grads: Optional[Gradients] = None) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
-    ``step()`` is called once per scale detected. The levels of a view of at most
+    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale detected. The levels of a view of at most
     ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
     described as the coarser one (the other direction), whose points give this view's s = 1
     points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
@@ -340,7 +359,8 @@ def detect_view(view: View, config: Config, mode: Mode,
     ``pending`` until :func:`complete_probe`). ``grads``: the image's gradients at s = 1
     (:meth:`Memo.measured`), used when ``view`` is the image itself.
     """
-    scales = sorted(config.scales)
+    config = search.config
+    scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     every = every if probing else 1
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
@@ -360,19 +380,20 @@ def detect_view(view: View, config: Config, mode: Mode,
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
             part = _part(kp, slice(config.probe.points)) if probing else kp
-            detected.append(Detected(kp, mode.describe(level, part),
+            detected.append(Detected(kp, search.mode.describe(level, part),
                                      level if keep else None))
-        step()
+        tick()
     return tuple(detected), probing
 
 
 def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
-               config: Config, mode: Mode) -> Probed:
+               search: Search) -> Probed:
     """Score each scale of a detected view from its strongest points (paper 5)."""
+    config = search.config
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
         scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
-                              matcher=config.matcher, orientation=mode.orientation,
+                              matcher=config.matcher, orientation=search.mode.orientation,
                               ransac=config.ransac,
                               scale_agreement=config.decision.scale_agreement, seed=config.seed)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
@@ -383,44 +404,47 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
 
 
 def _levels(view: View, detected: Sequence[Detected], wanted: Sequence[int],
-            config: Config) -> Tuple[Iterator[Tuple[int, Level]], bool]:
+            scales: Sequence[float], config: Config) -> Tuple[Iterator[Tuple[int, Level]], bool]:
     """(the levels ``wanted`` of a view as (index, level), in order; True when they were kept
     by the detection) -- else the detection's cascade again, up to the largest one wanted, a
     level at a time (bounded memory)."""
     if all(detected[i].level is not None for i in wanted):
         return ((i, detected[i].level) for i in wanted), True
-    scales = sorted(config.scales)
+    scales = sorted(scales)
     return ((i, level) for i, level in enumerate(scale_space(
         view.image, scales[:wanted[-1] + 1], **_space(config))) if i in wanted), False
 
 
-def complete_probe(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
+def complete_probe(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
                    contrast: Optional[Contrast] = None) -> Probed:
     """``probed`` with the scales its probe left ``pending`` detected and probed too: the same
     as a view detected and probed at every scale (:func:`detect_view` with ``every`` = 1)."""
+    config = search.config
     pending = [i for i, d in enumerate(probed.detected) if d.pending]
     if not pending:
         return probed
     view, detected = probed.view, list(probed.detected)
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
-    for i, level in _levels(view, detected, pending, config)[0]:
+    for i, level in _levels(view, detected, pending, scales, config)[0]:
         kp = _detect(view, level, config, contrast)
-        detected[i] = Detected(kp, mode.describe(level, _part(kp, slice(config.probe.points))),
+        detected[i] = Detected(kp, search.mode.describe(level,
+                                                        _part(kp, slice(config.probe.points))),
                                level if keep else None)
-    return score_view(view, tuple(detected), probed.probing, low, config, mode)
+    return score_view(view, tuple(detected), probed.probing, low, search)
 
 
-def finish_view(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
-                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
+                tick: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
     The probe's descriptors are kept: only the other points are described. The view is probed
-    at every scale (none ``pending``: :func:`complete_probe`). ``step()`` is called once per
-    scale matched or skipped.
+    at every scale (none ``pending``: :func:`complete_probe`). ``scales``: the view's (the
+    step's). ``tick()`` is called once per scale matched or skipped.
     """
-    scales = sorted(config.scales)
+    config = search.config
+    scales = sorted(scales)
     detected, run = probed.detected, probed.run
-    levels, kept = _levels(probed.view, detected, run, config)
+    levels, kept = _levels(probed.view, detected, run, scales, config)
 
     def one(item) -> ScaleOutcome:
         i, level = item
@@ -428,9 +452,9 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
         if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
-            rest = mode.describe(level, _part(kp, slice(config.probe.points, None)))
+            rest = search.mode.describe(level, _part(kp, slice(config.probe.points, None)))
             desc = _joined(desc, rest, config.probe.points)
-        return _full_scale(level, kp, desc, low.described, low.image, config, mode)
+        return _full_scale(level, kp, desc, low, search)
 
     if kept:  # every level in memory: the scales are matched side by side on threads
         full = dict(zip(run, thread_map(one, list(levels))))
@@ -445,31 +469,30 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, mode: Mode,
             row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n].keypoints), initial=0,
                            kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
-        step()
+        tick()
     return outcomes
 
 
 
 
-def run_step(step: Step, work: WorkImages, config: Config, mode: Mode, memo: Memo, meter: Meter,
+def run_step(search: Search, step: Step,
              searches: int) -> Tuple[List[Attempt], StepRecord, float]:
     """Run one step of the plan: probe its views, match the promising ones in full, decide;
     (attempts, record, seconds).
 
-    ``memo`` holds what earlier steps computed on the same images; ``searches`` counts
+    ``search.memo`` holds what earlier steps computed on the same images; ``searches`` counts
     the views probed by earlier steps (the a-contrario test counts them all).
     """
     t0 = time.perf_counter()
-    cfg = replace(config, scales=step.scales)
+    meter = search.meter
     start = meter.done
     if step.side == "coarser":
-        candidates = probe_coarser_views(step, work, cfg, mode, memo, meter)
+        candidates = probe_coarser_views(search, step)
     else:
-        candidates = probe_finer_views(step, work, cfg, mode, memo, meter)
+        candidates = probe_finer_views(search, step)
     if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
-        memo.plain[step.direction] = candidates[0][0]
-    attempts = match_chosen(step, candidates, work, cfg, mode, memo, meter,
-                            searches + len(candidates))
+        search.memo.plain[step.direction] = candidates[0][0]
+    attempts = match_chosen(search, step, candidates, searches + len(candidates))
     meter.tick(start + step.cost - meter.done)  # the views the probe left out
     record = StepRecord(step.direction, step.view_pass, len(candidates), len(attempts),
                         probe_best([p.score for p, _, _ in candidates]),
@@ -482,12 +505,12 @@ def run_step(step: Step, work: WorkImages, config: Config, mode: Mode, memo: Mem
 Candidate = Tuple["Probed", LowFeatures, Optional[View]]
 
 
-def probe_finer_views(step: Step, work: WorkImages, cfg: Config, mode: Mode, memo: Memo,
-                      meter: Meter) -> List[Candidate]:
+def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     """Detect and probe each view of the finer image (at every scale) against the coarser
     image, described once per direction (``memo.coarser``)."""
-    lo_img, hi_img = work.coarser_finer(step.direction)
-    lo_valid, hi_valid = work.valid(step.direction)
+    cfg, memo, tick = search.config, search.memo, search.meter.tick
+    lo_img, hi_img = search.work.coarser_finer(step.direction)
+    lo_valid, hi_valid = search.work.valid(step.direction)
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
@@ -498,80 +521,83 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, mode: Mode, mem
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, cfg.views, hi_valid)
-        return score_view(view, *detect_view(view, cfg, mode, meter.tick, known,
+        return score_view(view, *detect_view(view, search, step.scales, tick, known,
                                              memo.contrast(hi_img, cfg.harris), every),
-                          coarser[step.direction], cfg, mode)
+                          coarser[step.direction], search)
 
     def first_view(view: View):
         contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
-        return detect_view(view, cfg, mode, meter.tick, known, contrast, every, grads)
+        return detect_view(view, search, step.scales, tick, known, contrast, every, grads)
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
         view = tilt_view(hi_img, *keys[0], cfg.views, hi_valid)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, mode, *memo.measured(lo_img, cfg.harris_low),
+            lambda: describe_low(lo_img, search, *memo.measured(lo_img, cfg.harris_low),
                                  distance_inside(lo_valid)),
             lambda: first_view(view)])
-        probed.append(score_view(view, *detected, coarser[step.direction], cfg, mode))
+        probed.append(score_view(view, *detected, coarser[step.direction], search))
         keys = keys[1:]
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     if every > 1:  # the views whose probe of some scales scores best are probed at them all
         top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
-        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], cfg,
-                                                   mode, memo.contrast(hi_img, cfg.harris)),
+        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], search,
+                                                   step.scales,
+                                                   memo.contrast(hi_img, cfg.harris)),
                           top)
         for k, p in zip(top, done):
             probed[k] = p
     return [(p, coarser[step.direction], None) for p in probed]
 
 
-def describe_coarser_view(view: View, config: Config, mode: Mode,
+def describe_coarser_view(view: View, search: Search,
                           contrast: Optional[Contrast]) -> LowFeatures:
     """A view of the coarser image described as the coarser image is (at s = 1,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
     image's own (the detector adapts to it as for the image itself)."""
+    config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
     kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
                          config.views.edge_margin_px)
-    return LowFeatures(view.image, mode.describe(level, kp), kp)
+    return LowFeatures(view.image, search.mode.describe(level, kp), kp)
 
 
-def plain_probed(direction: Direction, work: WorkImages, cfg: Config, mode: Mode,
-                 memo: Memo) -> Probed:
-    """The finer image of ``direction`` detected at every scale, as its pass 0 did (kept in
-    ``memo.plain``; detected here when that step did not run, its score unset)."""
+def plain_probed(search: Search, step: Step) -> Probed:
+    """The finer image of ``step.direction`` detected at every scale of ``step``, as its pass 0
+    did (kept in ``memo.plain``; detected here when that step did not run, its score unset)."""
+    memo, direction = search.memo, step.direction
     if direction not in memo.plain:
-        hi_img = direction.coarser_finer(work.low, work.high)[1]
-        view = identity_view(hi_img, work.valid(direction)[1])
-        detected, probing = detect_view(view, cfg, mode, contrast=memo.contrast(
-            hi_img, cfg.harris), known=memo.coarser.get(direction.other))
+        hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
+        view = identity_view(hi_img, search.work.valid(direction)[1])
+        detected, probing = detect_view(view, search, step.scales, contrast=memo.contrast(
+            hi_img, search.config.harris), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
 
-def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, mode: Mode, memo: Memo,
-                        meter: Meter) -> List[Candidate]:
+def probe_coarser_views(search: Search, step: Step) -> List[Candidate]:
     """Detect each view of the coarser image once (s = 1) and probe the finer image's own
     scales (detected by pass 0) against it: a view of the coarser image costs one detection,
     where a view of the finer image costs one per scale."""
+    work = search.work
     lo_img = step.direction.coarser_finer(work.low, work.high)[0]
-    plain = plain_probed(step.direction, work, cfg, mode, memo)
-    contrast = memo.contrast(lo_img, cfg.harris_low)
+    plain = plain_probed(search, step)
+    contrast = search.memo.contrast(lo_img, search.config.harris_low)
 
     def probe(key) -> Candidate:
-        view = tilt_view(lo_img, *key, cfg.views, work.valid(step.direction)[0])
-        feats = describe_coarser_view(view, cfg, mode, contrast)
-        meter.tick()
-        return score_view(plain.view, plain.detected, plain.probing, feats, cfg, mode), feats, view
+        view = tilt_view(lo_img, *key, search.config.views, work.valid(step.direction)[0])
+        feats = describe_coarser_view(view, search, contrast)
+        search.meter.tick()
+        return score_view(plain.view, plain.detected, plain.probing, feats, search), feats, view
 
     return thread_map(probe, list(step.views))
 
 
-def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, cfg: Config,
-                 mode: Mode, memo: Memo, meter: Meter, searches: int) -> List[Attempt]:
+def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
+                 searches: int) -> List[Attempt]:
     """Match in full the views the probe finds promising (of a pass of views: the
     ``step.full_searches`` best, scoring at least ``views.min_probe_score``), and decide each."""
+    work, cfg, mode = search.work, search.config, search.mode
     hi_img = step.direction.coarser_finer(work.low, work.high)[1]
     chosen = sorted(candidates, key=lambda c: -c[0].score)
     if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
@@ -579,9 +605,9 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
                   if c[0].score >= cfg.views.min_probe_score]
     attempts: List[Attempt] = []
     for p, low_feats, coarser_view in chosen:
-        p = complete_probe(p, low_feats, cfg, mode,  # done unless a tie
-                           memo.contrast(hi_img, cfg.harris))
-        outcomes = tuple(finish_view(p, low_feats, cfg, mode, meter.tick))
+        p = complete_probe(p, low_feats, search, step.scales,  # done unless a tie
+                           search.memo.contrast(hi_img, cfg.harris))
+        outcomes = tuple(finish_view(p, low_feats, search, step.scales, search.meter.tick))
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
                          else work.valid(step.direction)[0])
@@ -616,7 +642,7 @@ def final_fit(attempt: Attempt, config: Config):
                             ransac, seed, coarser)
 
 
-def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
+def best_fitting(search: Search, attempts: Sequence[Attempt]):
     """(winner, its final fit, its pixel check): the matched attempt to report, or
     (None, None, None); the pixel check is None unless several were compared.
 
@@ -630,6 +656,7 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     at log10 NFA -43, 48 px off, beat the plain similarity of 11 inliers that was right; its
     pixels: ZNCC 0.963 against 0.996.
     """
+    config, work = search.config, search.work
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)
@@ -667,9 +694,8 @@ def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction
                     Direction.SWAPPED if swapped else Direction.GIVEN)
 
 
-def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
-                 plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
-                 timings: Dict[str, float], work: WorkImages) -> MatchResult:
+def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
+                 plan: Sequence[Step], stopped: str, timings: Dict[str, float]) -> MatchResult:
     """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
@@ -677,7 +703,8 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
     repeated structure is refused there.
     """
-    winner, final, near = best_fitting(attempts, config, work)
+    config, work = search.config, search.work
+    winner, final, near = best_fitting(search, attempts)
     refused = best_refused(attempts)
     shown = winner or refused or attempts[0]
     searches = sum(r.views for r in records)
@@ -690,7 +717,7 @@ def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
     common = dict(model=config.model, best_scale=shown.verdict.best_scale,
                   scales=tuple(o.row for o in shown.outcomes), timings=timings,
                   config=config, evidence=evidence, search=records,
-                  covariance_used=covariance_used)
+                  covariance_used=search.mode.covariance_used)
     if winner is None:
         more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
         if stopped == "time budget":
