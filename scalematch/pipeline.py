@@ -18,7 +18,7 @@ import functools
 import math
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
@@ -29,7 +29,7 @@ from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
-from .stages.decision import Look, decide, figures, final_checks, look_again
+from .stages.decision import FinalFigures, Look, decide, figures, final_checks, look_again
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
@@ -684,19 +684,45 @@ def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
 
 
 def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction: Direction,
-                       test: str, evidence: Evidence, config: Config) -> Rejected:
+                       test: str, log10_nfa: float, figures_: dict) -> Rejected:
     """A refused transform (finer working px -> coarser working px, found in ``direction``) as
-    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``)."""
+    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``);
+    ``figures_``: the refusing test's figures, as the test saw them (at working size)."""
     t, inliers, swapped = finer_to_coarser(np.asarray(t, np.float64), inliers,
                                            direction is Direction.SWAPPED)
-    return Rejected(t, model, inliers, evidence.log10_nfa, test,
-                    figures(test, evidence, config.decision),
+    return Rejected(t, model, inliers, log10_nfa, test, figures_,
                     Direction.SWAPPED if swapped else Direction.GIVEN)
+
+
+def evidence_of(shown: Attempt, records: Sequence[StepRecord], plan: Sequence[Step],
+                stopped: str, final: Optional[FinalFigures], work: WorkImages) -> Evidence:
+    """The one :class:`Evidence` of a search's answer, assembled here from its parts: the
+    decision's figures for the search ``shown`` (:func:`stages.decision.decide`), the pixel
+    tests of the final transform when it faced them (``final``,
+    :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
+    the probe, the steps), and the working size's: its factors, and the implied ratio and the
+    footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``).
+    """
+    decided = shown.verdict.evidence
+    direction = shown.step.direction
+    g = shown_scale(work, direction)
+    f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
+    return replace(decided, **(asdict(final) if final is not None else {}),
+                   searches=sum(r.views for r in records), search_order=direction,
+                   view_tilt=shown.shown_view.tilt,
+                   view_longitude_deg=shown.shown_view.longitude_deg,
+                   view_of=shown.step.side, probe_score=shown.probe,
+                   probe_best=probe_best([r.probe_best for r in records]),
+                   steps_run=len(records), steps_planned=len(plan), stopped=stopped,
+                   low_working_factor=work.f_low, high_working_factor=work.f_high,
+                   implied_ratio=decided.implied_ratio * g,
+                   footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
 
 
 def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, timings: Dict[str, float]) -> MatchResult:
-    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
+    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next),
+    its evidence assembled once (:func:`evidence_of`).
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
     shows the first search made (the finer image itself, in the given order), with its reason.
@@ -704,48 +730,45 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     repeated structure is refused there.
     """
     config, work = search.config, search.work
-    winner, final, near = best_fitting(search, attempts)
+    winner, fit, near = best_fitting(search, attempts)
     refused = best_refused(attempts)
     shown = winner or refused or attempts[0]
-    searches = sum(r.views for r in records)
-    evidence = replace(shown.verdict.evidence, searches=searches,
-                       search_order=shown.step.direction, view_tilt=shown.shown_view.tilt,
-                       view_longitude_deg=shown.shown_view.longitude_deg,
-                       view_of=shown.step.side, probe_score=shown.probe,
-                       probe_best=probe_best([r.probe_best for r in records]),
-                       steps_run=len(records), steps_planned=len(plan), stopped=stopped)
-    common = dict(model=config.model, best_scale=shown.verdict.best_scale,
+    verdict = shown.verdict
+    common = dict(model=config.model, best_scale=verdict.best_scale,
                   scales=tuple(o.row for o in shown.outcomes), timings=timings,
-                  config=config, evidence=evidence, search=records,
-                  covariance_used=search.mode.covariance_used)
+                  config=config, search=records, covariance_used=search.mode.covariance_used)
     if winner is None:
+        searches = sum(r.views for r in records)
         more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
         if stopped == "time budget":
             more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
                      f"{len(records)} of {len(plan)} steps")
-        verdict = shown.verdict
         rejected = None if refused is None else rejected_candidate(
             verdict.candidate, verdict.candidate_inliers, config.model, refused.step.direction,
-            verdict.test, evidence, config)
+            verdict.test, verdict.evidence.log10_nfa,
+            figures(verdict.test, verdict.evidence, config.decision))
         return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
+                           evidence=evidence_of(shown, records, plan, stopped, None, work),
                            **common)
-    t, inliers, model = final
+    t, inliers, model = fit
     has_ratio = model_of(model).has_ratio
+    final = None
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        common["evidence"], reason, test = final_checks(coarse, fine, t, evidence,
-                                                        config.decision, near,
-                                                        vouched=inliers[:, :2],
-                                                        pixel=config.pixel)
+        final, reason, test = final_checks(coarse, fine, t, verdict.evidence.log10_nfa,
+                                           config.decision, near, vouched=inliers[:, :2],
+                                           pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
-                t, inliers, model, winner.step.direction, test, common["evidence"], config),
-                **common)
+                t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
+                figures(test, verdict.evidence, config.decision, final)),
+                evidence=evidence_of(shown, records, plan, stopped, final, work), **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
         math.nan, math.nan, (math.nan, math.nan))
     return MatchResult(**dict(common, model=model), matched=True, transform=t,
                        resolution_ratio=ratio, rotation_deg=angle, translation=tr,
-                       inliers=inliers,
+                       inliers=inliers, evidence=evidence_of(shown, records, plan, stopped,
+                                                             final, work),
                        order=Direction.SWAPPED if swapped else Direction.GIVEN)

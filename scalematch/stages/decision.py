@@ -217,13 +217,29 @@ TESTS = {
 }
 
 
-def figures(test: str, evidence: Evidence, params: DecisionParams) -> dict:
-    """The figures of ``test`` (:data:`TESTS`): name -> value, from the evidence or the params.
+@dataclass(frozen=True)
+class FinalFigures:
+    """The pixel tests of a match's final transform (:func:`final_checks`): the figures of
+    the same names in :class:`Evidence`."""
+
+    unique_claimed: float  #: ZNCC of the finer image at the claimed placement
+    unique_elsewhere: float  #: the best ZNCC anywhere half a footprint away
+    unique_ratio: float  #: misfit elsewhere over misfit at the claim
+    final_ncc: float  #: ZNCC under the final transform
+    final_margin: float  #: how much better than the nearby wrong placements
+    judged_by: str  #: "geometry" or "pixels": what judged the match unique
+
+
+def figures(test: str, evidence: Evidence, params: DecisionParams,
+            final: Optional[FinalFigures] = None) -> dict:
+    """The figures of ``test`` (:data:`TESTS`): name -> value, from the final transform's
+    pixel tests (``final``, when it faced them), the evidence or the params.
 
     >>> figures("chance", Evidence(inliers=5, candidates=40, log10_nfa=-1.0), DecisionParams())
     {'inliers': 5, 'candidates': 40, 'log10_nfa': -1.0, 'max_log_nfa': -2.0}
     """
-    return {name: getattr(evidence, name) if hasattr(evidence, name) else getattr(params, name)
+    sources = ((final,) if final is not None else ()) + (evidence, params)
+    return {name: getattr(next(s for s in sources if hasattr(s, name)), name)
             for name in TESTS.get(test, ())}
 
 
@@ -489,11 +505,12 @@ def decide(outcomes: Sequence, low_shape, high_shape, params: DecisionParams, *,
     return Decision(True, "", best.row.s, t, pairs, evidence)
 
 
-def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
+def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, log10_nfa: float,
                  params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None,
                  pixel: PixelParams = PixelParams()):
-    """(evidence, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
-    coarser px, refit), why it is refused and by which test (:data:`TESTS`; "" when it is not).
+    """(figures, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
+    coarser px, refit, at log10 NFA ``log10_nfa``) as :class:`FinalFigures`, why it is refused
+    and by which test (:data:`TESTS`; "" when it is not).
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
@@ -508,7 +525,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     Geometry first: a transform beyond chance by ``max_log_nfa_geometry`` (and with no second
     transform of comparable support, which :func:`decide` refuses) is unique by its geometry;
     its pixel figures are recorded, not decisive: an occluder, parallax or relighting lowers
-    them where the points prove the map (``evidence.judged_by`` says which test decided).
+    them where the points prove the map (``judged_by`` says which test decided).
     ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
     ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
@@ -518,19 +535,18 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
             lambda: pixel_check(coarser, finer, t, pixel)])
     else:
         u = uniqueness(coarser, finer, t, pixel, vouched=vouched)
-    geometric = evidence.log10_nfa <= params.max_log_nfa_geometry
-    evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
-                       unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
-                       judged_by="geometry" if geometric else "pixels")
+    geometric = log10_nfa <= params.max_log_nfa_geometry
+    final = FinalFigures(unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
+                         unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
+                         judged_by="geometry" if geometric else "pixels")
     if geometric:
-        return evidence, "", ""
+        return final, "", ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        return evidence, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
-                          f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
-                          f"the transform found, log10 NFA {evidence.log10_nfa:.1f})"), \
-            "uniqueness"
+        return final, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
+                       f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
+                       f"the transform found, log10 NFA {log10_nfa:.1f})"), "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
-        return evidence, (f"the pixels do not confirm it: the transform found fits the low "
-                          f"image no better than nearby wrong placements (ZNCC margin "
-                          f"{near.margin:+.2f})"), "pixels"
-    return evidence, "", ""
+        return final, (f"the pixels do not confirm it: the transform found fits the low "
+                       f"image no better than nearby wrong placements (ZNCC margin "
+                       f"{near.margin:+.2f})"), "pixels"
+    return final, "", ""

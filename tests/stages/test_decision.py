@@ -122,7 +122,6 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     import cv2
 
     from scalematch.config import Config
-    from scalematch.result import Evidence
     from scalematch.stages.decision import final_checks
 
     params = Config().decision
@@ -130,12 +129,12 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)  # 4x finer
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
     unique = raccoon[170:350, 260:500]  # the place, and other (unrelated) texture around it
-    evidence, reason, _ = final_checks(unique, high, t, Evidence(), params)
-    assert reason == "" and evidence.unique_ratio > 3 * params.min_unique_ratio
+    final, reason, _ = final_checks(unique, high, t, math.inf, params)
+    assert reason == "" and final.unique_ratio > 3 * params.min_unique_ratio
     tiled = np.tile(base, (3, 3))  # the same structure nine times over
     t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
-    evidence, reason, _ = final_checks(tiled, high, t_tiled, Evidence(), params)
-    assert reason.startswith("ambiguous") and evidence.unique_ratio < params.min_unique_ratio
+    final, reason, _ = final_checks(tiled, high, t_tiled, math.inf, params)
+    assert reason.startswith("ambiguous") and final.unique_ratio < params.min_unique_ratio
 
 
 def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
@@ -149,7 +148,6 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
 
     from scalematch.config import Config
     from scalematch.geometry import compose
-    from scalematch.result import Evidence
     from scalematch.stages.decision import final_checks
 
     params = Config().decision
@@ -157,12 +155,12 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
     low = raccoon[170:350, 260:500]
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
-    evidence, reason, _ = final_checks(low, high, t, Evidence(), params)
-    assert reason == "" and evidence.final_margin > 0.3  # measured 0.6-0.7
+    final, reason, _ = final_checks(low, high, t, math.inf, params)
+    assert reason == "" and final.final_margin > 0.3  # measured 0.6-0.7
     turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)  # about the footprint's centre
     alone = replace(params, min_unique_ratio=0.0)
-    evidence, reason, _ = final_checks(low, high, compose(turn, t), Evidence(), alone)
-    assert evidence.final_margin < params.min_final_margin
+    final, reason, _ = final_checks(low, high, compose(turn, t), math.inf, alone)
+    assert final.final_margin < params.min_final_margin
     assert reason.startswith("the pixels do not confirm it"), reason
 
 
