@@ -1,7 +1,9 @@
 """The one-to-many matcher: every scale of the finer image against the coarser one (paper 4.2, 5).
 
 ``match(low, high, config)`` checks its inputs once, brings very large images to their working
-size, and runs the search plan (:mod:`scalematch.search`): each step detects the views of the
+size, builds one :class:`Search` (the images, the configuration, the mode's strategy from
+:mod:`scalematch.modes`, what the steps share, the progress meter) and runs the search plan
+(:mod:`scalematch.search`) with it, a step at a time: each step detects the views of the
 finer image at every scale (scale-adapted Harris), describes their strongest points, scores the
 scales with the probe, and matches the promising ones in full against the coarser image's
 points (found once, at s = 1): candidates, geometric constraints, robust estimation. The scale
@@ -16,7 +18,7 @@ import functools
 import math
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
@@ -27,13 +29,11 @@ from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
-from .stages.constraints import orientation_groups, semi_local_filter
-from .stages.decision import Look, decide, figures, final_checks, look_again
-from .stages.descriptors import Described, describe_gradients, describe_jets
+from .stages.decision import FinalFigures, Look, decide, figures, final_checks, look_again
+from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
 from .stages.estimator import Estimate, estimate, model_of
-from .stages.mahalanobis import load_covariance, whiten
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
@@ -42,6 +42,7 @@ from .stages.refit import pooled_refit, refit_in_high, richer_model, union_homog
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
 from .stages.views import View, identity_view, tilt_view, valid_in
+from .modes import Mode, mode_of
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
@@ -100,35 +101,32 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # the one check at the door, before anything is shrunk: ValueError for what cannot match
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
                            decoded_factors)
-    cov = load_covariance(config.covariance_path) if config.mode == "paper" else None
-    whitening = cov.whitening() if cov is not None else None
     plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
                                              for d in Direction})
-    meter = Meter(progress, sum(step.cost for step in plan))
-    memo = Memo()
+    # the mode's strategy chosen once (the paper's reads Lambda)
+    search = Search(work, config, mode_of(config), Memo(),
+                    Meter(progress, sum(step.cost for step in plan)))
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
     timings: Dict[str, float] = {}
     stopped = "plan done"
     for step in plan:
         if skips(step, attempts):
-            meter.tick(step.cost)
+            search.meter.tick(step.cost)
             continue
         if out_of_time(time.perf_counter() - t0, len(records), config):
             stopped = "time budget"
             break
-        found, record, seconds = run_step(step, work, config, whitening, memo, meter,
-                                          searches=sum(r.views for r in records))
+        found, record, seconds = run_step(search, step, searches=sum(r.views for r in records))
         attempts += found
         records.append(record)
         timings[record.name] = seconds
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
-    meter.finish()
+    search.meter.finish()
     timings["total"] = time.perf_counter() - t0
-    result = build_result(attempts, tuple(records), plan, stopped, config,
-                          cov.source if cov is not None else "", timings, work)
+    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
     return in_original(result, work, config)
 
 
@@ -163,37 +161,17 @@ class Meter:
             self.tick(self.total - self.done)
 
 
-def _describe(level: Level, kp: Keypoints, config: Config, whitening) -> Described:
-    if config.mode == "paper":
-        desc = describe_jets(level, kp.xy, config.harris.sigma_tilde, config.jets)
-        ok = np.all(np.isfinite(desc), axis=1)
-        rows = np.nonzero(ok)[0]
-        return Described(s=level.s, xy=kp.xy[rows], index=rows,
-                         angle=np.full(rows.size, np.nan), desc=whiten(desc[rows], whitening))
-    return describe_gradients(level, kp.xy, config.gradients)
-
-
-def _constrain(config: Config, high: Described, low: Described, cand, level: Level,
-               low_image: np.ndarray) -> List[np.ndarray]:
-    """Candidate subsets to hand to the estimator (each a boolean mask over the candidates)."""
-    p = high.xy[cand.i]
-    q = low.xy[cand.j]
-    if config.mode == "paper":
-        return [semi_local_filter(p, q, level, low_image, config.semi_local)]
-    dtheta = low.angle[cand.j] - high.angle[cand.i]
-    return orientation_groups(dtheta, config.orientation)
-
-
-def _full_scale(level: Level, kp: Keypoints, high: Described, low: Described,
-                low_image: np.ndarray, config: Config) -> ScaleOutcome:
+def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatures",
+                search: "Search") -> ScaleOutcome:
     """Candidate matching, constraints and robust estimation at one scale."""
+    config, low, low_image = search.config, coarser.described, coarser.image
     s = level.s
     cand = match_descriptors(high.desc, low.desc, config.matcher)
     best: Optional[Estimate] = None
     best_src = best_dst = np.zeros((0, 2))
     kept = 0
     if len(cand):
-        for mask in _constrain(config, high, low, cand, level, low_image):
+        for mask in search.mode.constrain(high, low, cand, level, low_image):
             src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
             est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
@@ -240,17 +218,18 @@ class LowFeatures:
         return kp, rows(min(n_described, len(kp))), rows(len(kp))
 
 
-def describe_low(low: np.ndarray, config: Config, whitening,
+def describe_low(low: np.ndarray, search: "Search",
                  contrast: Optional[Contrast] = None,
                  grads: Optional[Gradients] = None,
                  inside: Optional[np.ndarray] = None) -> LowFeatures:
     """The coarser image's points at s = 1 (``contrast``: its own, for adaptive detection;
     measured here when not given; ``grads``: its gradients, when measured with it; ``inside``:
     the distance to its no-data region, :func:`stages.nodata.distance_inside`)."""
+    config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=low)
     kp = detect_on_level(level, config.harris_low, contrast, grads, inside,
                          config.views.edge_margin_px)
-    return LowFeatures(low, _describe(level, kp, config, whitening), kp)
+    return LowFeatures(low, search.mode.describe(level, kp), kp)
 
 
 @dataclass
@@ -291,6 +270,23 @@ class Memo:
                 self._contrasts[key] = image_contrast(image, params.sigma, grads)
                 self._gradients[key] = grads
             return self._contrasts[key], (self._gradients.pop(key, None) if take else None)
+
+
+@dataclass(frozen=True)
+class Search:
+    """What every step of one search shares, built once by :func:`match`: the images at
+    their working size, the configuration, the mode's strategy (:func:`scalematch.modes.mode_of`),
+    what the steps compute once (``memo``) and the progress meter.
+
+    The scales a step searches are its own (``Step.scales``: its direction's, within reach);
+    the functions that detect or match take them as ``scales``, never from ``config``.
+    """
+
+    work: WorkImages = field(repr=False)
+    config: Config
+    mode: Mode
+    memo: Memo = field(repr=False)
+    meter: Meter = field(repr=False)
 
 
 def shares_first_level(config: Config) -> bool:
@@ -346,15 +342,15 @@ class Detected(NamedTuple):
     pending: bool = False
 
 
-def detect_view(view: View, config: Config, whitening,
-                step: Callable[[], None] = lambda: None,
+def detect_view(view: View, search: Search, scales: Sequence[float],
+                tick: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
                 contrast: Optional[Contrast] = None,
                 every: int = 1,
                 grads: Optional[Gradients] = None) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
-    ``step()`` is called once per scale detected. The levels of a view of at most
+    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale detected. The levels of a view of at most
     ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
     described as the coarser one (the other direction), whose points give this view's s = 1
     points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
@@ -363,7 +359,8 @@ def detect_view(view: View, config: Config, whitening,
     ``pending`` until :func:`complete_probe`). ``grads``: the image's gradients at s = 1
     (:meth:`Memo.measured`), used when ``view`` is the image itself.
     """
-    scales = sorted(config.scales)
+    config = search.config
+    scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     every = every if probing else 1
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
@@ -383,18 +380,22 @@ def detect_view(view: View, config: Config, whitening,
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
             part = _part(kp, slice(config.probe.points)) if probing else kp
-            detected.append(Detected(kp, _describe(level, part, config, whitening),
+            detected.append(Detected(kp, search.mode.describe(level, part),
                                      level if keep else None))
-        step()
+        tick()
     return tuple(detected), probing
 
 
 def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
-               config: Config) -> Probed:
+               search: Search) -> Probed:
     """Score each scale of a detected view from its strongest points (paper 5)."""
+    config = search.config
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
-        scores = probe_scores([detected[i].probe for i in usable], low.described, config)
+        scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
+                              matcher=config.matcher, orientation=search.mode.orientation,
+                              ransac=config.ransac,
+                              scale_agreement=config.decision.scale_agreement, seed=config.seed)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -403,44 +404,47 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
 
 
 def _levels(view: View, detected: Sequence[Detected], wanted: Sequence[int],
-            config: Config) -> Tuple[Iterator[Tuple[int, Level]], bool]:
+            scales: Sequence[float], config: Config) -> Tuple[Iterator[Tuple[int, Level]], bool]:
     """(the levels ``wanted`` of a view as (index, level), in order; True when they were kept
     by the detection) -- else the detection's cascade again, up to the largest one wanted, a
     level at a time (bounded memory)."""
     if all(detected[i].level is not None for i in wanted):
         return ((i, detected[i].level) for i in wanted), True
-    scales = sorted(config.scales)
+    scales = sorted(scales)
     return ((i, level) for i, level in enumerate(scale_space(
         view.image, scales[:wanted[-1] + 1], **_space(config))) if i in wanted), False
 
 
-def complete_probe(probed: Probed, low: LowFeatures, config: Config, whitening,
+def complete_probe(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
                    contrast: Optional[Contrast] = None) -> Probed:
     """``probed`` with the scales its probe left ``pending`` detected and probed too: the same
     as a view detected and probed at every scale (:func:`detect_view` with ``every`` = 1)."""
+    config = search.config
     pending = [i for i, d in enumerate(probed.detected) if d.pending]
     if not pending:
         return probed
     view, detected = probed.view, list(probed.detected)
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
-    for i, level in _levels(view, detected, pending, config)[0]:
+    for i, level in _levels(view, detected, pending, scales, config)[0]:
         kp = _detect(view, level, config, contrast)
-        detected[i] = Detected(kp, _describe(level, _part(kp, slice(config.probe.points)),
-                                             config, whitening), level if keep else None)
-    return score_view(view, tuple(detected), probed.probing, low, config)
+        detected[i] = Detected(kp, search.mode.describe(level,
+                                                        _part(kp, slice(config.probe.points))),
+                               level if keep else None)
+    return score_view(view, tuple(detected), probed.probing, low, search)
 
 
-def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
-                step: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
+def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
+                tick: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
     The probe's descriptors are kept: only the other points are described. The view is probed
-    at every scale (none ``pending``: :func:`complete_probe`). ``step()`` is called once per
-    scale matched or skipped.
+    at every scale (none ``pending``: :func:`complete_probe`). ``scales``: the view's (the
+    step's). ``tick()`` is called once per scale matched or skipped.
     """
-    scales = sorted(config.scales)
+    config = search.config
+    scales = sorted(scales)
     detected, run = probed.detected, probed.run
-    levels, kept = _levels(probed.view, detected, run, config)
+    levels, kept = _levels(probed.view, detected, run, scales, config)
 
     def one(item) -> ScaleOutcome:
         i, level = item
@@ -448,10 +452,9 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
         if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
-            rest = _describe(level, _part(kp, slice(config.probe.points, None)), config,
-                             whitening)
+            rest = search.mode.describe(level, _part(kp, slice(config.probe.points, None)))
             desc = _joined(desc, rest, config.probe.points)
-        return _full_scale(level, kp, desc, low.described, low.image, config)
+        return _full_scale(level, kp, desc, low, search)
 
     if kept:  # every level in memory: the scales are matched side by side on threads
         full = dict(zip(run, thread_map(one, list(levels))))
@@ -466,31 +469,30 @@ def finish_view(probed: Probed, low: LowFeatures, config: Config, whitening,
             row = ScaleRow(s=s_, ratio=float("nan"), points=len(detected[n].keypoints), initial=0,
                            kept=0, inliers=0, outlier_pct=100.0, skipped=n in probed.usable)
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
-        step()
+        tick()
     return outcomes
 
 
 
 
-def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo, meter: Meter,
+def run_step(search: Search, step: Step,
              searches: int) -> Tuple[List[Attempt], StepRecord, float]:
     """Run one step of the plan: probe its views, match the promising ones in full, decide;
     (attempts, record, seconds).
 
-    ``memo`` holds what earlier steps computed on the same images; ``searches`` counts
+    ``search.memo`` holds what earlier steps computed on the same images; ``searches`` counts
     the views probed by earlier steps (the a-contrario test counts them all).
     """
     t0 = time.perf_counter()
-    cfg = replace(config, scales=step.scales)
+    meter = search.meter
     start = meter.done
     if step.side == "coarser":
-        candidates = probe_coarser_views(step, work, cfg, whitening, memo, meter)
+        candidates = probe_coarser_views(search, step)
     else:
-        candidates = probe_finer_views(step, work, cfg, whitening, memo, meter)
+        candidates = probe_finer_views(search, step)
     if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
-        memo.plain[step.direction] = candidates[0][0]
-    attempts = match_chosen(step, candidates, work, cfg, whitening, memo, meter,
-                            searches + len(candidates))
+        search.memo.plain[step.direction] = candidates[0][0]
+    attempts = match_chosen(search, step, candidates, searches + len(candidates))
     meter.tick(start + step.cost - meter.done)  # the views the probe left out
     record = StepRecord(step.direction, step.view_pass, len(candidates), len(attempts),
                         probe_best([p.score for p, _, _ in candidates]),
@@ -503,12 +505,12 @@ def run_step(step: Step, work: WorkImages, config: Config, whitening, memo: Memo
 Candidate = Tuple["Probed", LowFeatures, Optional[View]]
 
 
-def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
-                      meter: Meter) -> List[Candidate]:
+def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     """Detect and probe each view of the finer image (at every scale) against the coarser
     image, described once per direction (``memo.coarser``)."""
-    lo_img, hi_img = work.coarser_finer(step.direction)
-    lo_valid, hi_valid = work.valid(step.direction)
+    cfg, memo, tick = search.config, search.memo, search.meter.tick
+    lo_img, hi_img = search.work.coarser_finer(step.direction)
+    lo_valid, hi_valid = search.work.valid(step.direction)
     probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
@@ -519,80 +521,83 @@ def probe_finer_views(step: Step, work: WorkImages, cfg: Config, whitening, memo
 
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, cfg.views, hi_valid)
-        return score_view(view, *detect_view(view, cfg, whitening, meter.tick, known,
+        return score_view(view, *detect_view(view, search, step.scales, tick, known,
                                              memo.contrast(hi_img, cfg.harris), every),
-                          coarser[step.direction], cfg)
+                          coarser[step.direction], search)
 
     def first_view(view: View):
         contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
-        return detect_view(view, cfg, whitening, meter.tick, known, contrast, every, grads)
+        return detect_view(view, search, step.scales, tick, known, contrast, every, grads)
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
         view = tilt_view(hi_img, *keys[0], cfg.views, hi_valid)
         coarser[step.direction], detected = thread_map(lambda job: job(), [
-            lambda: describe_low(lo_img, cfg, whitening, *memo.measured(lo_img, cfg.harris_low),
+            lambda: describe_low(lo_img, search, *memo.measured(lo_img, cfg.harris_low),
                                  distance_inside(lo_valid)),
             lambda: first_view(view)])
-        probed.append(score_view(view, *detected, coarser[step.direction], cfg))
+        probed.append(score_view(view, *detected, coarser[step.direction], search))
         keys = keys[1:]
     probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
     if every > 1:  # the views whose probe of some scales scores best are probed at them all
         top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
-        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], cfg,
-                                                   whitening, memo.contrast(hi_img, cfg.harris)),
+        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], search,
+                                                   step.scales,
+                                                   memo.contrast(hi_img, cfg.harris)),
                           top)
         for k, p in zip(top, done):
             probed[k] = p
     return [(p, coarser[step.direction], None) for p in probed]
 
 
-def describe_coarser_view(view: View, config: Config, whitening,
+def describe_coarser_view(view: View, search: Search,
                           contrast: Optional[Contrast]) -> LowFeatures:
     """A view of the coarser image described as the coarser image is (at s = 1,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
     image's own (the detector adapts to it as for the image itself)."""
+    config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
     kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
                          config.views.edge_margin_px)
-    return LowFeatures(view.image, _describe(level, kp, config, whitening), kp)
+    return LowFeatures(view.image, search.mode.describe(level, kp), kp)
 
 
-def plain_probed(direction: Direction, work: WorkImages, cfg: Config, whitening,
-                 memo: Memo) -> Probed:
-    """The finer image of ``direction`` detected at every scale, as its pass 0 did (kept in
-    ``memo.plain``; detected here when that step did not run, its score unset)."""
+def plain_probed(search: Search, step: Step) -> Probed:
+    """The finer image of ``step.direction`` detected at every scale of ``step``, as its pass 0
+    did (kept in ``memo.plain``; detected here when that step did not run, its score unset)."""
+    memo, direction = search.memo, step.direction
     if direction not in memo.plain:
-        hi_img = direction.coarser_finer(work.low, work.high)[1]
-        view = identity_view(hi_img, work.valid(direction)[1])
-        detected, probing = detect_view(view, cfg, whitening, contrast=memo.contrast(
-            hi_img, cfg.harris), known=memo.coarser.get(direction.other))
+        hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
+        view = identity_view(hi_img, search.work.valid(direction)[1])
+        detected, probing = detect_view(view, search, step.scales, contrast=memo.contrast(
+            hi_img, search.config.harris), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
 
-def probe_coarser_views(step: Step, work: WorkImages, cfg: Config, whitening, memo: Memo,
-                        meter: Meter) -> List[Candidate]:
+def probe_coarser_views(search: Search, step: Step) -> List[Candidate]:
     """Detect each view of the coarser image once (s = 1) and probe the finer image's own
     scales (detected by pass 0) against it: a view of the coarser image costs one detection,
     where a view of the finer image costs one per scale."""
+    work = search.work
     lo_img = step.direction.coarser_finer(work.low, work.high)[0]
-    plain = plain_probed(step.direction, work, cfg, whitening, memo)
-    contrast = memo.contrast(lo_img, cfg.harris_low)
+    plain = plain_probed(search, step)
+    contrast = search.memo.contrast(lo_img, search.config.harris_low)
 
     def probe(key) -> Candidate:
-        view = tilt_view(lo_img, *key, cfg.views, work.valid(step.direction)[0])
-        feats = describe_coarser_view(view, cfg, whitening, contrast)
-        meter.tick()
-        return score_view(plain.view, plain.detected, plain.probing, feats, cfg), feats, view
+        view = tilt_view(lo_img, *key, search.config.views, work.valid(step.direction)[0])
+        feats = describe_coarser_view(view, search, contrast)
+        search.meter.tick()
+        return score_view(plain.view, plain.detected, plain.probing, feats, search), feats, view
 
     return thread_map(probe, list(step.views))
 
 
-def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, cfg: Config,
-                 whitening, memo: Memo, meter: Meter, searches: int) -> List[Attempt]:
+def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
+                 searches: int) -> List[Attempt]:
     """Match in full the views the probe finds promising (of a pass of views: the
     ``step.full_searches`` best, scoring at least ``views.min_probe_score``), and decide each."""
+    work, cfg, mode = search.work, search.config, search.mode
     hi_img = step.direction.coarser_finer(work.low, work.high)[1]
     chosen = sorted(candidates, key=lambda c: -c[0].score)
     if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
@@ -600,9 +605,9 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
                   if c[0].score >= cfg.views.min_probe_score]
     attempts: List[Attempt] = []
     for p, low_feats, coarser_view in chosen:
-        p = complete_probe(p, low_feats, cfg, whitening,  # done unless a tie
-                           memo.contrast(hi_img, cfg.harris))
-        outcomes = tuple(finish_view(p, low_feats, cfg, whitening, meter.tick))
+        p = complete_probe(p, low_feats, search, step.scales,  # done unless a tie
+                           search.memo.contrast(hi_img, cfg.harris))
+        outcomes = tuple(finish_view(p, low_feats, search, step.scales, search.meter.tick))
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
                          else work.valid(step.direction)[0])
@@ -610,10 +615,13 @@ def match_chosen(step: Step, candidates: Sequence[Candidate], work: WorkImages, 
         def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
             return look_again(t, outcome.described, low_feats.described,
                               with_nan(view.image, valid_in(view)),
-                              with_nan(low_feats.image, valid), cfg)
+                              with_nan(low_feats.image, valid), model=cfg.model,
+                              guided=mode.guided, ransac=cfg.ransac, pixel=cfg.pixel)
 
-        verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg,
-                         searches=searches, shown_scale=shown_scale(work, step.direction),
+        verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
+                         model=cfg.model, ransac=cfg.ransac, orientation=mode.orientation,
+                         seed=cfg.seed, searches=searches,
+                         shown_scale=shown_scale(work, step.direction),
                          look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):
@@ -625,13 +633,16 @@ def final_fit(attempt: Attempt, config: Config):
     """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
-    fit = refit_in_high(view, attempt.verdict, best, config, coarser)
-    fit = richer_model(fit, view, best, config)  # a fit through a coarser view is affine already
-    fit = pooled_refit(fit, view, attempt.outcomes, config, coarser)
-    return union_homography(fit, view, attempt.outcomes, config, coarser)
+    ransac, seed = config.ransac, config.seed
+    fit = refit_in_high(view, attempt.verdict, best, config.model, ransac, seed, coarser)
+    # a fit through a coarser view is affine already
+    fit = richer_model(fit, view, best, config.model_check, ransac, seed)
+    fit = pooled_refit(fit, view, attempt.outcomes, ransac, coarser)
+    return union_homography(fit, view, attempt.outcomes, config.model_check, config.model,
+                            ransac, seed, coarser)
 
 
-def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
+def best_fitting(search: Search, attempts: Sequence[Attempt]):
     """(winner, its final fit, its pixel check): the matched attempt to report, or
     (None, None, None); the pixel check is None unless several were compared.
 
@@ -645,6 +656,7 @@ def best_fitting(attempts: Sequence[Attempt], config: Config, work: WorkImages):
     at log10 NFA -43, 48 px off, beat the plain similarity of 11 inliers that was right; its
     pixels: ZNCC 0.963 against 0.996.
     """
+    config, work = search.config, search.work
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)
@@ -672,68 +684,91 @@ def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
 
 
 def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction: Direction,
-                       test: str, evidence: Evidence, config: Config) -> Rejected:
+                       test: str, log10_nfa: float, figures_: dict) -> Rejected:
     """A refused transform (finer working px -> coarser working px, found in ``direction``) as
-    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``)."""
+    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``);
+    ``figures_``: the refusing test's figures, as the test saw them (at working size)."""
     t, inliers, swapped = finer_to_coarser(np.asarray(t, np.float64), inliers,
                                            direction is Direction.SWAPPED)
-    return Rejected(t, model, inliers, evidence.log10_nfa, test,
-                    figures(test, evidence, config.decision),
+    return Rejected(t, model, inliers, log10_nfa, test, figures_,
                     Direction.SWAPPED if swapped else Direction.GIVEN)
 
 
-def build_result(attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
-                 plan: Sequence[Step], stopped: str, config: Config, covariance_used: str,
-                 timings: Dict[str, float], work: WorkImages) -> MatchResult:
-    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next).
+def evidence_of(shown: Attempt, records: Sequence[StepRecord], plan: Sequence[Step],
+                stopped: str, final: Optional[FinalFigures], work: WorkImages) -> Evidence:
+    """The one :class:`Evidence` of a search's answer, assembled here from its parts: the
+    decision's figures for the search ``shown`` (:func:`stages.decision.decide`), the pixel
+    tests of the final transform when it faced them (``final``,
+    :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
+    the probe, the steps), and the working size's: its factors, and the implied ratio and the
+    footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``).
+    """
+    decided = shown.verdict.evidence
+    direction = shown.step.direction
+    g = shown_scale(work, direction)
+    f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
+    return replace(decided, **(asdict(final) if final is not None else {}),
+                   searches=sum(r.views for r in records), search_order=direction,
+                   view_tilt=shown.shown_view.tilt,
+                   view_longitude_deg=shown.shown_view.longitude_deg,
+                   view_of=shown.step.side, probe_score=shown.probe,
+                   probe_best=probe_best([r.probe_best for r in records]),
+                   steps_run=len(records), steps_planned=len(plan), stopped=stopped,
+                   low_working_factor=work.f_low, high_working_factor=work.f_high,
+                   implied_ratio=decided.implied_ratio * g,
+                   footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
+
+
+def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
+                 plan: Sequence[Step], stopped: str, timings: Dict[str, float]) -> MatchResult:
+    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next),
+    its evidence assembled once (:func:`evidence_of`).
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
     shows the first search made (the finer image itself, in the given order), with its reason.
     The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
     repeated structure is refused there.
     """
-    winner, final, near = best_fitting(attempts, config, work)
+    config, work = search.config, search.work
+    winner, fit, near = best_fitting(search, attempts)
     refused = best_refused(attempts)
     shown = winner or refused or attempts[0]
-    searches = sum(r.views for r in records)
-    evidence = replace(shown.verdict.evidence, searches=searches,
-                       search_order=shown.step.direction, view_tilt=shown.shown_view.tilt,
-                       view_longitude_deg=shown.shown_view.longitude_deg,
-                       view_of=shown.step.side, probe_score=shown.probe,
-                       probe_best=probe_best([r.probe_best for r in records]),
-                       steps_run=len(records), steps_planned=len(plan), stopped=stopped)
-    common = dict(model=config.model, best_scale=shown.verdict.best_scale,
+    verdict = shown.verdict
+    common = dict(model=config.model, best_scale=verdict.best_scale,
                   scales=tuple(o.row for o in shown.outcomes), timings=timings,
-                  config=config, evidence=evidence, search=records,
-                  covariance_used=covariance_used)
+                  config=config, search=records, covariance_used=search.mode.covariance_used)
     if winner is None:
+        searches = sum(r.views for r in records)
         more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
         if stopped == "time budget":
             more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
                      f"{len(records)} of {len(plan)} steps")
-        verdict = shown.verdict
         rejected = None if refused is None else rejected_candidate(
             verdict.candidate, verdict.candidate_inliers, config.model, refused.step.direction,
-            verdict.test, evidence, config)
+            verdict.test, verdict.evidence.log10_nfa,
+            figures(verdict.test, verdict.evidence, config.decision))
         return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
+                           evidence=evidence_of(shown, records, plan, stopped, None, work),
                            **common)
-    t, inliers, model = final
+    t, inliers, model = fit
     has_ratio = model_of(model).has_ratio
+    final = None
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        common["evidence"], reason, test = final_checks(coarse, fine, t, evidence,
-                                                        config.decision, near,
-                                                        vouched=inliers[:, :2],
-                                                        pixel=config.pixel)
+        final, reason, test = final_checks(coarse, fine, t, verdict.evidence.log10_nfa,
+                                           config.decision, near, vouched=inliers[:, :2],
+                                           pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
-                t, inliers, model, winner.step.direction, test, common["evidence"], config),
-                **common)
+                t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
+                figures(test, verdict.evidence, config.decision, final)),
+                evidence=evidence_of(shown, records, plan, stopped, final, work), **common)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
         math.nan, math.nan, (math.nan, math.nan))
     return MatchResult(**dict(common, model=model), matched=True, transform=t,
                        resolution_ratio=ratio, rotation_deg=angle, translation=tr,
-                       inliers=inliers,
+                       inliers=inliers, evidence=evidence_of(shown, records, plan, stopped,
+                                                             final, work),
                        order=Direction.SWAPPED if swapped else Direction.GIVEN)

@@ -45,9 +45,9 @@ class Direction(str, enum.Enum):
 class Evidence:
     """The figures behind the decision (JSON ``evidence``); NaN where a figure was not reached.
 
-    The decision (:mod:`scalematch.stages.decision`) fills the first group from the best
-    transform of one search; the search (:mod:`scalematch.pipeline`) the second; the working
-    size (:mod:`scalematch.working`) the last.
+    Assembled once (:func:`scalematch.pipeline.evidence_of`) from the decision's figures for
+    the best transform of one search (:mod:`scalematch.stages.decision`), the final transform's
+    pixel tests, the search's own figures and the working size's.
     """
 
     inliers: int = 0  #: distinct inliers of the best transform

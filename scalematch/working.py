@@ -197,13 +197,8 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
         return result
     g = shown_scale(work, result.evidence.search_order)
     rows = tuple(replace(r, s=r.s * g, ratio=r.ratio * g) for r in result.scales)
-    f_coarser = f_low if result.evidence.search_order is Direction.GIVEN else f_high
-    ev = result.evidence  # its figures in pixels too: the ratio as the table's, the area
-    evidence = replace(ev, low_working_factor=f_low, high_working_factor=f_high,
-                       implied_ratio=ev.implied_ratio * g,
-                       footprint_area_px=ev.footprint_area_px * f_coarser ** 2)
-    out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config,
-                  evidence=evidence)
+    # the evidence is in these pixels already (pipeline.evidence_of)
+    out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config)
     if not result.matched:
         return _rejected_mapped(out, _to_original(f_low), _to_original(f_high), turn=True)
     swapped = result.order == Direction.SWAPPED

@@ -488,22 +488,25 @@ def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_
     """ViewParams.probe_every = 2: a view's probe detects every other scale; completing it
     (``complete_probe``: the views whose probe scores best) gives what a probe of every scale
     gives: the same points and probe descriptors at each scale, the same scores."""
+    from scalematch.modes import mode_of
     from scalematch.stages.views import tilt_view
+    from scalematch.working import at_working_size
 
     config = Config()
     pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
-    whitening = None  # the default mode's gradient descriptors are not whitened
-    low = pipeline.describe_low(pair.low, config, whitening,
+    search = pipeline.Search(at_working_size(pair.low, pair.high, config), config,
+                             mode_of(config), pipeline.Memo(), pipeline.Meter(None, 0))
+    low = pipeline.describe_low(pair.low, search,
                                 pipeline.image_contrast(pair.low, config.harris_low.sigma))
     contrast = pipeline.image_contrast(pair.high, config.harris.sigma)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
-    every = pipeline.score_view(view, *pipeline.detect_view(view, config, whitening,
-                                                            contrast=contrast), low, config)
-    sampled = pipeline.score_view(view, *pipeline.detect_view(view, config, whitening,
+    every = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
+                                                            contrast=contrast), low, search)
+    sampled = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
                                                               contrast=contrast, every=2),
-                                  low, config)
+                                  low, search)
     assert [d.pending for d in sampled.detected][:4] == [False, True, False, True]
-    done = pipeline.complete_probe(sampled, low, config, whitening, contrast)
+    done = pipeline.complete_probe(sampled, low, search, config.scales, contrast)
     assert done.run == every.run and done.score == every.score
     for a, b in zip(done.detected, every.detected):
         assert np.array_equal(a.keypoints.xy, b.keypoints.xy)

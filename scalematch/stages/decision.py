@@ -38,9 +38,10 @@ import numpy as np
 from ..checks import in_range
 from ..geometry import apply, footprint, grid
 from ..result import Evidence
+from .constraints import OrientationParams
 from .descriptors import Described
-from .estimator import model_of
-from .guided import grow
+from .estimator import RansacParams, model_of
+from .guided import GuidedParams, grow
 from .pixelcheck import PixelParams, pixel_check, uniqueness
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
                      Second)
@@ -218,13 +219,29 @@ TESTS = {
 }
 
 
-def figures(test: str, evidence: Evidence, params: DecisionParams) -> dict:
-    """The figures of ``test`` (:data:`TESTS`): name -> value, from the evidence or the params.
+@dataclass(frozen=True)
+class FinalFigures:
+    """The pixel tests of a match's final transform (:func:`final_checks`): the figures of
+    the same names in :class:`Evidence`."""
+
+    unique_claimed: float  #: ZNCC of the finer image at the claimed placement
+    unique_elsewhere: float  #: the best ZNCC anywhere half a footprint away
+    unique_ratio: float  #: misfit elsewhere over misfit at the claim
+    final_ncc: float  #: ZNCC under the final transform
+    final_margin: float  #: how much better than the nearby wrong placements
+    judged_by: str  #: "geometry" or "pixels": what judged the match unique
+
+
+def figures(test: str, evidence: Evidence, params: DecisionParams,
+            final: Optional[FinalFigures] = None) -> dict:
+    """The figures of ``test`` (:data:`TESTS`): name -> value, from the final transform's
+    pixel tests (``final``, when it faced them), the evidence or the params.
 
     >>> figures("chance", Evidence(inliers=5, candidates=40, log10_nfa=-1.0), DecisionParams())
     {'inliers': 5, 'candidates': 40, 'log10_nfa': -1.0, 'max_log_nfa': -2.0}
     """
-    return {name: getattr(evidence, name) if hasattr(evidence, name) else getattr(params, name)
+    sources = ((final,) if final is not None else ()) + (evidence, params)
+    return {name: getattr(next(s for s in sources if hasattr(s, name)), name)
             for name in TESTS.get(test, ())}
 
 
@@ -305,18 +322,19 @@ class Look:
 
 
 def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.ndarray,
-               low_image: np.ndarray, config) -> Look:
+               low_image: np.ndarray, *, model: str, guided: GuidedParams, ransac: RansacParams,
+               pixel: PixelParams) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
     the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
 
     ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
-    coarser image's points; the images at the search's working size.
+    coarser image's points; the images at the search's working size. ``model``: the one
+    searched for; ``guided``: the growth's parameters (``use_orientation`` off for descriptors
+    without one: the paper's jets); ``ransac``: the fit's; ``pixel``: the pixel check's.
     """
-    guided = config.guided if config.mode == "default" else replace(config.guided,
-                                                                     use_orientation=False)
-    growth = grow(t, high, low, config.model, guided, config.ransac)
+    growth = grow(t, high, low, model, guided, ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
-    check = pixel_check(low_image, high_image, grown, config.pixel)
+    check = pixel_check(low_image, high_image, grown, pixel)
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
@@ -359,11 +377,18 @@ def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> b
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
+def decide(outcomes: Sequence, low_shape, high_shape, params: DecisionParams, *, model: str,
+           ransac: RansacParams, orientation: Optional[OrientationParams], seed: int,
+           searches: int = 1,
            shown_scale: float = 1.0,
            look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
+    ``params``: the decision's thresholds; ``model``: the model searched for; ``ransac``: the
+    robust fit's parameters (its threshold sets the a-contrario test's tolerance); ``seed``: the
+    one seed (:func:`scalematch.stages.rivals.second_transform`, ``off_plane``).
+    ``orientation``: the rotation groups of oriented descriptors, which make a chance candidate
+    less likely to fit and multiply the tests; None for descriptors without an orientation.
     ``searches`` is the number of whole searches made so far, this one included (each order
     and each simulated view is one): it multiplies the number of tests of the a-contrario count.
     ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
@@ -374,8 +399,6 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     ``few_min_inliers`` or more (:func:`pixels_confirm`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
     """
-    params: DecisionParams = config.decision
-    model = config.model
     spec = model_of(model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
@@ -405,11 +428,11 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     k = best.row.inliers
     n = max(best.candidates, k)
     m = spec.min_sample
-    oriented = config.mode == "default"
-    p = chance_probability(config.ransac.threshold_px, low_shape, model, oriented,
-                           config.orientation.tolerance_deg)
+    oriented = orientation is not None
+    p = chance_probability(ransac.threshold_px, low_shape, model, oriented,
+                           orientation.tolerance_deg if oriented else 0.0)
     tests = max(int(searches), 1) * len([o for o in outcomes if o.candidates > 0]) * max(
-        n - m, 1) * (config.orientation.max_peaks if oriented else 1)
+        n - m, 1) * (orientation.max_peaks if oriented else 1)
     lnfa = log10_nfa(n, k, m, p, tests)
     inl = est.inliers
     pairs = np.hstack([best.src[inl], best.dst[inl]])
@@ -470,9 +493,9 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
         return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
                   f"{k} inliers)", "agreeing scales")
     rival = second_transform(best.src, best.dst, inl, est.transform, high_shape,
-                             config.ransac, config.seed)
+                             ransac, seed)
     rival_nfa = log10_nfa(n, rival.inliers, m, p, tests)
-    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, config.seed)
+    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, seed)
     evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
                        second_gap_px=rival.gap_px, parallax_points=parallax,
                        parallax=parallax >= max(params.parallax_min_points,
@@ -484,11 +507,12 @@ def decide(outcomes: Sequence, low_shape, high_shape, config, searches: int = 1,
     return Decision(True, "", best.row.s, t, pairs, evidence)
 
 
-def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence: Evidence,
+def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, log10_nfa: float,
                  params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None,
                  pixel: PixelParams = PixelParams()):
-    """(evidence, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
-    coarser px, refit), why it is refused and by which test (:data:`TESTS`; "" when it is not).
+    """(figures, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
+    coarser px, refit, at log10 NFA ``log10_nfa``) as :class:`FinalFigures`, why it is refused
+    and by which test (:data:`TESTS`; "" when it is not).
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
@@ -503,7 +527,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
     Geometry first: a transform beyond chance by ``max_log_nfa_geometry`` (and with no second
     transform of comparable support, which :func:`decide` refuses) is unique by its geometry;
     its pixel figures are recorded, not decisive: an occluder, parallax or relighting lowers
-    them where the points prove the map (``evidence.judged_by`` says which test decided).
+    them where the points prove the map (``judged_by`` says which test decided).
     ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
     ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
@@ -513,19 +537,18 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, evidence
             lambda: pixel_check(coarser, finer, t, pixel)])
     else:
         u = uniqueness(coarser, finer, t, pixel, vouched=vouched)
-    geometric = evidence.log10_nfa <= params.max_log_nfa_geometry
-    evidence = replace(evidence, unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
-                       unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
-                       judged_by="geometry" if geometric else "pixels")
+    geometric = log10_nfa <= params.max_log_nfa_geometry
+    final = FinalFigures(unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
+                         unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
+                         judged_by="geometry" if geometric else "pixels")
     if geometric:
-        return evidence, "", ""
+        return final, "", ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        return evidence, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
-                          f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
-                          f"the transform found, log10 NFA {evidence.log10_nfa:.1f})"), \
-            "uniqueness"
+        return final, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
+                       f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
+                       f"the transform found, log10 NFA {log10_nfa:.1f})"), "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
-        return evidence, (f"the pixels do not confirm it: the transform found fits the low "
-                          f"image no better than nearby wrong placements (ZNCC margin "
-                          f"{near.margin:+.2f})"), "pixels"
-    return evidence, "", ""
+        return final, (f"the pixels do not confirm it: the transform found fits the low "
+                       f"image no better than nearby wrong placements (ZNCC margin "
+                       f"{near.margin:+.2f})"), "pixels"
+    return final, "", ""

@@ -11,16 +11,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import List, Sequence
+from typing import List, Optional, Sequence
 
 import numpy as np
 
 from ..checks import in_range
 from ..geometry import similarity_parts
-from .constraints import orientation_groups
+from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
-from .estimator import estimate
-from .matcher import Candidates, match_descriptors
+from .estimator import RansacParams, estimate
+from .matcher import Candidates, MatcherParams, match_descriptors
 
 
 @dataclass(frozen=True)
@@ -41,45 +41,53 @@ class ProbeParams:
             in_range("probe", name, getattr(self, name), lo=1, integer=True)
 
 
-def probe_scores(highs: Sequence[Described], low: Described, config) -> List[float]:
+def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams, *,
+                 matcher: MatcherParams, orientation: Optional[OrientationParams],
+                 ransac: RansacParams, scale_agreement: float, seed: int) -> List[float]:
     """How promising each scale looks from the initial matches of its strongest points alone.
 
     Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
-    paper mode a scale's score is their number of candidate matches. In the default mode it is
-    the number of inliers of a quick similarity fit to the candidates in the dominant rotation
-    peak, counted only when the fit's ratio agrees with the scale: rotation alone cannot rank
-    scales where the scene's edges share a few directions (facades), geometry can. One
-    nearest-neighbour search serves every scale (each candidate depends on its own row only;
-    one large product is faster than many small ones).
+    paper mode (``orientation`` None: descriptors without an orientation) a scale's score is
+    their number of candidate matches. In the default mode it is the number of inliers of a
+    quick similarity fit to the candidates in the dominant rotation peak, counted only when the
+    fit's ratio agrees with the scale: rotation alone cannot rank scales where the scene's edges
+    share a few directions (facades), geometry can. One nearest-neighbour search serves every
+    scale (each candidate depends on its own row only; one large product is faster than many
+    small ones).
+
+    ``matcher``: the candidates' parameters; ``ransac``: the quick fit's (with
+    ``params.ransac_iters`` iterations); ``scale_agreement``: how far a fit's ratio may be from
+    its scale (``DecisionParams.scale_agreement``); ``seed``: the one seed.
     """
     if not highs:
         return []
-    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, config.matcher)
+    cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, matcher)
     bounds = np.cumsum([0] + [len(h) for h in highs])
     out = []
     for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
         rows = (cand.i >= lo) & (cand.i < hi)
         part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
-        out.append(_score(h, low, part, config))
+        out.append(_score(h, low, part, orientation,
+                          replace(ransac, max_iters=params.ransac_iters), scale_agreement, seed))
     return out
 
 
-def _score(high: Described, low: Described, cand: Candidates, config) -> float:
+def _score(high: Described, low: Described, cand: Candidates,
+           orientation: Optional[OrientationParams], quick: RansacParams, scale_agreement: float,
+           seed: int) -> float:
     if len(cand) == 0:
         return 0.0
-    if config.mode == "paper":
+    if orientation is None:  # nothing to group the candidates by: their number
         return float(len(cand))
-    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], config.orientation)
+    groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], orientation)
     best = 0.0
     for mask in groups:
         est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
-                       replace(config.ransac, max_iters=config.probe.ransac_iters),
-                       seed=config.seed)
+                       quick, seed=seed)
         if est.transform is None:
             continue
         ratio = similarity_parts(est.transform)[0]
-        if math.isfinite(ratio) and abs(math.log(ratio / high.s)) <= math.log(
-                config.decision.scale_agreement):
+        if math.isfinite(ratio) and abs(math.log(ratio / high.s)) <= math.log(scale_agreement):
             best = max(best, float(est.n_inliers))
     return best
 

@@ -29,7 +29,7 @@ import numpy as np
 from ..checks import in_range, one_of
 from ..geometry import compose, invert
 from .decision import Decision, folded
-from .estimator import MIN_SAMPLE, MODELS, estimate, model_of, refine, residuals
+from .estimator import MIN_SAMPLE, MODELS, RansacParams, estimate, model_of, refine, residuals
 from .matcher import distinct_pairs
 from .views import View, to_high
 
@@ -82,26 +82,27 @@ def _back(view: Optional[View], xy: np.ndarray) -> np.ndarray:
     return xy if view is None else to_high(view, xy)
 
 
-def refit_in_high(view: View, verdict: Decision, best, config,
-                  coarser: Optional[View] = None) -> Refit:
+def refit_in_high(view: View, verdict: Decision, best, asked: str, ransac: RansacParams,
+                  seed: int, coarser: Optional[View] = None) -> Refit:
     """The winning view's match in the images' own pixels.
 
     The view's similarity composed with the views' compressions is an affine map; it is refit
     on the inliers mapped back to the images (an affine map, or a homography when that is
-    the model asked for), so the answer is exact rather than limited to the sampled tilts.
+    the model asked for, ``asked``), so the answer is exact rather than limited to the sampled
+    tilts. ``ransac``, ``seed``: the robust fit's parameters and the one seed.
     """
     if view.is_identity and coarser is None:
-        return verdict.transform, verdict.inliers, config.model
+        return verdict.transform, verdict.inliers, asked
     src = to_high(view, verdict.inliers[:, :2])
     dst = _back(coarser, verdict.inliers[:, 2:4])
-    model = "homography" if config.model == "homography" else "affine"
+    model = "homography" if asked == "homography" else "affine"
     # every candidate of the winning scale, not only the view's similarity inliers: the sampled
     # tilt differs from the true one, so the similarity holds on part of the image only
     cand_src, cand_dst = to_high(view, best.src), _back(coarser, best.dst)
-    est = estimate(model, cand_src, cand_dst, config.ransac, seed=config.seed)
+    est = estimate(model, cand_src, cand_dst, ransac, seed=seed)
     if est.transform is not None and est.n_inliers >= len(src):
         return est.transform, np.hstack([cand_src[est.inliers], cand_dst[est.inliers]]), model
-    est = estimate(model, src, dst, config.ransac, seed=config.seed)
+    est = estimate(model, src, dst, ransac, seed=seed)
     if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
         composed = compose(verdict.transform, view.to_view)
         if coarser is not None:
@@ -111,20 +112,20 @@ def refit_in_high(view: View, verdict: Decision, best, config,
     return est.transform, np.hstack([src[inl], dst[inl]]), model
 
 
-def richer_model(fit: Refit, view: View, best, config) -> Refit:
+def richer_model(fit: Refit, view: View, best, check: ModelCheckParams, ransac: RansacParams,
+                 seed: int) -> Refit:
     """A richer model when the similarity explains too little of the winning scale.
 
-    The candidates of the winning scale are refit with each of ``config.model_check.models``;
+    The candidates of the winning scale are refit with each of ``check.models``;
     the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
     whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
     """
     t, inliers, model = fit
-    check = config.model_check
     if not check.enabled or model != "similarity" or not view.is_identity:
         return fit
     k = len(inliers)
     for richer in check.models:
-        est = estimate(richer, best.src, best.dst, config.ransac, seed=config.seed)
+        est = estimate(richer, best.src, best.dst, ransac, seed=seed)
         if est.transform is None or folded(est.transform, view.source_shape):
             continue
         if check.clearly_more(est.n_inliers, k):
@@ -144,7 +145,7 @@ def _pooled(view: View, outcomes: Sequence,
                           _back(coarser, np.vstack([o.dst for o in done])))
 
 
-def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config,
+def pooled_refit(fit: Refit, view: View, outcomes: Sequence, ransac: RansacParams,
                  coarser: Optional[View] = None) -> Refit:
     """``fit`` refined on the candidates of every scale matched in full.
 
@@ -159,16 +160,17 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, config,
     if pool is None:
         return fit
     src, dst = pool
-    before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
-    est = refine(model, t, src, dst, config.ransac)
+    before = int((residuals(model, t, src, dst) <= ransac.threshold_px).sum())
+    est = refine(model, t, src, dst, ransac)
     if est.n_inliers < before or folded(est.transform, view.source_shape):
         return fit
     keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
-        config.ransac.threshold_px
+        ransac.threshold_px
     return est.transform, inliers[keep], model
 
 
-def union_homography(fit: Refit, view: View, outcomes: Sequence, config,
+def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelCheckParams,
+                     asked: str, ransac: RansacParams, seed: int,
                      coarser: Optional[View] = None) -> Refit:
     """A homography fitted to the candidates of every scale matched in full, when it explains
     clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
@@ -179,22 +181,21 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, config,
     band of it whose local ratio is near that scale, and a similarity or an affine map fitted
     there holds on that band only: the pooled candidates of neighbouring scales cover the
     others, and a homography fitted to all of them holds on the whole. Only for a similarity
-    asked for with the model check on (``ModelCheckParams.union``) and a homography among its
-    models, as :func:`richer_model`.
+    asked for (``asked``: the model searched for) with the model check on
+    (``ModelCheckParams.union``) and a homography among its models, as :func:`richer_model`.
     """
     t, inliers, model = fit
-    check = config.model_check
-    if (not check.enabled or not check.union or config.model != "similarity"
+    if (not check.enabled or not check.union or asked != "similarity"
             or model == "homography" or "homography" not in check.models):
         return fit
     pool = _pooled(view, outcomes, coarser)
     if pool is None:
         return fit
     src, dst = pool
-    before = int((residuals(model, t, src, dst) <= config.ransac.threshold_px).sum())
+    before = int((residuals(model, t, src, dst) <= ransac.threshold_px).sum())
     if not check.clearly_more(len(src), before):
         return fit  # no homography could explain enough more: the fit is not tried (same answer)
-    est = estimate("homography", src, dst, config.ransac, seed=config.seed)
+    est = estimate("homography", src, dst, ransac, seed=seed)
     if est.transform is None or folded(est.transform, view.source_shape):
         return fit
     if check.clearly_more(est.n_inliers, before):

@@ -79,15 +79,22 @@ def _look(grown: int, margin: float):
     return look
 
 
+def _params(config):
+    """decide's parameters after the shapes, from a Config."""
+    return dict(params=config.decision, model=config.model, ransac=config.ransac,
+                orientation=config.orientation, seed=config.seed)
+
+
 def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good_one():
     from scalematch.config import Config
     from scalematch.stages.decision import decide
 
     t, outcomes = _outcomes(k=5, n=8)
     config = Config()
-    plain = decide(outcomes, (768, 1024), (480, 640), config)
+    plain = decide(outcomes, (768, 1024), (480, 640), **_params(config))
     assert not plain.matched and "too few inliers: 5" in plain.reason
-    good = decide(outcomes, (768, 1024), (480, 640), config, look=_look(grown=25, margin=0.3))
+    good = decide(outcomes, (768, 1024), (480, 640), **_params(config),
+                   look=_look(grown=25, margin=0.3))
     assert good.matched and good.evidence.grown_inliers == 25
     assert good.evidence.pixel_margin == 0.3 and good.inliers.shape == (25, 4)
 
@@ -99,11 +106,12 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     _, outcomes = _outcomes(k=5, n=8)
     config = Config()
     for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan"))):
-        verdict = decide(outcomes, (768, 1024), (480, 640), config, look=look)
+        verdict = decide(outcomes, (768, 1024), (480, 640), **_params(config), look=look)
         assert not verdict.matched and "pass the pixel check" in verdict.reason
     # three inliers are never enough, whatever the look says (the evidence is recorded)
     _, three = _outcomes(k=3, n=8)
-    verdict = decide(three, (768, 1024), (480, 640), config, look=_look(grown=40, margin=0.6))
+    verdict = decide(three, (768, 1024), (480, 640), **_params(config),
+                   look=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
 
 
@@ -114,7 +122,6 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     import cv2
 
     from scalematch.config import Config
-    from scalematch.result import Evidence
     from scalematch.stages.decision import final_checks
 
     params = Config().decision
@@ -122,12 +129,12 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)  # 4x finer
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
     unique = raccoon[170:350, 260:500]  # the place, and other (unrelated) texture around it
-    evidence, reason, _ = final_checks(unique, high, t, Evidence(), params)
-    assert reason == "" and evidence.unique_ratio > 3 * params.min_unique_ratio
+    final, reason, _ = final_checks(unique, high, t, math.inf, params)
+    assert reason == "" and final.unique_ratio > 3 * params.min_unique_ratio
     tiled = np.tile(base, (3, 3))  # the same structure nine times over
     t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
-    evidence, reason, _ = final_checks(tiled, high, t_tiled, Evidence(), params)
-    assert reason.startswith("ambiguous") and evidence.unique_ratio < params.min_unique_ratio
+    final, reason, _ = final_checks(tiled, high, t_tiled, math.inf, params)
+    assert reason.startswith("ambiguous") and final.unique_ratio < params.min_unique_ratio
 
 
 def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
@@ -141,7 +148,6 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
 
     from scalematch.config import Config
     from scalematch.geometry import compose
-    from scalematch.result import Evidence
     from scalematch.stages.decision import final_checks
 
     params = Config().decision
@@ -149,12 +155,12 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
     low = raccoon[170:350, 260:500]
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
-    evidence, reason, _ = final_checks(low, high, t, Evidence(), params)
-    assert reason == "" and evidence.final_margin > 0.3  # measured 0.6-0.7
+    final, reason, _ = final_checks(low, high, t, math.inf, params)
+    assert reason == "" and final.final_margin > 0.3  # measured 0.6-0.7
     turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)  # about the footprint's centre
     alone = replace(params, min_unique_ratio=0.0)
-    evidence, reason, _ = final_checks(low, high, compose(turn, t), Evidence(), alone)
-    assert evidence.final_margin < params.min_final_margin
+    final, reason, _ = final_checks(low, high, compose(turn, t), math.inf, alone)
+    assert final.final_margin < params.min_final_margin
     assert reason.startswith("the pixels do not confirm it"), reason
 
 
@@ -165,7 +171,8 @@ def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
     from scalematch.stages.decision import decide
 
     t, outcomes = _outcomes(k=5, n=8)
-    verdict = decide(outcomes, (768, 1024), (480, 640), Config(), look=_look(grown=0, margin=0.3))
+    verdict = decide(outcomes, (768, 1024), (480, 640), **_params(Config()),
+                     look=_look(grown=0, margin=0.3))
     assert verdict.matched and verdict.inliers.shape == (5, 4)
     assert np.allclose(verdict.transform, t)
 
@@ -221,13 +228,14 @@ def test_a_repeated_facade_shows_a_second_transform_and_is_refused_as_ambiguous(
     from scalematch.config import Config
     from scalematch.stages.decision import decide
 
-    verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), Config())
+    verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
     assert not verdict.matched and verdict.test == "repeated structure"
     assert "second transform" in verdict.reason and "repeated structure" in verdict.reason
     assert verdict.evidence.second_inliers == 40 and verdict.candidate is not None
     # the same support for a copy only a few px away is one scene fitted piecewise
-    near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), Config())
+    near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
     assert near.matched and near.evidence.second_inliers == 40
     # a copy with a fifth of the support is not comparable: the winner stands
-    weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640), Config())
+    weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640),
+                  **_params(Config()))
     assert weak.matched and weak.evidence.second_inliers == 12

@@ -35,6 +35,11 @@ def _outcomes(truth: np.ndarray, bands, n: int = 40, outliers: int = 10, seed: i
     return out
 
 
+def _union_args(config):
+    """union_homography's parameters after the outcomes, from a Config."""
+    return config.model_check, config.model, config.ransac, config.seed
+
+
 def _similarity_on(outcome, config):
     """The similarity the winning scale alone would give: fitted to its own band."""
     est = estimate("similarity", outcome.src, outcome.dst, config.ransac, seed=0)
@@ -55,7 +60,7 @@ def test_a_perspective_answer_becomes_the_homography_of_every_scale():
     fit = _similarity_on(outcomes[1], config)
     assert _grid_error(fit[0], PERSPECTIVE) > 10
     t, inliers, model = union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
-                                         config)
+                                         *_union_args(config))
     assert model == "homography" and len(inliers) >= 110
     assert _grid_error(t, PERSPECTIVE) < 0.1
 
@@ -67,7 +72,8 @@ def test_a_plain_zoom_answer_keeps_its_similarity():
     zoom = np.array([[0.25, -0.1, 300.0], [0.1, 0.25, 200.0], [0.0, 0.0, 1.0]])
     outcomes = _outcomes(zoom, [(0, 213), (213, 426), (426, 639)], seed=1)
     fit = _similarity_on(outcomes[1], config)
-    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes, config) is fit
+    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
+                            *_union_args(config)) is fit
 
 
 @pytest.mark.parametrize("config", [
@@ -78,7 +84,8 @@ def test_a_plain_zoom_answer_keeps_its_similarity():
 def test_the_union_is_only_tried_for_a_similarity_with_the_model_check(config):
     outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
     fit = _similarity_on(outcomes[1], Config())
-    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes, config) is fit
+    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
+                            *_union_args(config)) is fit
 
 
 def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
@@ -103,7 +110,7 @@ def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
     t_view = estimate("affine", src, dst, Config().ransac).transform
     verdict = Decision(True, "", 1.0, t_view, np.hstack([src, dst]))
     t, inliers, model = refit_in_high(identity_view(np.zeros((200, 200), np.float32)), verdict,
-                                      best, Config(), coarser=view)
+                                      best, "similarity", Config().ransac, 0, coarser=view)
     assert model == "affine" and len(inliers) == 40
     assert np.abs(apply(t, src) - apply(truth, src)).max() < 1e-3
     assert np.abs(inliers[:, 2:4] - apply(truth, src)).max() < 1e-3
