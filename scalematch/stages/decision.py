@@ -35,7 +35,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .constraints import OrientationParams
@@ -161,30 +161,31 @@ class DecisionParams:
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
-            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
         for name in ("max_log_nfa", "max_log_nfa_alone"):
             in_range("decision", name, getattr(self, name))
-        in_range("decision", "scale_agreement", self.scale_agreement, lo=1)
-        in_range("decision", "min_inside", self.min_inside, lo=0, hi=1)
-        in_range("decision", "agreement_px", self.agreement_px, lo=0, lo_open=True)
-        in_range("decision", "min_area_px", self.min_area_px, lo=0)
+        in_range("decision", "scale_agreement", self.scale_agreement, Bounds(lo=1))
+        in_range("decision", "min_inside", self.min_inside, Bounds(lo=0, hi=1))
+        in_range("decision", "agreement_px", self.agreement_px, Bounds(lo=0, lo_open=True))
+        in_range("decision", "min_area_px", self.min_area_px, Bounds(lo=0))
         for name in ("look_min_inliers", "few_min_inliers", "few_min_grown"):
-            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
-        in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
-        in_range("decision", "few_strong_margin", self.few_strong_margin, lo=-2, hi=2)
+        in_range("decision", "few_min_margin", self.few_min_margin, Bounds(lo=-2, hi=2))
+        in_range("decision", "few_strong_margin", self.few_strong_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
-        in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
-        in_range("decision", "min_final_margin", self.min_final_margin, lo=-2, hi=2)
+        in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
+        in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
-        in_range("decision", "second_share", self.second_share, lo=0)
-        in_range("decision", "second_scale_factor", self.second_scale_factor, lo=1)
-        in_range("decision", "second_angle_deg", self.second_angle_deg, lo=0)
-        in_range("decision", "second_min_shift", self.second_min_shift, lo=0)
-        in_range("decision", "parallax_min_points", self.parallax_min_points, lo=0, integer=True)
-        in_range("decision", "parallax_share", self.parallax_share, lo=0)
-        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px, lo=0,
-                 lo_open=True)
+        in_range("decision", "second_share", self.second_share, Bounds(lo=0))
+        in_range("decision", "second_scale_factor", self.second_scale_factor, Bounds(lo=1))
+        in_range("decision", "second_angle_deg", self.second_angle_deg, Bounds(lo=0))
+        in_range("decision", "second_min_shift", self.second_min_shift, Bounds(lo=0))
+        in_range("decision", "parallax_min_points", self.parallax_min_points, Bounds(lo=0),
+                 integer=True)
+        in_range("decision", "parallax_share", self.parallax_share, Bounds(lo=0))
+        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
+                 Bounds(lo=0, lo_open=True))
 
 
 @dataclass(frozen=True)

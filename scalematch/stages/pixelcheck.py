@@ -39,7 +39,7 @@ from typing import NamedTuple, Optional, Tuple, Union
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
 from .scalespace import CAMERA_BLUR_PX
 
@@ -86,12 +86,12 @@ class PixelParams:
 
     def __post_init__(self) -> None:
         for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
-            in_range("pixel", name, getattr(self, name), lo=0, lo_open=True)
-        in_range("pixel", "rotation_deg", self.rotation_deg, lo=0, hi=180)
-        in_range("pixel", "scale_step", self.scale_step, lo=1)
-        in_range("pixel", "min_overlap_px", self.min_overlap_px, lo=1, integer=True)
-        in_range("pixel", "min_std", self.min_std, lo=0)
-        in_range("pixel", "edge_px", self.edge_px, lo=0, integer=True)
+            in_range("pixel", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+        in_range("pixel", "rotation_deg", self.rotation_deg, Bounds(lo=0, hi=180))
+        in_range("pixel", "scale_step", self.scale_step, Bounds(lo=1))
+        in_range("pixel", "min_overlap_px", self.min_overlap_px, Bounds(lo=1), integer=True)
+        in_range("pixel", "min_std", self.min_std, Bounds(lo=0))
+        in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
 
 
 @dataclass(frozen=True)

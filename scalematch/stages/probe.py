@@ -15,7 +15,7 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import similarity_parts
 from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
@@ -38,7 +38,7 @@ class ProbeParams:
 
     def __post_init__(self) -> None:
         for name in ("points", "keep", "ransac_iters"):
-            in_range("probe", name, getattr(self, name), lo=1, integer=True)
+            in_range("probe", name, getattr(self, name), Bounds(lo=1), integer=True)
 
 
 def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams, *,

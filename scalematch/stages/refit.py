@@ -26,7 +26,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import in_range, one_of
+from ..checks import Bounds, in_range, one_of
 from ..geometry import compose, invert
 from .decision import Decision, folded
 from .estimator import MIN_SAMPLE, MODELS, RansacParams, estimate, model_of, refine, residuals
@@ -70,8 +70,8 @@ class ModelCheckParams:
     def __post_init__(self) -> None:
         for name in self.models:
             one_of("model_check", "models", name, MODELS)
-        in_range("model_check", "min_gain", self.min_gain, lo=1)
-        in_range("model_check", "min_extra", self.min_extra, lo=0, integer=True)
+        in_range("model_check", "min_gain", self.min_gain, Bounds(lo=1))
+        in_range("model_check", "min_extra", self.min_extra, Bounds(lo=0), integer=True)
 
 
 Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)
