@@ -22,7 +22,7 @@ from typing import Dict, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from .chart import bar_chart
+from .chart import Titles, bar_chart
 from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
@@ -473,8 +473,8 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
     xlabel = "scale s of the high-resolution image"
     if any(r.skipped for r in rows):
         xlabel += "   (* skipped: hopeless from its initial matches)"
-    return bar_chart(labels, values, title=title, xlabel=xlabel,
-                     ylabel="inliers", highlight=best, size=size)
+    return bar_chart(labels, values, titles=Titles(title, xlabel, "inliers"), highlight=best,
+                     size=size)
 
 
 # --------------------------------------------------------------------------- files
