@@ -33,7 +33,7 @@ from .stages.decision import FinalFigures, Look, decide, figures, final_checks, 
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
-from .stages.estimator import Estimate, estimate, model_of
+from .stages.estimator import Estimate, FitSpec, estimate, model_of
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
@@ -392,10 +392,12 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     config = search.config
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
+        # the probe's quick fit is a similarity whatever the model searched for: its ratio
+        # and angle are what rank the scales
+        quick = FitSpec("similarity", config.ransac, config.seed)
         scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
                               matcher=config.matcher, orientation=search.mode.orientation,
-                              ransac=config.ransac,
-                              scale_agreement=config.decision.scale_agreement, seed=config.seed)
+                              fit=quick, scale_agreement=config.decision.scale_agreement)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -629,17 +631,21 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
     return attempts
 
 
+def fit_spec(config: Config) -> FitSpec:
+    """How the search fits its transforms: the model asked for, RANSAC and the seed."""
+    return FitSpec(config.model, config.ransac, config.seed)
+
+
 def final_fit(attempt: Attempt, config: Config):
     """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
-    ransac, seed = config.ransac, config.seed
-    fit = refit_in_high(view, attempt.verdict, best, config.model, ransac, seed, coarser)
+    spec = fit_spec(config)
+    fit = refit_in_high(view, attempt.verdict, best, spec, coarser)
     # a fit through a coarser view is affine already
-    fit = richer_model(fit, view, best, config.model_check, ransac, seed)
-    fit = pooled_refit(fit, view, attempt.outcomes, ransac, coarser)
-    return union_homography(fit, view, attempt.outcomes, config.model_check, config.model,
-                            ransac, seed, coarser)
+    fit = richer_model(fit, view, best, config.model_check, spec.ransac, spec.seed)
+    fit = pooled_refit(fit, view, attempt.outcomes, spec.ransac, coarser)
+    return union_homography(fit, view, attempt.outcomes, config.model_check, spec, coarser)
 
 
 def best_fitting(search: Search, attempts: Sequence[Attempt]):

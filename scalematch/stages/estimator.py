@@ -40,6 +40,16 @@ class RansacParams:
 
 
 @dataclass(frozen=True)
+class FitSpec:
+    """How a stage fits a transform: the model, the robust fit's parameters and the one seed
+    of its random samples (``Config.model``, ``Config.ransac``, ``Config.seed``)."""
+
+    model: str
+    ransac: RansacParams = field(default_factory=RansacParams)
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class Estimate:
     """A fitted model: ``transform`` maps ``src`` to ``dst`` (finer px -> coarser px);
     ``inliers`` is a boolean mask."""
