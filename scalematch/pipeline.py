@@ -29,7 +29,8 @@ from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
-from .stages.decision import FinalFigures, Look, decide, figures, final_checks, look_again
+from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
+                              final_checks, look_again)
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
@@ -615,16 +616,14 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
                          else work.valid(step.direction)[0])
 
         def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
-            return look_again(t, outcome.described, low_feats.described,
-                              with_nan(view.image, valid_in(view)),
-                              with_nan(low_feats.image, valid), model=cfg.model,
-                              guided=mode.guided, ransac=cfg.ransac, pixel=cfg.pixel)
+            return look_again(t, Seen(outcome.described, with_nan(view.image, valid_in(view))),
+                              Seen(low_feats.described, with_nan(low_feats.image, valid)),
+                              fit=fit_spec(cfg), guided=mode.guided, pixel=cfg.pixel)
 
+        context = SearchContext(fit_spec(cfg), mode.orientation, searches,
+                                shown_scale(work, step.direction))
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
-                         model=cfg.model, ransac=cfg.ransac, orientation=mode.orientation,
-                         seed=cfg.seed, searches=searches,
-                         shown_scale=shown_scale(work, step.direction),
-                         look=look)
+                         context=context, look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):
             break  # no other view of this step can do better
@@ -761,8 +760,8 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     final = None
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        final, reason, test = final_checks(coarse, fine, t, verdict.evidence.log10_nfa,
-                                           config.decision, near, vouched=inliers[:, :2],
+        claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2])
+        final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                            pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
