@@ -107,6 +107,20 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # the mode's strategy chosen once (the paper's reads Lambda)
     search = Search(work, config, mode_of(config), Memo(),
                     Meter(progress, sum(step.cost for step in plan)))
+    attempts, records, timings, stopped = run_plan(search, plan, t0)
+    search.meter.finish()
+    timings["total"] = time.perf_counter() - t0
+    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
+    return in_original(result, work, config)
+
+
+def run_plan(search: "Search", plan: Sequence[Step], t0: float
+             ) -> Tuple[List[Attempt], List[StepRecord], Dict[str, float], Optional[str]]:
+    """Run the steps of ``plan`` in order, each unless an earlier attempt makes it needless
+    (:func:`scalematch.search.skips`), until one stops the search or the time budget (counted
+    from ``t0``, ``time.perf_counter``) is spent: (attempts, the steps' records, seconds per
+    step by name, why the search stopped)."""
+    config = search.config
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
     timings: Dict[str, float] = {}
@@ -125,10 +139,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
-    search.meter.finish()
-    timings["total"] = time.perf_counter() - t0
-    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
-    return in_original(result, work, config)
+    return attempts, records, timings, stopped
 
 
 @functools.cache
@@ -233,6 +244,14 @@ def describe_low(low: np.ndarray, search: "Search",
     return LowFeatures(low, search.mode.describe(level, kp), kp)
 
 
+class Measured(NamedTuple):
+    """What :meth:`Memo.measured` gives of an image: its contrast (None: the detector does not
+    adapt to it) and the gradients it was measured from (None: taken already, or not kept)."""
+
+    contrast: Optional[Contrast]
+    gradients: Optional[Gradients] = None
+
+
 @dataclass
 class Memo:
     """What the steps of one search compute once and share: each direction's coarser image
@@ -255,13 +274,12 @@ class Memo:
         by side (the coarser image is described on a thread while the finer one is detected)."""
         return self.measured(image, params, take=False)[0]
 
-    def measured(self, image: np.ndarray, params,
-                 take: bool = True) -> Tuple[Optional[Contrast], Optional[Gradients]]:
+    def measured(self, image: np.ndarray, params, take: bool = True) -> "Measured":
         """(contrast, gradients): the image's contrast (:meth:`contrast`) and, the first time
         they are taken (``take``), the gradients it was measured from, which the image's s = 1
         Harris response shares (None after that, or when not adaptive)."""
         if not params.adaptive:
-            return None, None
+            return Measured(None, None)
         key = (id(image), float(params.sigma))
         with self._lock:
             lock = self._locks.setdefault(key, threading.Lock())
@@ -270,7 +288,8 @@ class Memo:
                 grads = gradients(image, params.sigma)
                 self._contrasts[key] = image_contrast(image, params.sigma, grads)
                 self._gradients[key] = grads
-            return self._contrasts[key], (self._gradients.pop(key, None) if take else None)
+            return Measured(self._contrasts[key],
+                            self._gradients.pop(key, None) if take else None)
 
 
 @dataclass(frozen=True)
@@ -346,21 +365,21 @@ class Detected(NamedTuple):
 def detect_view(view: View, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
-                contrast: Optional[Contrast] = None,
-                every: int = 1,
-                grads: Optional[Gradients] = None) -> Tuple[Tuple[Detected, ...], bool]:
+                measured: Measured = Measured(None),
+                every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale detected. The levels of a view of at most
     ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
     described as the coarser one (the other direction), whose points give this view's s = 1
-    points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
-    image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
-    ``every``: with the probe, only every ``every``-th scale is detected (the others are
-    ``pending`` until :func:`complete_probe`). ``grads``: the image's gradients at s = 1
-    (:meth:`Memo.measured`), used when ``view`` is the image itself.
+    points when it is the image itself (:func:`shares_first_level`). ``measured``: the finer
+    image's contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector
+    adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used when ``view`` is the
+    image itself. ``every``: with the probe, only every ``every``-th scale is detected (the
+    others are ``pending`` until :func:`complete_probe`).
     """
     config = search.config
+    contrast, grads = measured
     scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     every = every if probing else 1
@@ -525,12 +544,12 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, cfg.views, hi_valid)
         return score_view(view, *detect_view(view, search, step.scales, tick, known,
-                                             memo.contrast(hi_img, cfg.harris), every),
+                                             Measured(memo.contrast(hi_img, cfg.harris)), every),
                           coarser[step.direction], search)
 
-    def first_view(view: View):
-        contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
-        return detect_view(view, search, step.scales, tick, known, contrast, every, grads)
+    def first_view(view: View):  # the gradients: for the image itself
+        return detect_view(view, search, step.scales, tick, known,
+                           memo.measured(hi_img, cfg.harris), every)
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
@@ -572,8 +591,8 @@ def plain_probed(search: Search, step: Step) -> Probed:
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
         view = identity_view(hi_img, search.work.valid(direction)[1])
-        detected, probing = detect_view(view, search, step.scales, contrast=memo.contrast(
-            hi_img, search.config.harris), known=memo.coarser.get(direction.other))
+        detected, probing = detect_view(view, search, step.scales, measured=Measured(
+            memo.contrast(hi_img, search.config.harris)), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
