@@ -48,7 +48,7 @@ from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
 
-#: Largest view of the high image, px, whose scale-space levels are kept from detection to the
+#: Largest view of the finer image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
 #: larger image's levels are computed again, so peak memory stays bounded for camera-size
 #: images. The result is the same either way.
@@ -207,7 +207,7 @@ def _part(kp: Keypoints, rows: slice) -> Keypoints:
 
 @dataclass(frozen=True)
 class LowFeatures:
-    """The low-resolution image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
+    """The coarser image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
 
     image: np.ndarray = field(repr=False)  #: (H, W) float32
     described: Described = field(repr=False)
@@ -326,7 +326,7 @@ def _detect(view: View, level: Level, config: Config, contrast: Optional[Contras
 
 @dataclass(frozen=True)
 class Probed:
-    """A view of the high image detected at every scale and scored by the probe."""
+    """A view of the finer image detected at every scale and scored by the probe."""
 
     view: View = field(repr=False)
     detected: Tuple[Detected, ...] = field(repr=False)  #: per scale
@@ -369,10 +369,11 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
                 every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
-    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale detected. The levels of a view of at most
-    ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
-    described as the coarser one (the other direction), whose points give this view's s = 1
-    points when it is the image itself (:func:`shares_first_level`). ``measured``: the finer
+    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale
+    detected. The levels of a view of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the
+    full pass. ``known``: the same image described as the coarser one (the other direction),
+    whose points give this view's s = 1 points when it is the image itself
+    (:func:`shares_first_level`). ``measured``: the finer
     image's contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector
     adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used when ``view`` is the
     image itself. ``every``: with the probe, only every ``every``-th scale is detected (the

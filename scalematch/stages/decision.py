@@ -8,8 +8,8 @@ s = 1/h), then to the smaller scale.
 show evidence that an unrelated pair cannot produce:
 
 1. *Inliers beyond chance* (a contrario, Moisan & Stival 2004 "ORSA"): under the background
-   model where the low-image end of each candidate is uniform over the low image (and, in the
-   default mode, its orientation uniform over the circle), the expected number of transforms
+   model where the coarser-image end of each candidate is uniform over the coarser image (and,
+   in the default mode, its orientation uniform over the circle), the expected number of transforms
    with k inliers among n candidates, over all scales and subsets tried, is
    ``NFA = tests * C(n, k) * C(k, m) * p^(k - m)``, with m the model's minimal sample and
    p the chance that one random candidate lands within the inlier threshold, and ``tests``
@@ -18,9 +18,9 @@ show evidence that an unrelated pair cannot produce:
    ``log10 NFA <= max_log_nfa``, and at least ``min_inliers``.
 2. *A plausible scale*: the ratio the transform implies agrees with the scale it was found at
    (within ``scale_agreement``), as the scale-space premise demands of a true match.
-3. *A plausible footprint*: the high image maps onto a region of the low image that is not
-   degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
-   outside the low image (a telephoto frame overhanging the wide one) is normal and accepted
+3. *A plausible footprint*: the finer image maps onto a region of the coarser image that is
+   not degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
+   outside the coarser image (a telephoto frame overhanging the wide one) is normal and accepted
    when the evidence is overwhelming (``max_log_nfa_alone``); with weaker evidence at least
    ``min_inside`` of it must lie inside.
 4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
@@ -58,20 +58,20 @@ class DecisionParams:
     #: in a hundred pairs of unrelated images could show such a transform by chance
     max_log_nfa: float = -2.0
     scale_agreement: float = 1.6  #: implied ratio within this factor of the winning scale
-    #: fraction of the high image's footprint inside the low image, required only when the
+    #: fraction of the finer image's footprint inside the coarser one, required only when the
     #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
     #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
     #: docs/DESIGN.md, "What real pairs need")
     min_inside: float = 0.5
-    #: another scale agrees when its transform maps the high image within this many low px of
-    #: the winner's (mean over a grid, as EVALUATION.md measures error)
+    #: another scale agrees when its transform maps the finer image within this many coarser
+    #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
     agreement_px: float = 4.0
     min_agreeing_scales: int = 1  #: other scales that must agree with the winner ...
     #: ... unless the winner alone is this far beyond chance (log10 NFA): the best transforms of
     #: 39 unrelated pairs measured during development never went below -1.05, true ones at
     #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
-    min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
+    min_area_px: float = 64.0  #: smallest footprint area in the coarser image, px^2 (8x8)
     #: a best transform with at least this many distinct inliers, and fewer than
     #: ``min_inliers``, gets a second look (guided growth and the pixel check,
     #: :func:`look_again`), recorded in the evidence
@@ -194,7 +194,7 @@ class Decision:
     reason: str
     best_scale: float
     transform: Optional[np.ndarray] = field(repr=False)
-    inliers: np.ndarray = field(repr=False)  #: (N, 4) x_high, y_high, x_low, y_low
+    inliers: np.ndarray = field(repr=False)  #: (N, 4) x, y finer; x, y coarser
     evidence: Evidence = field(default_factory=Evidence)
     #: a "no": the test that refused (a key of ``TESTS``; "" when matched or nothing to refuse)
     test: str = ""
@@ -265,19 +265,21 @@ def _polygon_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
-def _inside_fraction(t, high_shape, low_shape) -> float:
-    p = apply(t, grid(high_shape, 11))
-    h, w = low_shape
+def _inside_fraction(t, finer_shape, coarser_shape) -> float:
+    """The fraction of an 11 x 11 grid over the finer image that ``t`` maps inside the coarser
+    image."""
+    p = apply(t, grid(finer_shape, 11))
+    h, w = coarser_shape
     ok = (p[:, 0] >= -0.5) & (p[:, 1] >= -0.5) & (p[:, 0] <= w - 0.5) & (p[:, 1] <= h - 0.5)
     return float(ok.mean())
 
 
-def folded(t: np.ndarray, high_shape=None) -> bool:
-    """True when the transform turns the high image over (a mirror image) somewhere on it.
+def folded(t: np.ndarray, finer_shape=None) -> bool:
+    """True when the transform turns the finer image over (a mirror image) somewhere on it.
 
     A 2x3 map: its linear part's determinant is not positive. A homography H: its Jacobian at
     a pixel p has the determinant ``det(H) / w(p)^3`` (``w`` the third coordinate of H p), so it
-    keeps the orientation over the image (``high_shape``; None: at its origin only) when ``w``
+    keeps the orientation over the image (``finer_shape``; None: at its origin only) when ``w``
     has one sign at every corner (the horizon w = 0 does not cross the image: ``w`` is affine)
     and ``det(H)`` has that sign too. (The top-left 2x2 block is that Jacobian only when H is
     affine: a steep perspective map 0.7 px from the truth was called folded; docs/design/VIEWS.md,
@@ -292,7 +294,7 @@ def folded(t: np.ndarray, high_shape=None) -> bool:
     t = np.asarray(t, np.float64)
     if t.shape == (2, 3):
         return float(np.linalg.det(t[:, :2])) <= 0.0
-    h, w = (1, 1) if high_shape is None else high_shape[:2]
+    h, w = (1, 1) if finer_shape is None else finer_shape[:2]
     corners = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], np.float64)
     depth = corners @ t[2]
     if not (np.all(depth > 0) or np.all(depth < 0)):
@@ -300,10 +302,11 @@ def folded(t: np.ndarray, high_shape=None) -> bool:
     return float(np.linalg.det(t)) * float(np.sign(depth[0])) <= 0.0
 
 
-def chance_probability(threshold_px: float, low_shape, model: str, oriented: bool,
+def chance_probability(threshold_px: float, coarser_shape, model: str, oriented: bool,
                        orientation_tol_deg: float) -> float:
-    """p: chance that a candidate with a uniform random low position fits within threshold."""
-    h, w = low_shape
+    """p: chance that a candidate with a uniform random position in the coarser image fits
+    within threshold."""
+    h, w = coarser_shape
     p = model_of(model).chance_area(threshold_px, (h, w)) / (h * w)
     if oriented:
         p *= 2.0 * orientation_tol_deg / 360.0
