@@ -238,10 +238,19 @@ def save(image: np.ndarray, path: Optional[PathLike]) -> None:
         raise ValueError(f"{p}: OpenCV cannot write this format; use .png or .jpg")
     buf.tofile(str(p))
 
+@dataclass(frozen=True)
+class Titles:
+    """The words of a chart: its title and its axes' titles."""
+
+    title: str = ""
+    xlabel: str = ""
+    ylabel: str = ""
+
+
 def bar_chart(labels: Sequence[object], values: Sequence[float],
-              path: Optional[PathLike] = None, title: str = "", xlabel: str = "",
-              ylabel: str = "", highlight: Optional[int] = None,
-              size: Tuple[int, int] = DEFAULT_SIZE, annotate: bool = True) -> np.ndarray:
+              path: Optional[PathLike] = None, titles: Titles = Titles(),
+              highlight: Optional[int] = None, size: Tuple[int, int] = DEFAULT_SIZE,
+              annotate: bool = True) -> np.ndarray:
     """A bar chart over categories (e.g. inliers against scale), one bar optionally highlighted.
 
     Parameters
@@ -252,7 +261,8 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
         Bar heights; NaN/inf draws no bar ("-" above the slot).
     path : str or Path, optional
         Where to write the image; None writes nothing.
-    title, xlabel, ylabel : str
+    titles : Titles
+        The chart's title and its axes' titles.
     highlight : int, optional
         Index (into ``labels``) of the bar drawn in the highlight colour, e.g. the winning scale;
         None or out of range highlights nothing.
@@ -274,7 +284,8 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
     f = _font_scale((w, h))
     img = np.full((h, w, 3), 255, np.uint8)
     fin = _finite(vals)
-    layout = Layout((w, h), f, _bar_yticks(fin, annotate), title, xlabel, ylabel)
+    layout = Layout((w, h), f, _bar_yticks(fin, annotate), titles.title, titles.xlabel,
+                    titles.ylabel)
     n = len(labs)
     fr = _frame(layout, (-0.5, n - 0.5) if n else (-0.5, 0.5),
                 (layout.yticks.at[0], layout.yticks.at[-1]))

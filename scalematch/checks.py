@@ -7,15 +7,15 @@ not deep inside a match. ``owner`` is the ``Config`` field that holds the parame
 (``"ransac"``; ``""`` for ``Config``'s own fields), so the message names the value as
 ``--set`` does.
 
->>> in_range("ransac", "threshold_px", -1.0, lo=0, lo_open=True)
+>>> in_range("ransac", "threshold_px", -1.0, Bounds(lo=0, lo_open=True))
 Traceback (most recent call last):
 ...
 ValueError: ransac.threshold_px must be > 0, got -1.0
->>> in_range("matcher", "ratio", 5.0, lo=0, hi=1, lo_open=True)
+>>> in_range("matcher", "ratio", 5.0, Bounds(lo=0, hi=1, lo_open=True))
 Traceback (most recent call last):
 ...
 ValueError: matcher.ratio must be in (0, 1], got 5.0
->>> in_range("ransac", "max_iters", 2.5, lo=1, integer=True)
+>>> in_range("ransac", "max_iters", 2.5, Bounds(lo=1), integer=True)
 Traceback (most recent call last):
 ...
 ValueError: ransac.max_iters must be an integer >= 1, got 2.5
@@ -24,6 +24,7 @@ ValueError: ransac.max_iters must be an integer >= 1, got 2.5
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any, Iterable, Optional
 
@@ -33,31 +34,52 @@ def _path(owner: str, name: str) -> str:
     return f"{owner}.{name}" if owner else name
 
 
-def _rule(lo: Optional[float], hi: Optional[float], lo_open: bool, hi_open: bool) -> str:
-    if lo is not None and hi is not None:
-        return f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-    if lo is not None:
-        return f"{'>' if lo_open else '>='} {lo:g}"
-    if hi is not None:
-        return f"{'<' if hi_open else '<='} {hi:g}"
-    return "a finite number"
+@dataclass(frozen=True)
+class Bounds:
+    """The range a value must lie in: from ``lo`` to ``hi`` (None: unbounded on that side),
+    each end included unless ``lo_open`` / ``hi_open``.
+
+    >>> Bounds(lo=0, hi=1, lo_open=True).rule(), Bounds(lo=1).rule(), Bounds().rule()
+    ('in (0, 1]', '>= 1', 'a finite number')
+    """
+
+    lo: Optional[float] = None
+    hi: Optional[float] = None
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def rule(self) -> str:
+        """The range in words, as the error message says it."""
+        lo, hi = self.lo, self.hi
+        if lo is not None and hi is not None:
+            return (f"in {'(' if self.lo_open else '['}{lo:g}, {hi:g}"
+                    f"{')' if self.hi_open else ']'}")
+        if lo is not None:
+            return f"{'>' if self.lo_open else '>='} {lo:g}"
+        if hi is not None:
+            return f"{'<' if self.hi_open else '<='} {hi:g}"
+        return "a finite number"
+
+    def holds(self, v: float) -> bool:
+        """Whether the number ``v`` lies in the range."""
+        return ((self.lo is None or (v > self.lo if self.lo_open else v >= self.lo))
+                and (self.hi is None or (v < self.hi if self.hi_open else v <= self.hi)))
 
 
-def in_range(owner: str, name: str, value: Any, *, lo: Optional[float] = None,
-             hi: Optional[float] = None, lo_open: bool = False, hi_open: bool = False,
+def in_range(owner: str, name: str, value: Any, bounds: Bounds = Bounds(), *,
              integer: bool = False, allow_inf: bool = False) -> None:
-    """Raise ``ValueError`` unless ``value`` is a number (an integer with ``integer``) in range.
+    """Raise ``ValueError`` unless ``value`` is a number (an integer with ``integer``) within
+    ``bounds``.
 
     NaN is always refused; infinity only passes with ``allow_inf`` (and the bounds).
     """
-    rule = _rule(lo, hi, lo_open, hi_open)
+    rule = bounds.rule()
     number = isinstance(value, Real) and not isinstance(value, bool)
     ok = number and (isinstance(value, Integral) or not integer)
     if ok:
         v = float(value)
         ok = not math.isnan(v) and (allow_inf or math.isfinite(v))
-        ok = ok and (lo is None or (v > lo if lo_open else v >= lo))
-        ok = ok and (hi is None or (v < hi if hi_open else v <= hi))
+        ok = ok and bounds.holds(v)
     if not ok:
         kind = "an integer" if integer else "a number"
         must = rule if rule == "a finite number" and not integer else (

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, Optional, Tuple
 
-from .checks import in_range, one_of
+from .checks import Bounds, in_range, one_of
 from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
@@ -139,18 +139,18 @@ class Config:
         one_of("", "order", self.order, ORDERS)
         one_of("", "mode", self.mode, MODES)
         one_of("", "model", self.model, MODELS)
-        in_range("", "seed", self.seed, lo=0, integer=True)
+        in_range("", "seed", self.seed, Bounds(lo=0), integer=True)
         for name in ("low_max_side", "high_max_side"):
             side = getattr(self, name)
             if side is not None:  # None: always full size
-                in_range("", name, side, lo=MIN_WORKING_SIDE_PX, integer=True)
+                in_range("", name, side, Bounds(lo=MIN_WORKING_SIDE_PX), integer=True)
         if len(self.scales) == 0:
             raise ValueError("scales must hold at least one scale (>= 1)")
         for s in self.scales:  # the high-resolution image is never enlarged
-            in_range("", "scales", s, lo=1)
-        in_range("", "min_footprint_px", self.min_footprint_px, lo=0)
+            in_range("", "scales", s, Bounds(lo=1))
+        in_range("", "min_footprint_px", self.min_footprint_px, Bounds(lo=0))
         if self.time_budget_s is not None:
-            in_range("", "time_budget_s", self.time_budget_s, lo=0, lo_open=True)
+            in_range("", "time_budget_s", self.time_budget_s, Bounds(lo=0, lo_open=True))
 
     @staticmethod
     def paper(**changes) -> "Config":

@@ -29,11 +29,12 @@ from .imageio import grey_levels
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
-from .stages.decision import FinalFigures, Look, decide, figures, final_checks, look_again
+from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
+                              final_checks, look_again)
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
-from .stages.estimator import Estimate, estimate, model_of
+from .stages.estimator import Estimate, FitSpec, estimate, model_of
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
@@ -47,7 +48,7 @@ from .working import WorkImages, at_working_size, in_original, shown_scale
 
 __all__ = ["match", "distinct_pairs"]
 
-#: Largest view of the high image, px, whose scale-space levels are kept from detection to the
+#: Largest view of the finer image, px, whose scale-space levels are kept from detection to the
 #: full pass (about 2.7 image copies of float32 over third-octave scales: 43 MB at 4 MP); a
 #: larger image's levels are computed again, so peak memory stays bounded for camera-size
 #: images. The result is the same either way.
@@ -106,6 +107,20 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # the mode's strategy chosen once (the paper's reads Lambda)
     search = Search(work, config, mode_of(config), Memo(),
                     Meter(progress, sum(step.cost for step in plan)))
+    attempts, records, timings, stopped = run_plan(search, plan, t0)
+    search.meter.finish()
+    timings["total"] = time.perf_counter() - t0
+    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
+    return in_original(result, work, config)
+
+
+def run_plan(search: "Search", plan: Sequence[Step], t0: float
+             ) -> Tuple[List[Attempt], List[StepRecord], Dict[str, float], Optional[str]]:
+    """Run the steps of ``plan`` in order, each unless an earlier attempt makes it needless
+    (:func:`scalematch.search.skips`), until one stops the search or the time budget (counted
+    from ``t0``, ``time.perf_counter``) is spent: (attempts, the steps' records, seconds per
+    step by name, why the search stopped)."""
+    config = search.config
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
     timings: Dict[str, float] = {}
@@ -124,10 +139,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
-    search.meter.finish()
-    timings["total"] = time.perf_counter() - t0
-    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
-    return in_original(result, work, config)
+    return attempts, records, timings, stopped
 
 
 @functools.cache
@@ -195,7 +207,7 @@ def _part(kp: Keypoints, rows: slice) -> Keypoints:
 
 @dataclass(frozen=True)
 class LowFeatures:
-    """The low-resolution image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
+    """The coarser image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
 
     image: np.ndarray = field(repr=False)  #: (H, W) float32
     described: Described = field(repr=False)
@@ -232,6 +244,14 @@ def describe_low(low: np.ndarray, search: "Search",
     return LowFeatures(low, search.mode.describe(level, kp), kp)
 
 
+class Measured(NamedTuple):
+    """What :meth:`Memo.measured` gives of an image: its contrast (None: the detector does not
+    adapt to it) and the gradients it was measured from (None: taken already, or not kept)."""
+
+    contrast: Optional[Contrast]
+    gradients: Optional[Gradients] = None
+
+
 @dataclass
 class Memo:
     """What the steps of one search compute once and share: each direction's coarser image
@@ -254,13 +274,12 @@ class Memo:
         by side (the coarser image is described on a thread while the finer one is detected)."""
         return self.measured(image, params, take=False)[0]
 
-    def measured(self, image: np.ndarray, params,
-                 take: bool = True) -> Tuple[Optional[Contrast], Optional[Gradients]]:
+    def measured(self, image: np.ndarray, params, take: bool = True) -> "Measured":
         """(contrast, gradients): the image's contrast (:meth:`contrast`) and, the first time
         they are taken (``take``), the gradients it was measured from, which the image's s = 1
         Harris response shares (None after that, or when not adaptive)."""
         if not params.adaptive:
-            return None, None
+            return Measured(None, None)
         key = (id(image), float(params.sigma))
         with self._lock:
             lock = self._locks.setdefault(key, threading.Lock())
@@ -269,7 +288,8 @@ class Memo:
                 grads = gradients(image, params.sigma)
                 self._contrasts[key] = image_contrast(image, params.sigma, grads)
                 self._gradients[key] = grads
-            return self._contrasts[key], (self._gradients.pop(key, None) if take else None)
+            return Measured(self._contrasts[key],
+                            self._gradients.pop(key, None) if take else None)
 
 
 @dataclass(frozen=True)
@@ -306,7 +326,7 @@ def _detect(view: View, level: Level, config: Config, contrast: Optional[Contras
 
 @dataclass(frozen=True)
 class Probed:
-    """A view of the high image detected at every scale and scored by the probe."""
+    """A view of the finer image detected at every scale and scored by the probe."""
 
     view: View = field(repr=False)
     detected: Tuple[Detected, ...] = field(repr=False)  #: per scale
@@ -345,21 +365,22 @@ class Detected(NamedTuple):
 def detect_view(view: View, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
-                contrast: Optional[Contrast] = None,
-                every: int = 1,
-                grads: Optional[Gradients] = None) -> Tuple[Tuple[Detected, ...], bool]:
+                measured: Measured = Measured(None),
+                every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
-    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale detected. The levels of a view of at most
-    ``KEEP_LEVELS_MAX_PX`` pixels are kept for the full pass. ``known``: the same image
-    described as the coarser one (the other direction), whose points give this view's s = 1
-    points when it is the image itself (:func:`shares_first_level`). ``contrast``: the finer
-    image's (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to it.
-    ``every``: with the probe, only every ``every``-th scale is detected (the others are
-    ``pending`` until :func:`complete_probe`). ``grads``: the image's gradients at s = 1
-    (:meth:`Memo.measured`), used when ``view`` is the image itself.
+    ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale
+    detected. The levels of a view of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the
+    full pass. ``known``: the same image described as the coarser one (the other direction),
+    whose points give this view's s = 1 points when it is the image itself
+    (:func:`shares_first_level`). ``measured``: the finer
+    image's contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector
+    adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used when ``view`` is the
+    image itself. ``every``: with the probe, only every ``every``-th scale is detected (the
+    others are ``pending`` until :func:`complete_probe`).
     """
     config = search.config
+    contrast, grads = measured
     scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     every = every if probing else 1
@@ -392,10 +413,12 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
     config = search.config
     usable = [i for i, d in enumerate(detected) if d.probe is not None and len(d.probe)]
     if probing:
+        # the probe's quick fit is a similarity whatever the model searched for: its ratio
+        # and angle are what rank the scales
+        quick = FitSpec("similarity", config.ransac, config.seed)
         scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
                               matcher=config.matcher, orientation=search.mode.orientation,
-                              ransac=config.ransac,
-                              scale_agreement=config.decision.scale_agreement, seed=config.seed)
+                              fit=quick, scale_agreement=config.decision.scale_agreement)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
         best = max(scores, default=0.0)
     else:
@@ -522,12 +545,12 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     def probe(key) -> Probed:
         view = tilt_view(hi_img, *key, cfg.views, hi_valid)
         return score_view(view, *detect_view(view, search, step.scales, tick, known,
-                                             memo.contrast(hi_img, cfg.harris), every),
+                                             Measured(memo.contrast(hi_img, cfg.harris)), every),
                           coarser[step.direction], search)
 
-    def first_view(view: View):
-        contrast, grads = memo.measured(hi_img, cfg.harris)  # grads: for the image itself
-        return detect_view(view, search, step.scales, tick, known, contrast, every, grads)
+    def first_view(view: View):  # the gradients: for the image itself
+        return detect_view(view, search, step.scales, tick, known,
+                           memo.measured(hi_img, cfg.harris), every)
 
     keys = list(step.views)
     if step.direction not in coarser:  # described while the first view is detected
@@ -569,8 +592,8 @@ def plain_probed(search: Search, step: Step) -> Probed:
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
         view = identity_view(hi_img, search.work.valid(direction)[1])
-        detected, probing = detect_view(view, search, step.scales, contrast=memo.contrast(
-            hi_img, search.config.harris), known=memo.coarser.get(direction.other))
+        detected, probing = detect_view(view, search, step.scales, measured=Measured(
+            memo.contrast(hi_img, search.config.harris)), known=memo.coarser.get(direction.other))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
@@ -613,33 +636,35 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
                          else work.valid(step.direction)[0])
 
         def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
-            return look_again(t, outcome.described, low_feats.described,
-                              with_nan(view.image, valid_in(view)),
-                              with_nan(low_feats.image, valid), model=cfg.model,
-                              guided=mode.guided, ransac=cfg.ransac, pixel=cfg.pixel)
+            return look_again(t, Seen(outcome.described, with_nan(view.image, valid_in(view))),
+                              Seen(low_feats.described, with_nan(low_feats.image, valid)),
+                              fit=fit_spec(cfg), guided=mode.guided, pixel=cfg.pixel)
 
+        context = SearchContext(fit_spec(cfg), mode.orientation, searches,
+                                shown_scale(work, step.direction))
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
-                         model=cfg.model, ransac=cfg.ransac, orientation=mode.orientation,
-                         seed=cfg.seed, searches=searches,
-                         shown_scale=shown_scale(work, step.direction),
-                         look=look)
+                         context=context, look=look)
         attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):
             break  # no other view of this step can do better
     return attempts
 
 
+def fit_spec(config: Config) -> FitSpec:
+    """How the search fits its transforms: the model asked for, RANSAC and the seed."""
+    return FitSpec(config.model, config.ransac, config.seed)
+
+
 def final_fit(attempt: Attempt, config: Config):
     """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
-    ransac, seed = config.ransac, config.seed
-    fit = refit_in_high(view, attempt.verdict, best, config.model, ransac, seed, coarser)
+    spec = fit_spec(config)
+    fit = refit_in_high(view, attempt.verdict, best, spec, coarser)
     # a fit through a coarser view is affine already
-    fit = richer_model(fit, view, best, config.model_check, ransac, seed)
-    fit = pooled_refit(fit, view, attempt.outcomes, ransac, coarser)
-    return union_homography(fit, view, attempt.outcomes, config.model_check, config.model,
-                            ransac, seed, coarser)
+    fit = richer_model(fit, view, best, config.model_check, spec.ransac, spec.seed)
+    fit = pooled_refit(fit, view, attempt.outcomes, spec.ransac, coarser)
+    return union_homography(fit, view, attempt.outcomes, config.model_check, spec, coarser)
 
 
 def best_fitting(search: Search, attempts: Sequence[Attempt]):
@@ -755,8 +780,8 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     final = None
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        final, reason, test = final_checks(coarse, fine, t, verdict.evidence.log10_nfa,
-                                           config.decision, near, vouched=inliers[:, :2],
+        claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2])
+        final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                            pixel=config.pixel)
         if reason:
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(

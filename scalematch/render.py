@@ -22,7 +22,7 @@ from typing import Dict, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from .chart import bar_chart
+from .chart import Titles, bar_chart
 from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
@@ -255,47 +255,91 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     ``MAX_CAPTION_SHARE`` of the picture: they are then drawn in bands above and below it
     """
     low_bgr = to_bgr8(low)
-    hh, ww = low_bgr.shape[:2]
     low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
     out = cv2.cvtColor(low_grey, cv2.COLOR_GRAY2BGR)
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
     lines = [verdict(result), evidence_line(result)]
     outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
     if result.matched and t is not None and model_of(result.model).has_ratio:
-        high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
-        warped, mask = _warp_high(high_grey, t, (ww, hh))
-        inside = mask > 0
-        warped = match_grey_levels(warped, low_grey, inside)  # grey where they agree
-        dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
-        out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
-        out[inside, 0] = low_grey[inside]  # B: low
-        out[inside, 1] = warped[inside]  # G: high, warped
-        out[inside, 2] = low_grey[inside]  # R: low
-        corners = footprint(t, high.shape)
-        clipped = False
-        if corners is not None:
-            thick = max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
-            inset = thick / 2.0  # the whole stroke inside the picture
-            shown = clip_polygon(np.asarray(corners, np.float64),
-                                 (inset - 0.5, inset - 0.5, ww - 0.5 - inset, hh - 0.5 - inset))
-            clipped = not np.allclose(shown.shape, np.asarray(corners).shape) or \
-                not np.allclose(shown, corners)
-            if len(shown) >= 2:
-                outline = np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2), thick
-        lines.append("magenta = low, green = high warped (grey where they agree); "
-                     "outline = high footprint" + (" (cut at the picture's edge, where it "
-                                                   "runs beyond)" if clipped else ""))
+        out, outline, legend = _blended(low_grey, high, t)
+        lines.append(legend)
     elif not result.matched and rejected_footprint(result, high.shape) is not None:
-        corners = rejected_footprint(result, high.shape)
-        thick = max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
-        dashed_polygon(out, corners, REJECTED, thick, dash_px=max(8, 4 * thick))
-        lines.append(f"dashed = the best candidate's footprint ({result.rejected.n_inliers} "
-                     f"inliers), refused by the {result.rejected.test} test")
+        lines.append(_draw_rejected(out, result, high.shape))
     elif result.matched and result.inliers.size:
-        for x, y in result.inliers[:, 2:4]:
-            cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
-                       cv2.LINE_AA, shift=4)
-        lines.append(f"dots = inliers in the low image (a {result.model} matrix has no overlay)")
+        lines.append(_draw_inlier_dots(out, result))
+    return _captioned(out, lines, footer, outline)
+
+
+def _outline_thickness(hh: int, ww: int) -> int:
+    """The footprint outline's thickness on an ``hh`` x ``ww`` picture, px."""
+    return max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
+
+
+def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray):
+    """(picture, outline, legend): the high image warped by ``t`` onto ``low_grey`` in false
+    colour, the low image dimmed outside the footprint; the footprint's outline to draw over
+    the caption (None: no footprint), and the caption line that explains the colours."""
+    hh, ww = low_grey.shape[:2]
+    high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
+    warped, mask = _warp_high(high_grey, t, (ww, hh))
+    inside = mask > 0
+    warped = match_grey_levels(warped, low_grey, inside)  # grey where they agree
+    dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
+    out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
+    out[inside, 0] = low_grey[inside]  # B: low
+    out[inside, 1] = warped[inside]  # G: high, warped
+    out[inside, 2] = low_grey[inside]  # R: low
+    outline, clipped = _footprint_outline(t, high.shape, (hh, ww))
+    legend = ("magenta = low, green = high warped (grey where they agree); "
+              "outline = high footprint" + (" (cut at the picture's edge, where it "
+                                            "runs beyond)" if clipped else ""))
+    return out, outline, legend
+
+
+def _footprint_outline(t: np.ndarray, high_shape, picture_shape: Tuple[int, int]):
+    """(outline, clipped): the footprint of ``t`` cut to the picture (``picture_shape``, (H, W))
+    with its whole stroke inside, as (M, 1, 2) int32 in 1/16 px and its thickness (None: no
+    footprint, or none of it in the picture); True when it was cut."""
+    corners = footprint(t, high_shape)
+    if corners is None:
+        return None, False
+    hh, ww = picture_shape
+    thick = _outline_thickness(hh, ww)
+    inset = thick / 2.0  # the whole stroke inside the picture
+    shown = clip_polygon(np.asarray(corners, np.float64),
+                         (inset - 0.5, inset - 0.5, ww - 0.5 - inset, hh - 0.5 - inset))
+    clipped = not np.allclose(shown.shape, np.asarray(corners).shape) or \
+        not np.allclose(shown, corners)
+    if len(shown) < 2:
+        return None, clipped
+    return (np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2), thick), clipped
+
+
+def _draw_rejected(out: np.ndarray, result: MatchResult, high_shape) -> str:
+    """Dash the refused candidate's footprint on ``out``; the caption line that says so."""
+    hh, ww = out.shape[:2]
+    corners = rejected_footprint(result, high_shape)
+    thick = _outline_thickness(hh, ww)
+    dashed_polygon(out, corners, REJECTED, thick, dash_px=max(8, 4 * thick))
+    return (f"dashed = the best candidate's footprint ({result.rejected.n_inliers} "
+            f"inliers), refused by the {result.rejected.test} test")
+
+
+def _draw_inlier_dots(out: np.ndarray, result: MatchResult) -> str:
+    """Circle the inliers in the low image on ``out`` (a model with no overlay, the fundamental
+    matrix); the caption line that says so."""
+    for x, y in result.inliers[:, 2:4]:
+        cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
+                   cv2.LINE_AA, shift=4)
+    return f"dots = inliers in the low image (a {result.model} matrix has no overlay)"
+
+
+def _captioned(out: np.ndarray, lines: Sequence[str], footer: Sequence[str],
+               outline) -> np.ndarray:
+    """``out`` with its caption ``lines`` at the top, ``footer`` at the bottom and the
+    footprint ``outline`` over both; the captions go in bands above and below the picture when
+    they would cover more than ``MAX_CAPTION_SHARE`` of it."""
+    hh, ww = out.shape[:2]
     strips = _layout(lines, ww)[2] + _layout(footer, ww)[2]
     inside = strips <= MAX_CAPTION_SHARE * hh
     if inside:
@@ -473,8 +517,8 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
     xlabel = "scale s of the high-resolution image"
     if any(r.skipped for r in rows):
         xlabel += "   (* skipped: hopeless from its initial matches)"
-    return bar_chart(labels, values, title=title, xlabel=xlabel,
-                     ylabel="inliers", highlight=best, size=size)
+    return bar_chart(labels, values, titles=Titles(title, xlabel, "inliers"), highlight=best,
+                     size=size)
 
 
 # --------------------------------------------------------------------------- files

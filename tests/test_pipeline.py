@@ -500,10 +500,11 @@ def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_
                                 pipeline.image_contrast(pair.low, config.harris_low.sigma))
     contrast = pipeline.image_contrast(pair.high, config.harris.sigma)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
+    measured = pipeline.Measured(contrast)
     every = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
-                                                            contrast=contrast), low, search)
+                                                            measured=measured), low, search)
     sampled = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
-                                                              contrast=contrast, every=2),
+                                                              measured=measured, every=2),
                                   low, search)
     assert [d.pending for d in sampled.detected][:4] == [False, True, False, True]
     done = pipeline.complete_probe(sampled, low, search, config.scales, contrast)

@@ -22,7 +22,7 @@ from typing import List
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from .scalespace import Level
 
 # --------------------------------------------------------------- orientation consistency (default)
@@ -36,11 +36,11 @@ class OrientationParams:
     max_peaks: int = 2  #: peaks tried at most
 
     def __post_init__(self) -> None:
-        in_range("orientation", "bins", self.bins, lo=1, integer=True)
-        in_range("orientation", "tolerance_deg", self.tolerance_deg, lo=0, hi=180,
-                 lo_open=True)
-        in_range("orientation", "second_peak", self.second_peak, lo=0, hi=1)
-        in_range("orientation", "max_peaks", self.max_peaks, lo=1, integer=True)
+        in_range("orientation", "bins", self.bins, Bounds(lo=1), integer=True)
+        in_range("orientation", "tolerance_deg", self.tolerance_deg,
+                 Bounds(lo=0, hi=180, lo_open=True))
+        in_range("orientation", "second_peak", self.second_peak, Bounds(lo=0, hi=1))
+        in_range("orientation", "max_peaks", self.max_peaks, Bounds(lo=1), integer=True)
 
 
 def orientation_groups(dtheta: np.ndarray, params: OrientationParams = OrientationParams()
@@ -97,11 +97,11 @@ class SemiLocalParams:
 
     def __post_init__(self) -> None:
         for name in ("radius_px", "tolerance_px", "patch_radius_px"):
-            in_range("semi_local", name, getattr(self, name), lo=0, lo_open=True)
-        in_range("semi_local", "max_neighbours", self.max_neighbours, lo=1, integer=True)
-        in_range("semi_local", "scale_tolerance", self.scale_tolerance, lo=1)
-        in_range("semi_local", "min_support", self.min_support, lo=0, integer=True)
-        in_range("semi_local", "correlation_min", self.correlation_min, lo=-1, hi=1)
+            in_range("semi_local", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+        in_range("semi_local", "max_neighbours", self.max_neighbours, Bounds(lo=1), integer=True)
+        in_range("semi_local", "scale_tolerance", self.scale_tolerance, Bounds(lo=1))
+        in_range("semi_local", "min_support", self.min_support, Bounds(lo=0), integer=True)
+        in_range("semi_local", "correlation_min", self.correlation_min, Bounds(lo=-1, hi=1))
 
 
 def semi_local_support(p: np.ndarray, q: np.ndarray, s: float,

@@ -8,8 +8,8 @@ s = 1/h), then to the smaller scale.
 show evidence that an unrelated pair cannot produce:
 
 1. *Inliers beyond chance* (a contrario, Moisan & Stival 2004 "ORSA"): under the background
-   model where the low-image end of each candidate is uniform over the low image (and, in the
-   default mode, its orientation uniform over the circle), the expected number of transforms
+   model where the coarser-image end of each candidate is uniform over the coarser image (and,
+   in the default mode, its orientation uniform over the circle), the expected number of transforms
    with k inliers among n candidates, over all scales and subsets tried, is
    ``NFA = tests * C(n, k) * C(k, m) * p^(k - m)``, with m the model's minimal sample and
    p the chance that one random candidate lands within the inlier threshold, and ``tests``
@@ -18,9 +18,9 @@ show evidence that an unrelated pair cannot produce:
    ``log10 NFA <= max_log_nfa``, and at least ``min_inliers``.
 2. *A plausible scale*: the ratio the transform implies agrees with the scale it was found at
    (within ``scale_agreement``), as the scale-space premise demands of a true match.
-3. *A plausible footprint*: the high image maps onto a region of the low image that is not
-   degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
-   outside the low image (a telephoto frame overhanging the wide one) is normal and accepted
+3. *A plausible footprint*: the finer image maps onto a region of the coarser image that is
+   not degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
+   outside the coarser image (a telephoto frame overhanging the wide one) is normal and accepted
    when the evidence is overwhelming (``max_log_nfa_alone``); with weaker evidence at least
    ``min_inside`` of it must lie inside.
 4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
@@ -31,16 +31,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import apply, footprint, grid
 from ..result import Evidence
 from .constraints import OrientationParams
 from .descriptors import Described
-from .estimator import RansacParams, model_of
+from .estimator import FitSpec, model_of
 from .guided import GuidedParams, grow
 from .pixelcheck import PixelParams, pixel_check, uniqueness
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
@@ -58,20 +58,20 @@ class DecisionParams:
     #: in a hundred pairs of unrelated images could show such a transform by chance
     max_log_nfa: float = -2.0
     scale_agreement: float = 1.6  #: implied ratio within this factor of the winning scale
-    #: fraction of the high image's footprint inside the low image, required only when the
+    #: fraction of the finer image's footprint inside the coarser one, required only when the
     #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
     #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
     #: docs/DESIGN.md, "What real pairs need")
     min_inside: float = 0.5
-    #: another scale agrees when its transform maps the high image within this many low px of
-    #: the winner's (mean over a grid, as EVALUATION.md measures error)
+    #: another scale agrees when its transform maps the finer image within this many coarser
+    #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
     agreement_px: float = 4.0
     min_agreeing_scales: int = 1  #: other scales that must agree with the winner ...
     #: ... unless the winner alone is this far beyond chance (log10 NFA): the best transforms of
     #: 39 unrelated pairs measured during development never went below -1.05, true ones at
     #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
-    min_area_px: float = 64.0  #: smallest footprint area in the low image, px^2 (8x8)
+    min_area_px: float = 64.0  #: smallest footprint area in the coarser image, px^2 (8x8)
     #: a best transform with at least this many distinct inliers, and fewer than
     #: ``min_inliers``, gets a second look (guided growth and the pixel check,
     #: :func:`look_again`), recorded in the evidence
@@ -161,30 +161,31 @@ class DecisionParams:
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
-            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
         for name in ("max_log_nfa", "max_log_nfa_alone"):
             in_range("decision", name, getattr(self, name))
-        in_range("decision", "scale_agreement", self.scale_agreement, lo=1)
-        in_range("decision", "min_inside", self.min_inside, lo=0, hi=1)
-        in_range("decision", "agreement_px", self.agreement_px, lo=0, lo_open=True)
-        in_range("decision", "min_area_px", self.min_area_px, lo=0)
+        in_range("decision", "scale_agreement", self.scale_agreement, Bounds(lo=1))
+        in_range("decision", "min_inside", self.min_inside, Bounds(lo=0, hi=1))
+        in_range("decision", "agreement_px", self.agreement_px, Bounds(lo=0, lo_open=True))
+        in_range("decision", "min_area_px", self.min_area_px, Bounds(lo=0))
         for name in ("look_min_inliers", "few_min_inliers", "few_min_grown"):
-            in_range("decision", name, getattr(self, name), lo=0, integer=True)
+            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
-        in_range("decision", "few_min_margin", self.few_min_margin, lo=-2, hi=2)
-        in_range("decision", "few_strong_margin", self.few_strong_margin, lo=-2, hi=2)
+        in_range("decision", "few_min_margin", self.few_min_margin, Bounds(lo=-2, hi=2))
+        in_range("decision", "few_strong_margin", self.few_strong_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
-        in_range("decision", "min_unique_ratio", self.min_unique_ratio, lo=0)
-        in_range("decision", "min_final_margin", self.min_final_margin, lo=-2, hi=2)
+        in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
+        in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
-        in_range("decision", "second_share", self.second_share, lo=0)
-        in_range("decision", "second_scale_factor", self.second_scale_factor, lo=1)
-        in_range("decision", "second_angle_deg", self.second_angle_deg, lo=0)
-        in_range("decision", "second_min_shift", self.second_min_shift, lo=0)
-        in_range("decision", "parallax_min_points", self.parallax_min_points, lo=0, integer=True)
-        in_range("decision", "parallax_share", self.parallax_share, lo=0)
-        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px, lo=0,
-                 lo_open=True)
+        in_range("decision", "second_share", self.second_share, Bounds(lo=0))
+        in_range("decision", "second_scale_factor", self.second_scale_factor, Bounds(lo=1))
+        in_range("decision", "second_angle_deg", self.second_angle_deg, Bounds(lo=0))
+        in_range("decision", "second_min_shift", self.second_min_shift, Bounds(lo=0))
+        in_range("decision", "parallax_min_points", self.parallax_min_points, Bounds(lo=0),
+                 integer=True)
+        in_range("decision", "parallax_share", self.parallax_share, Bounds(lo=0))
+        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
+                 Bounds(lo=0, lo_open=True))
 
 
 @dataclass(frozen=True)
@@ -193,7 +194,7 @@ class Decision:
     reason: str
     best_scale: float
     transform: Optional[np.ndarray] = field(repr=False)
-    inliers: np.ndarray = field(repr=False)  #: (N, 4) x_high, y_high, x_low, y_low
+    inliers: np.ndarray = field(repr=False)  #: (N, 4) x, y finer; x, y coarser
     evidence: Evidence = field(default_factory=Evidence)
     #: a "no": the test that refused (a key of ``TESTS``; "" when matched or nothing to refuse)
     test: str = ""
@@ -264,19 +265,21 @@ def _polygon_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
-def _inside_fraction(t, high_shape, low_shape) -> float:
-    p = apply(t, grid(high_shape, 11))
-    h, w = low_shape
+def _inside_fraction(t, finer_shape, coarser_shape) -> float:
+    """The fraction of an 11 x 11 grid over the finer image that ``t`` maps inside the coarser
+    image."""
+    p = apply(t, grid(finer_shape, 11))
+    h, w = coarser_shape
     ok = (p[:, 0] >= -0.5) & (p[:, 1] >= -0.5) & (p[:, 0] <= w - 0.5) & (p[:, 1] <= h - 0.5)
     return float(ok.mean())
 
 
-def folded(t: np.ndarray, high_shape=None) -> bool:
-    """True when the transform turns the high image over (a mirror image) somewhere on it.
+def folded(t: np.ndarray, finer_shape=None) -> bool:
+    """True when the transform turns the finer image over (a mirror image) somewhere on it.
 
     A 2x3 map: its linear part's determinant is not positive. A homography H: its Jacobian at
     a pixel p has the determinant ``det(H) / w(p)^3`` (``w`` the third coordinate of H p), so it
-    keeps the orientation over the image (``high_shape``; None: at its origin only) when ``w``
+    keeps the orientation over the image (``finer_shape``; None: at its origin only) when ``w``
     has one sign at every corner (the horizon w = 0 does not cross the image: ``w`` is affine)
     and ``det(H)`` has that sign too. (The top-left 2x2 block is that Jacobian only when H is
     affine: a steep perspective map 0.7 px from the truth was called folded; docs/design/VIEWS.md,
@@ -291,7 +294,7 @@ def folded(t: np.ndarray, high_shape=None) -> bool:
     t = np.asarray(t, np.float64)
     if t.shape == (2, 3):
         return float(np.linalg.det(t[:, :2])) <= 0.0
-    h, w = (1, 1) if high_shape is None else high_shape[:2]
+    h, w = (1, 1) if finer_shape is None else finer_shape[:2]
     corners = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], np.float64)
     depth = corners @ t[2]
     if not (np.all(depth > 0) or np.all(depth < 0)):
@@ -299,10 +302,11 @@ def folded(t: np.ndarray, high_shape=None) -> bool:
     return float(np.linalg.det(t)) * float(np.sign(depth[0])) <= 0.0
 
 
-def chance_probability(threshold_px: float, low_shape, model: str, oriented: bool,
+def chance_probability(threshold_px: float, coarser_shape, model: str, oriented: bool,
                        orientation_tol_deg: float) -> float:
-    """p: chance that a candidate with a uniform random low position fits within threshold."""
-    h, w = low_shape
+    """p: chance that a candidate with a uniform random position in the coarser image fits
+    within threshold."""
+    h, w = coarser_shape
     p = model_of(model).chance_area(threshold_px, (h, w)) / (h * w)
     if oriented:
         p *= 2.0 * orientation_tol_deg / 360.0
@@ -321,20 +325,30 @@ class Look:
     z: float  #: ncc against the nearby placements' mean, in their standard deviations
 
 
-def look_again(t: np.ndarray, high: Described, low: Described, high_image: np.ndarray,
-               low_image: np.ndarray, *, model: str, guided: GuidedParams, ransac: RansacParams,
+@dataclass(frozen=True)
+class Seen:
+    """One image of a hypothesis as the second look sees it."""
+
+    #: its described points (the finer image's at the hypothesis' scale)
+    described: Described = field(repr=False)
+    #: its pixels at the search's working size, NaN where it shows no scene
+    image: np.ndarray = field(repr=False)
+
+
+def look_again(t: np.ndarray, finer: Seen, coarser: Seen, *, fit: FitSpec, guided: GuidedParams,
                pixel: PixelParams) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
     the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
 
-    ``high``: every described point of the finer image at the hypothesis' scale; ``low``: the
-    coarser image's points; the images at the search's working size. ``model``: the one
-    searched for; ``guided``: the growth's parameters (``use_orientation`` off for descriptors
-    without one: the paper's jets); ``ransac``: the fit's; ``pixel``: the pixel check's.
+    ``finer``: every described point of the finer image at the hypothesis' scale, and its
+    pixels; ``coarser``: the coarser image's points and pixels. ``fit``: the model searched for
+    and the refit's RANSAC parameters (growth draws no sample: the seed is not used);
+    ``guided``: the growth's parameters (``use_orientation`` off for descriptors without one:
+    the paper's jets); ``pixel``: the pixel check's.
     """
-    growth = grow(t, high, low, model, guided, ransac)
+    growth = grow(t, finer.described, coarser.described, fit.model, guided, fit.ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
-    check = pixel_check(low_image, high_image, grown, pixel)
+    check = pixel_check(coarser.image, finer.image, grown, pixel)
     return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
 
 
@@ -377,68 +391,117 @@ def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> b
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
 
-def decide(outcomes: Sequence, low_shape, high_shape, params: DecisionParams, *, model: str,
-           ransac: RansacParams, orientation: Optional[OrientationParams], seed: int,
-           searches: int = 1,
-           shown_scale: float = 1.0,
+@dataclass(frozen=True)
+class SearchContext:
+    """What the decision needs to know of the search it judges, beside its outcomes."""
+
+    fit: FitSpec  #: the model searched for, the robust fit's parameters and the one seed
+    #: the rotation groups of oriented descriptors (a chance candidate is less likely to fit,
+    #: and each group is a test); None for descriptors without an orientation (the paper's jets)
+    orientation: Optional[OrientationParams]
+    #: whole searches made so far, this one included (each order and each simulated view is
+    #: one): they multiply the number of tests of the a-contrario count
+    searches: int = 1
+    #: the search's scales and ratios times this are the ones the user's images have (the
+    #: working size shrinks them, :mod:`scalematch.working`): the reasons name those
+    shown_scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class Winner:
+    """The winning scale's outcome and its a-contrario count (:func:`log10_nfa`)."""
+
+    outcome: object = field(repr=False)  #: a ``search.ScaleOutcome``
+    k: int  #: its inliers
+    n: int  #: its candidates (at least ``k``)
+    m: int  #: the model's minimal sample
+    p: float  #: the chance that one random candidate fits (:func:`chance_probability`)
+    tests: int  #: scales with candidates x subsets x searches x rotation groups
+    log10_nfa: float
+
+    def nfa_of(self, inliers: int) -> float:
+        """log10 NFA of another consensus of ``inliers`` among the same candidates."""
+        return log10_nfa(self.n, inliers, self.m, self.p, self.tests)
+
+
+def _closeness(o) -> float:
+    """How far an outcome's implied ratio is from its scale, |log(ratio / s)| (inf: no ratio)."""
+    r = o.row.ratio
+    return abs(math.log(r / o.row.s)) if r > 0 and math.isfinite(r) else math.inf
+
+
+def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
+           context: SearchContext,
            look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
-    ``params``: the decision's thresholds; ``model``: the model searched for; ``ransac``: the
-    robust fit's parameters (its threshold sets the a-contrario test's tolerance); ``seed``: the
-    one seed (:func:`scalematch.stages.rivals.second_transform`, ``off_plane``).
-    ``orientation``: the rotation groups of oriented descriptors, which make a chance candidate
-    less likely to fit and multiply the tests; None for descriptors without an orientation.
-    ``searches`` is the number of whole searches made so far, this one included (each order
-    and each simulated view is one): it multiplies the number of tests of the a-contrario count.
-    ``shown_scale`` turns the search's scales and ratios into the ones the user's images have
-    (the working size shrinks them, :mod:`scalematch.working`) in the reason's text, so it
-    names the scales of the per-scale table. ``look(t, outcome)``, when given, takes the second
-    look (:func:`look_again`) at a best transform of ``look_min_inliers`` to ``min_inliers - 1``
+    ``coarser_shape``, ``finer_shape``: the (H, W) of the images searched (or their views);
+    ``params``: the decision's thresholds; ``context``: the search's model, robust fit (its
+    threshold sets the a-contrario test's tolerance), seed
+    (:func:`scalematch.stages.rivals.second_transform`, ``off_plane``), rotation groups and
+    searches made, which the a-contrario count multiplies, and the scale its reasons are shown
+    at (:class:`SearchContext`). ``look(t, outcome)``, when given, takes the second look
+    (:func:`look_again`) at a best transform of ``look_min_inliers`` to ``min_inliers - 1``
     inliers: its figures go in the evidence, and it may accept a transform of
     ``few_min_inliers`` or more (:func:`pixels_confirm`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
     """
-    spec = model_of(model)
+    spec = model_of(context.fit.model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
-    evidence = Evidence()
     if not with_t:
         return Decision(False, "no scale produced a transform (too few candidate matches)",
-                        math.nan, None, np.zeros((0, 4)), evidence)
-
-    def closeness(o) -> float:
-        r = o.row.ratio
-        return abs(math.log(r / o.row.s)) if r > 0 and math.isfinite(r) else math.inf
-
+                        math.nan, None, np.zeros((0, 4)), Evidence())
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
     plausible = [o for o in with_t if not spec.has_ratio
-                 or closeness(o) <= math.log(params.scale_agreement)]
+                 or _closeness(o) <= math.log(params.scale_agreement)]
     if not plausible:
-        best = max(with_t, key=lambda o: o.row.inliers)
-        implied = best.row.ratio * shown_scale
-        implies = (f"implies a ratio of {implied:.3g}" if 1e-3 < implied < 1e3 else
-                   "is degenerate: it implies no usable ratio")  # inf, 2.5e+19: no picture
-        return Decision(False, f"no scale found a transform consistent with its own scale "
-                        f"(the best, at scale {best.row.s * shown_scale:.3g}, {implies})",
-                        best.row.s, None, np.zeros((0, 4)), evidence)
-    best = min(plausible, key=lambda o: (-o.row.inliers, closeness(o), o.row.s))
-    est = best.estimate
-    t = est.transform
+        return _implausible(with_t, context.shown_scale)
+    best = min(plausible, key=lambda o: (-o.row.inliers, _closeness(o), o.row.s))
+    winner = _counted(best, outcomes, coarser_shape, context)
+    return _tested(winner, with_t, (coarser_shape, finer_shape), params, context, look)
+
+
+def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
+    """The "no" when no scale's transform agrees with its own scale."""
+    best = max(with_t, key=lambda o: o.row.inliers)
+    implied = best.row.ratio * shown_scale
+    implies = (f"implies a ratio of {implied:.3g}" if 1e-3 < implied < 1e3 else
+               "is degenerate: it implies no usable ratio")  # inf, 2.5e+19: no picture
+    return Decision(False, f"no scale found a transform consistent with its own scale "
+                    f"(the best, at scale {best.row.s * shown_scale:.3g}, {implies})",
+                    best.row.s, None, np.zeros((0, 4)), Evidence())
+
+
+def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext) -> Winner:
+    """The winning outcome ``best`` with its a-contrario count over all of ``outcomes``."""
+    orientation = context.orientation
+    model = context.fit.model
     k = best.row.inliers
     n = max(best.candidates, k)
-    m = spec.min_sample
+    m = model_of(model).min_sample
     oriented = orientation is not None
-    p = chance_probability(ransac.threshold_px, low_shape, model, oriented,
+    p = chance_probability(context.fit.ransac.threshold_px, coarser_shape, model, oriented,
                            orientation.tolerance_deg if oriented else 0.0)
-    tests = max(int(searches), 1) * len([o for o in outcomes if o.candidates > 0]) * max(
+    tests = max(int(context.searches), 1) * len([o for o in outcomes if o.candidates > 0]) * max(
         n - m, 1) * (orientation.max_peaks if oriented else 1)
-    lnfa = log10_nfa(n, k, m, p, tests)
-    inl = est.inliers
-    pairs = np.hstack([best.src[inl], best.dst[inl]])
-    evidence = replace(evidence, inliers=int(k), candidates=int(n), log10_nfa=lnfa, chance_p=p)
+    return Winner(best, k, n, m, p, tests, log10_nfa(n, k, m, p, tests))
 
-    def no(reason: str, test: str) -> Decision:
+
+def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
+            context: SearchContext, look) -> Decision:
+    """The winner ``w`` through the tests, in order (the module's docstring): enough inliers
+    (or few, confirmed by the second look), beyond chance, a plausible footprint, agreeing
+    scales, no repeated structure. ``shapes``: (coarser, finer) (H, W)."""
+    best, k, lnfa = w.outcome, w.k, w.log10_nfa
+    spec = model_of(context.fit.model)
+    shown = best.row.s * context.shown_scale
+    t = best.estimate.transform
+    pairs = np.hstack([best.src[best.estimate.inliers], best.dst[best.estimate.inliers]])
+    evidence = replace(Evidence(), inliers=int(k), candidates=int(w.n), log10_nfa=lnfa,
+                       chance_p=w.p)
+
+    def no(reason: str, test: str) -> Decision:  # with the evidence, t and pairs reached
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence, test, t,
                         pairs)
 
@@ -446,78 +509,142 @@ def decide(outcomes: Sequence, low_shape, high_shape, params: DecisionParams, *,
     # every match, final_checks): above, it would cost a tenth of a plain pair's time for nothing
     second = look(t, best) if look is not None and spec.has_ratio and \
         params.look_min_inliers <= k < params.min_inliers else None
-    if second is not None:
-        evidence = replace(evidence, grown_inliers=len(second.inliers),
-                           grown_chance=second.chance, pixel_ncc=second.ncc,
-                           pixel_margin=second.margin, pixel_z=second.z)
-    few = k < params.min_inliers
-    if few:
-        confirmed = second is not None and k >= params.few_min_inliers and \
-            pixels_confirm(lnfa, second.margin, params) and \
-            len(second.inliers) >= params.few_min_grown
-        if not confirmed:
-            return no(f"too few inliers: {k} at scale {best.row.s * shown_scale:.3g} (at least "
+    evidence = _with_look(evidence, second)
+    if k < params.min_inliers:
+        if not _few_confirmed(w, second, params):
+            return no(f"too few inliers: {k} at scale {shown:.3g} (at least "
                       f"{params.min_inliers} needed, or {params.few_min_inliers} beyond chance "
                       f"that pass the pixel check)", "too few inliers")
         if len(second.inliers) >= k:  # grown (or kept): the refit map and its inliers
             t, pairs = second.transform, second.inliers
     if lnfa > params.max_log_nfa:
-        return no(f"the best transform ({k} inliers of {n} candidates at scale "
-                  f"{best.row.s * shown_scale:.3g}) "
+        return no(f"the best transform ({k} inliers of {w.n} candidates at scale "
+                  f"{shown:.3g}) "
                   f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})",
                   "chance")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, evidence)
-    poly = footprint(t, high_shape, edges=False)  # corner pixel centres, as measured
+    evidence, refusal = _footprint_tests(t, shapes, w, evidence, params)
+    if refusal is None:
+        evidence, refusal = _agreement_test(t, w, with_t, shapes[1], evidence, params,
+                                            context.shown_scale)
+    if refusal is None:
+        evidence, refusal = _rival_test(w, shapes[1], evidence, params, context.fit)
+    if refusal is not None:
+        return no(*refusal)
+    return Decision(True, "", best.row.s, t, pairs, evidence)
+
+
+def _with_look(evidence: Evidence, second: Optional[Look]) -> Evidence:
+    """``evidence`` with the second look's figures (unchanged without one)."""
+    if second is None:
+        return evidence
+    return replace(evidence, grown_inliers=len(second.inliers), grown_chance=second.chance,
+                   pixel_ncc=second.ncc, pixel_margin=second.margin, pixel_z=second.z)
+
+
+def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) -> bool:
+    """Whether the second look accepts a winner of fewer than ``min_inliers``: enough inliers,
+    far enough beyond chance for its pixel margin (:func:`pixels_confirm`), grown enough."""
+    return second is not None and w.k >= params.few_min_inliers and \
+        pixels_confirm(w.log10_nfa, second.margin, params) and \
+        len(second.inliers) >= params.few_min_grown
+
+
+#: A test's refusal: (reason, test), or None when it passes
+Refusal = Optional[Tuple[str, str]]
+
+
+def _footprint_tests(t: np.ndarray, shapes, w: Winner, evidence: Evidence,
+                     params: DecisionParams) -> Tuple[Evidence, Refusal]:
+    """Test 3, a plausible footprint of ``t`` (finer px -> coarser px; ``shapes``: (coarser,
+    finer) (H, W)): not folded over, not too small, inside enough unless the evidence is
+    overwhelming. (evidence with the footprint's figures, refusal)."""
+    coarser_shape, finer_shape = shapes
+    poly = footprint(t, finer_shape, edges=False)  # corner pixel centres, as measured
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
-    inside = _inside_fraction(t, high_shape, low_shape)
-    evidence = replace(evidence, implied_ratio=best.row.ratio, footprint_area_px=area,
+    inside = _inside_fraction(t, finer_shape, coarser_shape)
+    evidence = replace(evidence, implied_ratio=w.outcome.row.ratio, footprint_area_px=area,
                        footprint_inside=inside)
-    if folded(t, high_shape):
-        return no("the transform folds the high image over (a mirror image): not a view of it",
-                  "folded")
+    if folded(t, finer_shape):
+        return evidence, ("the transform folds the high image over (a mirror image): not a "
+                          "view of it", "folded")
     if area < params.min_area_px:
-        return no(f"the high image would cover only {area:.0f} px^2 of the low image",
-                  "footprint area")
-    if inside < params.min_inside and lnfa > params.max_log_nfa_alone:
-        return no(f"only {inside:.0%} of the high image's footprint lies inside the low image",
-                  "footprint inside")
+        return evidence, (f"the high image would cover only {area:.0f} px^2 of the low image",
+                          "footprint area")
+    if inside < params.min_inside and w.log10_nfa > params.max_log_nfa_alone:
+        return evidence, (f"only {inside:.0%} of the high image's footprint lies inside the "
+                          f"low image", "footprint inside")
+    return evidence, None
+
+
+def _agreement_test(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape,
+                    evidence: Evidence, params: DecisionParams,
+                    shown_scale: float) -> Tuple[Evidence, Refusal]:
+    """Test 4, consistent neighbouring scales: how many other scales found (nearly) ``t``;
+    enough of them unless the winner is overwhelming alone or has fewer than ``min_inliers``
+    (the second look confirmed it). ``shown_scale``: :attr:`SearchContext.shown_scale`."""
+    best = w.outcome
+    few = w.k < params.min_inliers
     agreeing = 0
     for o in with_t:
-        if o is best or o.row.inliers < spec.min_sample + 1:
+        if o is best or o.row.inliers < w.m + 1:
             continue
-        if mean_transfer_gap(o.estimate.transform, t, high_shape) <= params.agreement_px:
+        if mean_transfer_gap(o.estimate.transform, t, finer_shape) <= params.agreement_px:
             agreeing += 1
     evidence = replace(evidence, agreeing_scales=agreeing)
-    if agreeing < params.min_agreeing_scales and lnfa > params.max_log_nfa_alone and not few:
-        return no(f"no other scale agrees with the best one (scale {best.row.s * shown_scale:.3g}, "
-                  f"{k} inliers)", "agreeing scales")
-    rival = second_transform(best.src, best.dst, inl, est.transform, high_shape,
-                             ransac, seed)
-    rival_nfa = log10_nfa(n, rival.inliers, m, p, tests)
-    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, seed)
+    if agreeing < params.min_agreeing_scales and w.log10_nfa > params.max_log_nfa_alone \
+            and not few:
+        return evidence, (f"no other scale agrees with the best one "
+                          f"(scale {best.row.s * shown_scale:.3g}, "
+                          f"{w.k} inliers)", "agreeing scales")
+    return evidence, None
+
+
+def _rival_test(w: Winner, finer_shape, evidence: Evidence, params: DecisionParams,
+                fit: FitSpec) -> Tuple[Evidence, Refusal]:
+    """What the candidates the winner leaves over show: a second transform of the same scale
+    and angle (a repeated structure, refused: :func:`repeats`) and points off the winner's
+    plane (parallax, recorded). (evidence with their figures, refusal)."""
+    best, k = w.outcome, w.k
+    est = best.estimate
+    inl = est.inliers
+    rival = second_transform(best.src, best.dst, inl, est.transform, finer_shape,
+                             fit.ransac, fit.seed)
+    rival_nfa = w.nfa_of(rival.inliers)
+    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, fit.seed)
     evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
                        second_gap_px=rival.gap_px, parallax_points=parallax,
                        parallax=parallax >= max(params.parallax_min_points,
                                                 params.parallax_share * k))
-    if repeats(rival, rival_nfa, k, area, est.transform, params):
-        return no(f"ambiguous: a second transform of the same scale and angle, "
-                  f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
-                  f"{k}: a repeated structure", "repeated structure")
-    return Decision(True, "", best.row.s, t, pairs, evidence)
+    if repeats(rival, rival_nfa, k, evidence.footprint_area_px, est.transform, params):
+        return evidence, (f"ambiguous: a second transform of the same scale and angle, "
+                          f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
+                          f"{k}: a repeated structure", "repeated structure")
+    return evidence, None
 
 
-def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, log10_nfa: float,
-                 params: DecisionParams, near=None, vouched: Optional[np.ndarray] = None,
-                 pixel: PixelParams = PixelParams()):
-    """(figures, reason, test): the pixel tests of a match's final transform ``t`` (finer px ->
-    coarser px, refit, at log10 NFA ``log10_nfa``) as :class:`FinalFigures`, why it is refused
-    and by which test (:data:`TESTS`; "" when it is not).
+@dataclass(frozen=True)
+class Claim:
+    """A match's final transform as the pixel tests judge it (:func:`final_checks`)."""
+
+    transform: np.ndarray = field(repr=False)  #: refit, finer px -> coarser px
+    log10_nfa: float  #: the decision's a-contrario figure for it
+    #: the finer px (N, 2) of the inliers that vouch for it; None: the whole footprint
+    vouched: Optional[np.ndarray] = field(default=None, repr=False)
+
+
+def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
+                 near=None, pixel: PixelParams = PixelParams()):
+    """(figures, reason, test): the pixel tests of a match's final transform ``claim.transform``
+    (``t`` below: finer px -> coarser px, refit, at log10 NFA ``claim.log10_nfa``) as
+    :class:`FinalFigures`, why it is refused and by which test (:data:`TESTS`; "" when it is
+    not).
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
     times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`),
-    compared where the inliers ``vouched`` for the map (their finer px, (N, 2)).
+    compared where the inliers vouched for the map (``claim.vouched``).
     Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
     (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
     Both are measured on the final transform: a similarity found before the refit may hold on
@@ -531,6 +658,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, log10_nf
     ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
     ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
+    t, log10_nfa, vouched = claim.transform, claim.log10_nfa, claim.vouched
     if near is None:  # side by side: neither needs the other
         u, near = thread_map(lambda job: job(), [
             lambda: uniqueness(coarser, finer, t, pixel, vouched=vouched),

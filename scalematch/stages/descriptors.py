@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from .filters import gaussian_derivative
 from .scalespace import Level, gaussian_blur
 
@@ -63,8 +63,8 @@ class JetParams:
     min_gradient: float = 0.5
 
     def __post_init__(self) -> None:
-        in_range("jets", "scale_factor", self.scale_factor, lo=0, lo_open=True)
-        in_range("jets", "min_gradient", self.min_gradient, lo=0, lo_open=True)
+        in_range("jets", "scale_factor", self.scale_factor, Bounds(lo=0, lo_open=True))
+        in_range("jets", "min_gradient", self.min_gradient, Bounds(lo=0, lo_open=True))
 
 
 #: Number of local-jet invariants in the descriptor (v2..v8).
@@ -163,12 +163,12 @@ class GradientParams:
 
     def __post_init__(self) -> None:
         for name in ("cell_px", "orientation_radius_px", "orientation_sigma_px", "clip"):
-            in_range("gradients", name, getattr(self, name), lo=0, lo_open=True)
+            in_range("gradients", name, getattr(self, name), Bounds(lo=0, lo_open=True))
         for name in ("grid", "bins", "samples_per_cell", "orientation_bins",
                      "orientation_step_px"):
-            in_range("gradients", name, getattr(self, name), lo=1, integer=True)
-        in_range("gradients", "secondary_peak", self.secondary_peak, lo=0, hi=1)
-        in_range("gradients", "presmooth_px", self.presmooth_px, lo=0)
+            in_range("gradients", name, getattr(self, name), Bounds(lo=1), integer=True)
+        in_range("gradients", "secondary_peak", self.secondary_peak, Bounds(lo=0, hi=1))
+        in_range("gradients", "presmooth_px", self.presmooth_px, Bounds(lo=0))
 
 
 @dataclass(frozen=True)

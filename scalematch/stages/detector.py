@@ -40,7 +40,7 @@ from typing import List, NamedTuple, Optional, Sequence
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from .filters import gaussian_derivative
 from .nodata import away_from
 from .scalespace import Level, as_float_image, gaussian_blur, scale_space
@@ -89,14 +89,15 @@ class HarrisParams:
 
     def __post_init__(self) -> None:
         for name in ("sigma", "sigma_tilde", "min_level_sigma"):
-            in_range("harris", name, getattr(self, name), lo=0, lo_open=True)
+            in_range("harris", name, getattr(self, name), Bounds(lo=0, lo_open=True))
         # alpha >= 0.25 makes every cornerness negative (det <= tr^2 / 4)
-        in_range("harris", "alpha", self.alpha, lo=0, hi=0.25, hi_open=True)
+        in_range("harris", "alpha", self.alpha, Bounds(lo=0, hi=0.25, hi_open=True))
         for name in ("threshold", "nms_radius", "border"):
-            in_range("harris", name, getattr(self, name), lo=0)
-        in_range("harris", "max_points", self.max_points, lo=0, integer=True)
-        in_range("harris", "contrast_cap", self.contrast_cap, lo=0, lo_open=True, allow_inf=True)
-        in_range("harris", "min_points", self.min_points, lo=0, integer=True)
+            in_range("harris", name, getattr(self, name), Bounds(lo=0))
+        in_range("harris", "max_points", self.max_points, Bounds(lo=0), integer=True)
+        in_range("harris", "contrast_cap", self.contrast_cap, Bounds(lo=0, lo_open=True),
+                 allow_inf=True)
+        in_range("harris", "min_points", self.min_points, Bounds(lo=0), integer=True)
 
 
 @dataclass(frozen=True)

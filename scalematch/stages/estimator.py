@@ -17,7 +17,7 @@ from typing import Callable, Dict, Optional, Tuple
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import transfer_error
 
 @dataclass(frozen=True)
@@ -32,11 +32,21 @@ class RansacParams:
     refine_iters: int = 10  #: Levenberg-Marquardt refinement iterations (OpenCV default)
 
     def __post_init__(self) -> None:
-        in_range("ransac", "threshold_px", self.threshold_px, lo=0, lo_open=True)
-        in_range("ransac", "confidence", self.confidence, lo=0, hi=1, lo_open=True,
-                 hi_open=True)
-        in_range("ransac", "max_iters", self.max_iters, lo=1, integer=True)
-        in_range("ransac", "refine_iters", self.refine_iters, lo=0, integer=True)
+        in_range("ransac", "threshold_px", self.threshold_px, Bounds(lo=0, lo_open=True))
+        in_range("ransac", "confidence", self.confidence,
+                 Bounds(lo=0, hi=1, lo_open=True, hi_open=True))
+        in_range("ransac", "max_iters", self.max_iters, Bounds(lo=1), integer=True)
+        in_range("ransac", "refine_iters", self.refine_iters, Bounds(lo=0), integer=True)
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """How a stage fits a transform: the model, the robust fit's parameters and the one seed
+    of its random samples (``Config.model``, ``Config.ransac``, ``Config.seed``)."""
+
+    model: str
+    ransac: RansacParams = field(default_factory=RansacParams)
+    seed: int = 0
 
 
 @dataclass(frozen=True)

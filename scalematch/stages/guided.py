@@ -30,7 +30,7 @@ from typing import Tuple
 
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
@@ -65,9 +65,9 @@ class GuidedParams:
 
     def __post_init__(self) -> None:
         for name in ("radius_px", "max_distance", "threshold_px"):
-            in_range("guided", name, getattr(self, name), lo=0, lo_open=True)
-        in_range("guided", "angle_tolerance_deg", self.angle_tolerance_deg, lo=0, hi=180)
-        in_range("guided", "max_rounds", self.max_rounds, lo=1, integer=True)
+            in_range("guided", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+        in_range("guided", "angle_tolerance_deg", self.angle_tolerance_deg, Bounds(lo=0, hi=180))
+        in_range("guided", "max_rounds", self.max_rounds, Bounds(lo=1), integer=True)
 
 
 @dataclass(frozen=True)

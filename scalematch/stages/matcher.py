@@ -19,7 +19,7 @@ from typing import Tuple
 
 import numpy as np
 
-from ..checks import in_range, one_of
+from ..checks import Bounds, in_range, one_of
 from .threads import thread_map
 
 SELECTIONS = ("nn", "knn", "threshold", "ratio")
@@ -43,9 +43,9 @@ class MatcherParams:
 
     def __post_init__(self) -> None:
         one_of("matcher", "selection", self.selection, SELECTIONS)
-        in_range("matcher", "k", self.k, lo=1, integer=True)
-        in_range("matcher", "ratio", self.ratio, lo=0, hi=1, lo_open=True)
-        in_range("matcher", "max_distance", self.max_distance, lo=0, lo_open=True,
+        in_range("matcher", "k", self.k, Bounds(lo=1), integer=True)
+        in_range("matcher", "ratio", self.ratio, Bounds(lo=0, hi=1, lo_open=True))
+        in_range("matcher", "max_distance", self.max_distance, Bounds(lo=0, lo_open=True),
                  allow_inf=True)
 
 

@@ -39,7 +39,7 @@ from typing import NamedTuple, Optional, Tuple, Union
 import cv2
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
 from .scalespace import CAMERA_BLUR_PX
 
@@ -86,12 +86,12 @@ class PixelParams:
 
     def __post_init__(self) -> None:
         for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
-            in_range("pixel", name, getattr(self, name), lo=0, lo_open=True)
-        in_range("pixel", "rotation_deg", self.rotation_deg, lo=0, hi=180)
-        in_range("pixel", "scale_step", self.scale_step, lo=1)
-        in_range("pixel", "min_overlap_px", self.min_overlap_px, lo=1, integer=True)
-        in_range("pixel", "min_std", self.min_std, lo=0)
-        in_range("pixel", "edge_px", self.edge_px, lo=0, integer=True)
+            in_range("pixel", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+        in_range("pixel", "rotation_deg", self.rotation_deg, Bounds(lo=0, hi=180))
+        in_range("pixel", "scale_step", self.scale_step, Bounds(lo=1))
+        in_range("pixel", "min_overlap_px", self.min_overlap_px, Bounds(lo=1), integer=True)
+        in_range("pixel", "min_std", self.min_std, Bounds(lo=0))
+        in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
 
 
 @dataclass(frozen=True)
@@ -321,31 +321,10 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
         return _nan_check(placed)
     low, t3, ratio, corners, area = placed
     others = perturbations(t3, high.shape, params)
-    # one box holding every placement's footprint, clipped to the low image
-    hh, ww = low.shape
-    pts = [corners] + [footprint(m, high.shape) for m in others]
-    pts = np.vstack([p for p in pts if p is not None])
-    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int), 0)
-    x1 = min(int(np.ceil(pts[:, 0].max())), ww - 1)
-    y1 = min(int(np.ceil(pts[:, 1].max())), hh - 1)
-    if x1 <= x0 or y1 <= y0:
+    box = _common_box(low.shape, [corners] + [footprint(m, high.shape) for m in others])
+    if box is None:
         return _nan_check("the footprint lies outside the low image")
-    box = low[y0:y1 + 1, x0:x1 + 1]
-    size = (x1 - x0 + 1, y1 - y0 + 1)
-    small, k = blurred_for_ratio(high, ratio)
-    shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
-    from_small = _small_to_high(k)
-
-    box_shown = np.isfinite(box)
-
-    def score(m3: np.ndarray) -> Tuple[float, int]:
-        img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
-        mask &= box_shown & np.isfinite(img)
-        n = int(mask.sum())
-        if n < params.min_overlap_px:
-            return float("nan"), n
-        return zncc(img[mask], box[mask], params.min_std), n
-
+    score = _scorer(low, high, ratio, box, params)
     ncc, n = score(t3)
     fraction = n / area
     if n < params.min_overlap_px:
@@ -353,6 +332,50 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     if not math.isfinite(ncc):
         return _nan_check("flat: no grey-level variation over the overlap", n, fraction)
     pert = np.array([score(m)[0] for m in others])
+    return _against_perturbed(ncc, pert, n, fraction)
+
+
+def _common_box(low_shape: Tuple[int, int],
+                footprints) -> Optional[Tuple[int, int, int, int]]:
+    """(x0, y0, x1, y1), inclusive low px: one box holding every placement's footprint (each
+    (4, 2), or None: left out), clipped to the low image; None when nothing of it is inside."""
+    hh, ww = low_shape
+    pts = np.vstack([p for p in footprints if p is not None])
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int), 0)
+    x1 = min(int(np.ceil(pts[:, 0].max())), ww - 1)
+    y1 = min(int(np.ceil(pts[:, 1].max())), hh - 1)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return x0, y0, x1, y1
+
+
+def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int, int, int],
+            params: PixelParams):
+    """``score(m3) -> (zncc, overlap px)``: the high image, blurred for ``ratio``, warped by the
+    3x3 map ``m3`` (high px -> low px) onto ``box`` of ``low`` and compared where both show
+    the scene (zncc nan under ``min_overlap_px``)."""
+    x0, y0, x1, y1 = box
+    crop = low[y0:y1 + 1, x0:x1 + 1]
+    size = (x1 - x0 + 1, y1 - y0 + 1)
+    small, k = blurred_for_ratio(high, ratio)
+    shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
+    from_small = _small_to_high(k)
+    crop_shown = np.isfinite(crop)
+
+    def score(m3: np.ndarray) -> Tuple[float, int]:
+        img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
+        mask &= crop_shown & np.isfinite(img)
+        n = int(mask.sum())
+        if n < params.min_overlap_px:
+            return float("nan"), n
+        return zncc(img[mask], crop[mask], params.min_std), n
+
+    return score
+
+
+def _against_perturbed(ncc: float, pert: np.ndarray, n: int, fraction: float) -> PixelCheck:
+    """The check of a hypothesis of ZNCC ``ncc`` (over ``n`` low px, ``fraction`` of its
+    footprint) against its perturbed placements' ZNCC ``pert`` (nan: not measured)."""
     good = pert[np.isfinite(pert)]
     if good.size == 0:
         return PixelCheck(ncc, float("nan"), float("nan"), float("nan"), tuple(pert.tolist()),

@@ -15,11 +15,11 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 
-from ..checks import in_range
+from ..checks import Bounds, in_range
 from ..geometry import similarity_parts
 from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
-from .estimator import RansacParams, estimate
+from .estimator import FitSpec, estimate
 from .matcher import Candidates, MatcherParams, match_descriptors
 
 
@@ -38,12 +38,12 @@ class ProbeParams:
 
     def __post_init__(self) -> None:
         for name in ("points", "keep", "ransac_iters"):
-            in_range("probe", name, getattr(self, name), lo=1, integer=True)
+            in_range("probe", name, getattr(self, name), Bounds(lo=1), integer=True)
 
 
 def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams, *,
                  matcher: MatcherParams, orientation: Optional[OrientationParams],
-                 ransac: RansacParams, scale_agreement: float, seed: int) -> List[float]:
+                 fit: FitSpec, scale_agreement: float) -> List[float]:
     """How promising each scale looks from the initial matches of its strongest points alone.
 
     Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
@@ -55,26 +55,27 @@ def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams
     scale (each candidate depends on its own row only; one large product is faster than many
     small ones).
 
-    ``matcher``: the candidates' parameters; ``ransac``: the quick fit's (with
-    ``params.ransac_iters`` iterations); ``scale_agreement``: how far a fit's ratio may be from
-    its scale (``DecisionParams.scale_agreement``); ``seed``: the one seed.
+    ``matcher``: the candidates' parameters; ``fit``: the quick fit's model (a similarity),
+    RANSAC parameters (run with ``params.ransac_iters`` iterations) and the one seed;
+    ``scale_agreement``: how far a fit's ratio may be from its scale
+    (``DecisionParams.scale_agreement``).
     """
     if not highs:
         return []
     cand = match_descriptors(np.vstack([h.desc for h in highs]), low.desc, matcher)
     bounds = np.cumsum([0] + [len(h) for h in highs])
+    quick = replace(fit, ransac=replace(fit.ransac, max_iters=params.ransac_iters))
     out = []
     for h, lo, hi in zip(highs, bounds[:-1], bounds[1:]):
         rows = (cand.i >= lo) & (cand.i < hi)
         part = Candidates(cand.i[rows] - lo, cand.j[rows], cand.distance[rows], cand.second[rows])
-        out.append(_score(h, low, part, orientation,
-                          replace(ransac, max_iters=params.ransac_iters), scale_agreement, seed))
+        out.append(_score(h, low, part, orientation, quick, scale_agreement))
     return out
 
 
 def _score(high: Described, low: Described, cand: Candidates,
-           orientation: Optional[OrientationParams], quick: RansacParams, scale_agreement: float,
-           seed: int) -> float:
+           orientation: Optional[OrientationParams], quick: FitSpec,
+           scale_agreement: float) -> float:
     if len(cand) == 0:
         return 0.0
     if orientation is None:  # nothing to group the candidates by: their number
@@ -82,8 +83,8 @@ def _score(high: Described, low: Described, cand: Candidates,
     groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], orientation)
     best = 0.0
     for mask in groups:
-        est = estimate("similarity", high.xy[cand.i[mask]], low.xy[cand.j[mask]],
-                       quick, seed=seed)
+        est = estimate(quick.model, high.xy[cand.i[mask]], low.xy[cand.j[mask]],
+                       quick.ransac, seed=quick.seed)
         if est.transform is None:
             continue
         ratio = similarity_parts(est.transform)[0]

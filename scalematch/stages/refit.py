@@ -26,10 +26,11 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import in_range, one_of
+from ..checks import Bounds, in_range, one_of
 from ..geometry import compose, invert
 from .decision import Decision, folded
-from .estimator import MIN_SAMPLE, MODELS, RansacParams, estimate, model_of, refine, residuals
+from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, model_of, refine,
+                        residuals)
 from .matcher import distinct_pairs
 from .views import View, to_high
 
@@ -70,8 +71,8 @@ class ModelCheckParams:
     def __post_init__(self) -> None:
         for name in self.models:
             one_of("model_check", "models", name, MODELS)
-        in_range("model_check", "min_gain", self.min_gain, lo=1)
-        in_range("model_check", "min_extra", self.min_extra, lo=0, integer=True)
+        in_range("model_check", "min_gain", self.min_gain, Bounds(lo=1))
+        in_range("model_check", "min_extra", self.min_extra, Bounds(lo=0), integer=True)
 
 
 Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)
@@ -82,15 +83,16 @@ def _back(view: Optional[View], xy: np.ndarray) -> np.ndarray:
     return xy if view is None else to_high(view, xy)
 
 
-def refit_in_high(view: View, verdict: Decision, best, asked: str, ransac: RansacParams,
-                  seed: int, coarser: Optional[View] = None) -> Refit:
+def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
+                  coarser: Optional[View] = None) -> Refit:
     """The winning view's match in the images' own pixels.
 
     The view's similarity composed with the views' compressions is an affine map; it is refit
     on the inliers mapped back to the images (an affine map, or a homography when that is
-    the model asked for, ``asked``), so the answer is exact rather than limited to the sampled
-    tilts. ``ransac``, ``seed``: the robust fit's parameters and the one seed.
+    the model asked for, ``spec.model``), so the answer is exact rather than limited to the
+    sampled tilts. ``spec``: also the robust fit's parameters and the one seed.
     """
+    asked, ransac, seed = spec.model, spec.ransac, spec.seed
     if view.is_identity and coarser is None:
         return verdict.transform, verdict.inliers, asked
     src = to_high(view, verdict.inliers[:, :2])
@@ -170,8 +172,7 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, ransac: RansacParam
 
 
 def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelCheckParams,
-                     asked: str, ransac: RansacParams, seed: int,
-                     coarser: Optional[View] = None) -> Refit:
+                     spec: FitSpec, coarser: Optional[View] = None) -> Refit:
     """A homography fitted to the candidates of every scale matched in full, when it explains
     clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
     same pooled pairs count for both, so a plain zoom pair, where the similarity explains them
@@ -181,9 +182,11 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelChe
     band of it whose local ratio is near that scale, and a similarity or an affine map fitted
     there holds on that band only: the pooled candidates of neighbouring scales cover the
     others, and a homography fitted to all of them holds on the whole. Only for a similarity
-    asked for (``asked``: the model searched for) with the model check on
-    (``ModelCheckParams.union``) and a homography among its models, as :func:`richer_model`.
+    asked for (``spec.model``: the model searched for) with the model check on
+    (``ModelCheckParams.union``) and a homography among its models, as :func:`richer_model`;
+    ``spec``: also the robust fit's parameters and the one seed.
     """
+    asked, ransac, seed = spec.model, spec.ransac, spec.seed
     t, inliers, model = fit
     if (not check.enabled or not check.union or asked != "similarity"
             or model == "homography" or "homography" not in check.models):

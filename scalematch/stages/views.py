@@ -22,7 +22,7 @@ from typing import List, Optional, Tuple
 import cv2
 import numpy as np
 
-from ..checks import in_range, one_of
+from ..checks import Bounds, in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
 from .nodata import away_from, distance_inside
 
@@ -97,14 +97,14 @@ class ViewParams:
     def __post_init__(self) -> None:
         for tilts in self.passes:
             for t in tilts:
-                in_range("views", "passes", t, lo=1)
+                in_range("views", "passes", t, Bounds(lo=1))
         one_of("views", "coarser_directions", self.coarser_directions, COARSER_DIRECTIONS)
-        in_range("views", "longitude_step_deg", self.longitude_step_deg, lo=0, lo_open=True)
+        in_range("views", "longitude_step_deg", self.longitude_step_deg, Bounds(lo=0, lo_open=True))
         for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
-            in_range("views", name, getattr(self, name), lo=0)
-        in_range("views", "full_searches", self.full_searches, lo=1, integer=True)
-        in_range("views", "probe_every", self.probe_every, lo=1, integer=True)
-        in_range("views", "confirm_below_inliers", self.confirm_below_inliers, lo=0,
+            in_range("views", name, getattr(self, name), Bounds(lo=0))
+        in_range("views", "full_searches", self.full_searches, Bounds(lo=1), integer=True)
+        in_range("views", "probe_every", self.probe_every, Bounds(lo=1), integer=True)
+        in_range("views", "confirm_below_inliers", self.confirm_below_inliers, Bounds(lo=0),
                  integer=True)
 
 

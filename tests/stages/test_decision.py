@@ -81,8 +81,11 @@ def _look(grown: int, margin: float):
 
 def _params(config):
     """decide's parameters after the shapes, from a Config."""
-    return dict(params=config.decision, model=config.model, ransac=config.ransac,
-                orientation=config.orientation, seed=config.seed)
+    from scalematch.stages.decision import SearchContext
+    from scalematch.stages.estimator import FitSpec
+
+    fit = FitSpec(config.model, config.ransac, config.seed)
+    return dict(params=config.decision, context=SearchContext(fit, config.orientation))
 
 
 def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good_one():
@@ -122,18 +125,18 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     import cv2
 
     from scalematch.config import Config
-    from scalematch.stages.decision import final_checks
+    from scalematch.stages.decision import Claim, final_checks
 
     params = Config().decision
     base = raccoon[200:260, 300:380]  # 80 x 60 px
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)  # 4x finer
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
     unique = raccoon[170:350, 260:500]  # the place, and other (unrelated) texture around it
-    final, reason, _ = final_checks(unique, high, t, math.inf, params)
+    final, reason, _ = final_checks(unique, high, Claim(t, math.inf), params)
     assert reason == "" and final.unique_ratio > 3 * params.min_unique_ratio
     tiled = np.tile(base, (3, 3))  # the same structure nine times over
     t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)  # the centre copy
-    final, reason, _ = final_checks(tiled, high, t_tiled, math.inf, params)
+    final, reason, _ = final_checks(tiled, high, Claim(t_tiled, math.inf), params)
     assert reason.startswith("ambiguous") and final.unique_ratio < params.min_unique_ratio
 
 
@@ -148,18 +151,18 @@ def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
 
     from scalematch.config import Config
     from scalematch.geometry import compose
-    from scalematch.stages.decision import final_checks
+    from scalematch.stages.decision import Claim, final_checks
 
     params = Config().decision
     base = raccoon[200:260, 300:380]
     high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
     low = raccoon[170:350, 260:500]
     t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
-    final, reason, _ = final_checks(low, high, t, math.inf, params)
+    final, reason, _ = final_checks(low, high, Claim(t, math.inf), params)
     assert reason == "" and final.final_margin > 0.3  # measured 0.6-0.7
     turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)  # about the footprint's centre
     alone = replace(params, min_unique_ratio=0.0)
-    final, reason, _ = final_checks(low, high, compose(turn, t), math.inf, alone)
+    final, reason, _ = final_checks(low, high, Claim(compose(turn, t), math.inf), alone)
     assert final.final_margin < params.min_final_margin
     assert reason.startswith("the pixels do not confirm it"), reason
 

@@ -11,7 +11,7 @@ from scalematch.config import Config
 from scalematch.geometry import apply
 from scalematch.result import ScaleRow
 from scalematch.search import ScaleOutcome
-from scalematch.stages.estimator import Estimate, estimate
+from scalematch.stages.estimator import Estimate, FitSpec, estimate
 from scalematch.stages.refit import union_homography
 from scalematch.stages.views import identity_view
 
@@ -37,7 +37,7 @@ def _outcomes(truth: np.ndarray, bands, n: int = 40, outliers: int = 10, seed: i
 
 def _union_args(config):
     """union_homography's parameters after the outcomes, from a Config."""
-    return config.model_check, config.model, config.ransac, config.seed
+    return config.model_check, FitSpec(config.model, config.ransac, config.seed)
 
 
 def _similarity_on(outcome, config):
@@ -110,7 +110,8 @@ def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
     t_view = estimate("affine", src, dst, Config().ransac).transform
     verdict = Decision(True, "", 1.0, t_view, np.hstack([src, dst]))
     t, inliers, model = refit_in_high(identity_view(np.zeros((200, 200), np.float32)), verdict,
-                                      best, "similarity", Config().ransac, 0, coarser=view)
+                                      best, FitSpec("similarity", Config().ransac, 0),
+                                      coarser=view)
     assert model == "affine" and len(inliers) == 40
     assert np.abs(apply(t, src) - apply(truth, src)).max() < 1e-3
     assert np.abs(inliers[:, 2:4] - apply(truth, src)).max() < 1e-3
