@@ -21,7 +21,8 @@ show evidence that an unrelated pair cannot produce:
 3. *A plausible footprint*: the finer image maps onto a region of the coarser image that is
    not degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
    outside the coarser image (a telephoto frame overhanging the wide one) is normal and accepted
-   when the evidence is overwhelming (``max_log_nfa_alone``); with weaker evidence at least
+   when the evidence is overwhelming (``max_log_nfa_alone``) or when the pixels of the part
+   inside confirm a few-inlier map (:func:`pixels_confirm`); with weaker evidence at least
    ``min_inside`` of it must lie inside.
 4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
    (nearly) the same transform, as the paper's Table 1 shows for a true match.
@@ -101,6 +102,14 @@ class DecisionParams:
     #: inliers 0.018 (docs/NULLS.md; docs/design/DECISION.md, "The ground for each threshold")
     few_strong_margin: float = 0.3
     few_strong_max_log_nfa: float = -4.0
+    #: ... or, with a pixel margin of at least this, the plain a-contrario bound
+    #: (``max_log_nfa``): the pixels then decide. A footprint that overhangs the coarser image
+    #: leaves few points to match and sinks the NFA of a true 4-inlier answer to -2.9 to -4.5
+    #: (realistic partial pairs at ratios 6-8: pixel margins 0.53 to 0.87), while the best
+    #: transforms of the null runs' second looks reached 0.043 at the most (238 of 600 runs;
+    #: docs/design/DECISION.md, "The ground for each threshold"); every true few-inlier answer
+    #: of the clean sets measured below it (0.05 to 0.47) passes by the tiers above
+    few_clear_margin: float = 0.5
     #: a transform about to be accepted must place the finer image better than anywhere else in
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
     #: times the claimed one's (``stages.pixelcheck.uniqueness``). A repeated structure (the
@@ -174,6 +183,7 @@ class DecisionParams:
         in_range("decision", "few_min_margin", self.few_min_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "few_strong_margin", self.few_strong_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
+        in_range("decision", "few_clear_margin", self.few_clear_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
         in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
@@ -210,7 +220,8 @@ TESTS = {
     "chance": ("inliers", "candidates", "log10_nfa", "max_log_nfa"),
     "folded": (),
     "footprint area": ("footprint_area_px", "min_area_px"),
-    "footprint inside": ("footprint_inside", "min_inside", "log10_nfa", "max_log_nfa_alone"),
+    "footprint inside": ("footprint_inside", "min_inside", "log10_nfa", "max_log_nfa_alone",
+                         "pixel_margin"),
     "agreeing scales": ("agreeing_scales", "min_agreeing_scales", "log10_nfa",
                         "max_log_nfa_alone"),
     "repeated structure": ("inliers", "second_inliers", "second_gap_px", "second_share"),
@@ -378,16 +389,20 @@ def repeats(second: Second, second_nfa: float, k: int, area: float, winner: np.n
 
 
 def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> bool:
-    """Whether a few-inlier transform's NFA and pixel margin reach one of the two tiers: a
-    modest margin with a low NFA, or a wide margin with a weaker one (``few_*`` of
+    """Whether a few-inlier transform's NFA and pixel margin reach one of the three tiers: a
+    modest margin with a low NFA, a wide margin with a weaker one, or a margin no wrong
+    placement reaches with the plain a-contrario bound (``few_*`` and ``max_log_nfa`` of
     :class:`DecisionParams`). A nan margin (cannot tell) confirms nothing.
 
     >>> p = DecisionParams()
     >>> pixels_confirm(-7.0, 0.15, p), pixels_confirm(-4.5, 0.15, p), pixels_confirm(-4.5, 0.4, p)
     (True, False, True)
+    >>> pixels_confirm(-2.9, 0.4, p), pixels_confirm(-2.9, 0.87, p), pixels_confirm(-1.5, 0.87, p)
+    (False, True, False)
     """
     tiers = ((params.few_max_log_nfa, params.few_min_margin),
-             (params.few_strong_max_log_nfa, params.few_strong_margin))
+             (params.few_strong_max_log_nfa, params.few_strong_margin),
+             (params.max_log_nfa, params.few_clear_margin))
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
 
@@ -559,7 +574,8 @@ def _footprint_tests(t: np.ndarray, shapes, w: Winner, evidence: Evidence,
                      params: DecisionParams) -> Tuple[Evidence, Refusal]:
     """Test 3, a plausible footprint of ``t`` (finer px -> coarser px; ``shapes``: (coarser,
     finer) (H, W)): not folded over, not too small, inside enough unless the evidence is
-    overwhelming. (evidence with the footprint's figures, refusal)."""
+    overwhelming or the second look's pixels confirm it. (evidence with the footprint's
+    figures, refusal)."""
     coarser_shape, finer_shape = shapes
     poly = footprint(t, finer_shape, edges=False)  # corner pixel centres, as measured
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
@@ -572,7 +588,8 @@ def _footprint_tests(t: np.ndarray, shapes, w: Winner, evidence: Evidence,
     if area < params.min_area_px:
         return evidence, (f"the high image would cover only {area:.0f} px^2 of the low image",
                           "footprint area")
-    if inside < params.min_inside and w.log10_nfa > params.max_log_nfa_alone:
+    if inside < params.min_inside and w.log10_nfa > params.max_log_nfa_alone and \
+            not pixels_confirm(w.log10_nfa, evidence.pixel_margin, params):
         return evidence, (f"only {inside:.0%} of the high image's footprint lies inside the "
                           f"low image", "footprint inside")
     return evidence, None

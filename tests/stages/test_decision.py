@@ -118,6 +118,25 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
 
 
+def test_an_overhanging_footprint_needs_overwhelming_evidence_or_pixels_that_confirm_it():
+    from scalematch.config import Config
+    from scalematch.stages.decision import _inside_fraction, decide
+
+    t, outcomes = _outcomes(k=5, n=8)
+    coarser = (340, 1024)  # the footprint's lower 62 % hangs below the coarser image
+    assert _inside_fraction(t, (480, 640), coarser) < Config().decision.min_inside
+    config = Config()
+    # a margin no wrong placement reaches (few_clear_margin) confirms the part inside
+    clear = decide(outcomes, coarser, (480, 640), **_params(config),
+                   look=_look(grown=5, margin=0.6))
+    assert clear.matched and clear.evidence.footprint_inside < 0.5
+    # many inliers but no second look: the footprint test refuses below max_log_nfa_alone
+    t, outcomes = _outcomes(k=6, n=100)
+    plain = decide(outcomes, coarser, (480, 640), **_params(config))
+    assert plain.evidence.log10_nfa > config.decision.max_log_nfa_alone
+    assert not plain.matched and plain.test == "footprint inside"
+
+
 def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     """The uniqueness check (docs/NULLS.md, the hardest nulls): the finer image warped by the
     transform must fit its place at least min_unique_ratio times better (misfit 1 - ZNCC) than
