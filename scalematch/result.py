@@ -68,6 +68,12 @@ class Evidence:
     unique_claimed: float = math.nan  #: ZNCC of the finer image at the claimed placement
     unique_elsewhere: float = math.nan  #: the best ZNCC anywhere half a footprint away
     unique_ratio: float = math.nan  #: misfit elsewhere over misfit at the claim
+    #: the same by windows (``stages.pixelcheck.window_agreement``), measured only when the
+    #: ratio above refuses: windows compared, the share that agrees at the claim, the highest
+    #: share anywhere else
+    unique_windows: int = 0
+    windows_agreeing: float = math.nan
+    windows_elsewhere: float = math.nan
     #: the pixel check of the final (refit) transform, as ``pixel_ncc`` / ``pixel_margin`` are
     #: of the search's: the map reported, an affine map or a homography where the view is tilted
     final_ncc: float = math.nan

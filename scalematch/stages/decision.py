@@ -43,7 +43,7 @@ from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import FitSpec, model_of
 from .guided import GuidedParams, grow
-from .pixelcheck import PixelParams, pixel_check, uniqueness
+from .pixelcheck import Agreement, PixelParams, pixel_check, uniqueness, window_agreement
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
                      Second)
 from .threads import thread_map
@@ -121,6 +121,17 @@ class DecisionParams:
     #: (600 null runs, docs/design/DECISION.md, "Why the geometry can outweigh the pixels")
     #: nan (the finer image covers the coarser one: no room elsewhere) passes.
     min_unique_ratio: float = 2.0
+    #: ... or, compared window by window (``stages.pixelcheck.window_agreement``), at least
+    #: ``min_windows`` windows of which this share agree at the claim ...
+    min_window_agreement: float = 0.6
+    #: ... and this many times the share that agrees anywhere else. An occluder loses only
+    #: the windows it covers. Measured (docs/design/DECISION.md, "Windows that agree"): the
+    #: null facades that reach the test agree at 0.33 to 0.50 of their windows; the occluded
+    #: true pairs one ZNCC refuses at 0.70 to 0.88, 2.7 to 15 times their best elsewhere
+    min_window_ratio: float = 2.0
+    #: fewest windows for the agreement to count: 16 of 8 px cover a quarter of a 64 px
+    #: template (``PixelParams.window_px``, ``unique_side_px``)
+    min_windows: int = 16
     #: the final (refit) transform must line the pixels up better than its nearby wrong
     #: placements by more than this ZNCC (``Evidence.final_margin``). The search's own check
     #: (``pixel_margin``) cannot serve: it measures the similarity found in a view, which a
@@ -185,6 +196,10 @@ class DecisionParams:
         in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
         in_range("decision", "few_clear_margin", self.few_clear_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
+        in_range("decision", "min_window_agreement", self.min_window_agreement,
+                 Bounds(lo=0, hi=1))
+        in_range("decision", "min_window_ratio", self.min_window_ratio, Bounds(lo=0))
+        in_range("decision", "min_windows", self.min_windows, Bounds(lo=1), integer=True)
         in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
         in_range("decision", "second_share", self.second_share, Bounds(lo=0))
@@ -226,7 +241,8 @@ TESTS = {
                         "max_log_nfa_alone"),
     "repeated structure": ("inliers", "second_inliers", "second_gap_px", "second_share"),
     "uniqueness": ("unique_ratio", "min_unique_ratio", "unique_claimed", "unique_elsewhere",
-                   "log10_nfa", "max_log_nfa_geometry"),
+                   "unique_windows", "windows_agreeing", "windows_elsewhere",
+                   "min_window_agreement", "log10_nfa", "max_log_nfa_geometry"),
     "pixels": ("final_margin", "min_final_margin", "log10_nfa", "max_log_nfa_geometry"),
 }
 
@@ -242,6 +258,10 @@ class FinalFigures:
     final_ncc: float  #: ZNCC under the final transform
     final_margin: float  #: how much better than the nearby wrong placements
     judged_by: str  #: "geometry" or "pixels": what judged the match unique
+    #: the uniqueness test by windows, measured when one ZNCC refuses (0 and nan: not measured)
+    unique_windows: int = 0  #: windows compared
+    windows_agreeing: float = math.nan  #: share of them that agree at the claim
+    windows_elsewhere: float = math.nan  #: the highest share anywhere else
 
 
 def figures(test: str, evidence: Evidence, params: DecisionParams,
@@ -651,6 +671,20 @@ class Claim:
     vouched: Optional[np.ndarray] = field(default=None, repr=False)
 
 
+def windows_agree(a: Agreement, params: DecisionParams) -> bool:
+    """Whether the windows of a claim (:func:`scalematch.stages.pixelcheck.window_agreement`)
+    show it unique: enough of them, most agreeing at the claim, far fewer anywhere else.
+
+    >>> p = DecisionParams()
+    >>> windows_agree(Agreement(40, 0.8, 0.2), p), windows_agree(Agreement(40, 0.5, 0.1), p)
+    (True, False)
+    >>> windows_agree(Agreement(40, 0.8, 0.5), p), windows_agree(Agreement(9, 1.0, 0.0), p)
+    (False, False)
+    """
+    return (a.windows >= params.min_windows and a.claimed >= params.min_window_agreement
+            and a.claimed >= params.min_window_ratio * a.elsewhere)
+
+
 def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
                  near=None, pixel: PixelParams = PixelParams()):
     """(figures, reason, test): the pixel tests of a match's final transform ``claim.transform``
@@ -661,7 +695,8 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
     times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`),
-    compared where the inliers vouched for the map (``claim.vouched``).
+    compared where the inliers vouched for the map (``claim.vouched``); or, where that one
+    ZNCC refuses (an occluder sinks it), window by window (:func:`windows_agree`).
     Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
     (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
     Both are measured on the final transform: a similarity found before the refit may hold on
@@ -689,9 +724,16 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
     if geometric:
         return final, "", ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        return final, (f"ambiguous: the high image's pixels fit elsewhere in the low image "
-                       f"nearly as well (ZNCC {u.elsewhere:.2f} there, {u.claimed:.2f} at "
-                       f"the transform found, log10 NFA {log10_nfa:.1f})"), "uniqueness"
+        a = window_agreement(coarser, finer, t, pixel, vouched=vouched)
+        final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
+                        windows_elsewhere=a.elsewhere)
+        if not windows_agree(a, params):
+            windows = (f"; {a.claimed:.0%} of its windows agree at the transform found, "
+                       f"{a.elsewhere:.0%} elsewhere" if a.windows else "")
+            return final, (f"ambiguous: the high image's pixels fit elsewhere in the low "
+                           f"image nearly as well (ZNCC {u.elsewhere:.2f} there, "
+                           f"{u.claimed:.2f} at the transform found{windows}; log10 NFA "
+                           f"{log10_nfa:.1f})"), "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
         return final, (f"the pixels do not confirm it: the transform found fits the low "
                        f"image no better than nearby wrong placements (ZNCC margin "

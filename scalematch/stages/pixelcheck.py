@@ -83,6 +83,15 @@ class PixelParams:
     #: (16 px of a 64 px footprint) is twice the descriptor window's radius (8 of its 16 px
     #: at the point's scale), so most of what is compared was not what the descriptors matched
     vouch_radius: float = 0.25
+    #: side of the windows of the agreement test (:func:`window_agreement`), px of the
+    #: uniqueness test's template (``unique_side_px``): 8 tiles a 64 px template with 64
+    #: windows, each half the descriptor window (16 px at the point's scale)
+    window_px: int = 8
+    #: a window agrees at a placement when its ZNCC there is at least this: measured on the
+    #: occluded pairs and the null facades that reach the test, 0.8 separates the copy of a
+    #: facade (a third to a half of its windows agree) from the scene itself (two thirds to
+    #: nine tenths; docs/design/DECISION.md, "Windows that agree")
+    window_ncc: float = 0.8
 
     def __post_init__(self) -> None:
         for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
@@ -92,6 +101,8 @@ class PixelParams:
         in_range("pixel", "min_overlap_px", self.min_overlap_px, Bounds(lo=1), integer=True)
         in_range("pixel", "min_std", self.min_std, Bounds(lo=0))
         in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
+        in_range("pixel", "window_px", self.window_px, Bounds(lo=2), integer=True)
+        in_range("pixel", "window_ncc", self.window_ncc, Bounds(lo=-1, hi=1))
 
 
 @dataclass(frozen=True)
@@ -485,10 +496,39 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     True
     """
     nan = float("nan")
+    placed = unique_template(low, high, t, params, vouched)
+    if placed is None:
+        return Uniqueness(nan, nan, nan)
+    r = masked_zncc_map(placed.low, placed.tpl, placed.mask, params.min_std)
+    claimed = _at_claim(r, placed)
+    far = _far(r.shape, placed)
+    if not far.any():
+        return Uniqueness(claimed, nan, nan)
+    elsewhere = float(r[far].max())
+    return Uniqueness(claimed, elsewhere, (1.0 - elsewhere) / max(1.0 - claimed, MISFIT_FLOOR))
+
+
+class Template(NamedTuple):
+    """The finer image warped by a claim, cut to where it is compared, for the tests that slide
+    it over the coarser image (:func:`uniqueness`, :func:`window_agreement`)."""
+
+    low: np.ndarray  #: (H, W) float32 coarser image at the tests' size, 0 where it has no scene
+    tpl: np.ndarray  #: (h, w) float32 warped finer image, 0 outside ``mask``
+    mask: np.ndarray  #: (h, w) bool: the pixels compared
+    y0: int  #: the claimed placement: the template's top-left corner in ``low``
+    x0: int
+
+
+def unique_template(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: PixelParams,
+                    vouched: Optional[np.ndarray] = None) -> Optional[Template]:
+    """The :class:`Template` of claim ``t`` (finer px -> coarser px) at the uniqueness test's
+    size (``unique_side_px``), compared where both images show the scene and, with ``vouched``
+    (the inliers, finer px), within ``vouch_radius`` of them; None when it cannot tell: too
+    small an overlap, flat, or no room elsewhere."""
     placed = _placed(np.asarray(low, np.float32), high.shape, t,
                      replace(params, max_side_px=params.unique_side_px))
     if isinstance(placed, str):
-        return Uniqueness(nan, nan, nan)
+        return None
     low, t3, ratio, _, _ = placed
     small, k = blurred_for_ratio(high, ratio)
     hh, ww = low.shape
@@ -501,18 +541,87 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     low = np.where(shown, low, np.float32(0.0))
     rows, cols = np.nonzero(mask)
     if rows.size < params.min_overlap_px:
-        return Uniqueness(nan, nan, nan)
+        return None
     y0, y1, x0, x1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
     tmask = mask[y0:y1, x0:x1]
     tpl = np.ascontiguousarray(np.where(tmask, img[y0:y1, x0:x1], np.float32(0.0)))
     if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask].std()) <= params.min_std:
-        return Uniqueness(nan, nan, nan)  # no room to place it anywhere else, or flat
-    r = masked_zncc_map(low, tpl, tmask, params.min_std)
-    claimed = float(r[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
-    yy, xx = np.ogrid[0:r.shape[0], 0:r.shape[1]]
-    radius = UNIQUE_EXCLUSION * min(tpl.shape)
-    far = (yy - y0) ** 2 + (xx - x0) ** 2 > radius * radius
-    if not far.any():
-        return Uniqueness(claimed, nan, nan)
-    elsewhere = float(r[far].max())
-    return Uniqueness(claimed, elsewhere, (1.0 - elsewhere) / max(1.0 - claimed, MISFIT_FLOOR))
+        return None  # no room to place it anywhere else, or flat
+    return Template(low, tpl, tmask, int(y0), int(x0))
+
+
+def _at_claim(score: np.ndarray, placed: Template) -> float:
+    """The best of ``score`` (a map over placements) within 1 px of the claimed placement."""
+    y0, x0 = placed.y0, placed.x0
+    return float(score[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
+
+
+def _far(shape: Tuple[int, int], placed: Template) -> np.ndarray:
+    """(shape) bool: the placements ``UNIQUE_EXCLUSION`` of the template's size away from the
+    claimed one."""
+    yy, xx = np.ogrid[0:shape[0], 0:shape[1]]
+    radius = UNIQUE_EXCLUSION * min(placed.tpl.shape)
+    return (yy - placed.y0) ** 2 + (xx - placed.x0) ** 2 > radius * radius
+
+
+class Agreement(NamedTuple):
+    """How many windows of the placed finer image agree with the coarser one (ZNCC of at least
+    ``PixelParams.window_ncc``), at the claimed placement and at the best placement elsewhere."""
+
+    windows: int  #: windows compared (wholly inside the compared pixels, not flat)
+    claimed: float  #: share of them that agree at the claimed placement
+    elsewhere: float  #: the highest share anywhere half a footprint away
+
+
+def agreement_map(low: np.ndarray, tpl: np.ndarray, mask: np.ndarray, side: int,
+                  least: float, min_std: float = 1.0) -> Tuple[np.ndarray, int]:
+    """(share, n): for every placement of ``tpl`` in ``low`` (as ``cv2.matchTemplate`` counts
+    them), the share of its ``n`` windows of ``side`` px (a grid over ``tpl``, those wholly in
+    ``mask`` with a grey-level std above ``min_std``) whose own ZNCC there is at least ``least``.
+
+    >>> rng = np.random.default_rng(0)
+    >>> img = cv2.GaussianBlur(rng.uniform(0, 255, (60, 80)).astype(np.float32), (0, 0), 1.0)
+    >>> tpl = img[10:42, 20:52].copy(); tpl[:16, :16] = 0        # an occluded quarter
+    >>> m = np.ones(tpl.shape, bool)
+    >>> share, n = agreement_map(img, tpl, m, 8, 0.8)
+    >>> n, float(share[10, 20]), float(np.delete(share.ravel(), 10 * share.shape[1] + 20).max()) < 0.5
+    (12, 1.0, True)
+    """
+    hh, ww = low.shape
+    h, w = tpl.shape
+    ph, pw = hh - h + 1, ww - w + 1
+    count = np.zeros((ph, pw), np.float32)
+    n = 0
+    for oy in range(0, h - side + 1, side):
+        for ox in range(0, w - side + 1, side):
+            patch = np.ascontiguousarray(tpl[oy:oy + side, ox:ox + side])
+            if not mask[oy:oy + side, ox:ox + side].all() or float(patch.std()) <= min_std:
+                continue
+            r = cv2.matchTemplate(low, patch, cv2.TM_CCOEFF_NORMED)
+            count += r[oy:oy + ph, ox:ox + pw] >= least
+            n += 1
+    return count / max(n, 1), n
+
+
+def window_agreement(low: np.ndarray, high: np.ndarray, t: np.ndarray,
+                     params: PixelParams = PixelParams(),
+                     vouched: Optional[np.ndarray] = None) -> Agreement:
+    """The uniqueness test by windows: the placed finer image (:func:`unique_template`) cut
+    into windows of ``window_px``, each compared on its own (ZNCC at least ``window_ncc``), at
+    the claimed placement and at every placement elsewhere.
+
+    One ZNCC over the footprint counts an occluder, a shadow or a relit patch against the map
+    over its whole area; a share of windows loses only the windows it covers. A copy of a
+    repeated structure is alike, not the same: fewer of its windows agree at the claim, and as
+    many agree at the other copies. nan shares (0 windows): cannot tell.
+    """
+    nan = float("nan")
+    placed = unique_template(low, high, t, params, vouched)
+    if placed is None:
+        return Agreement(0, nan, nan)
+    share, n = agreement_map(placed.low, placed.tpl, placed.mask, params.window_px,
+                             params.window_ncc)
+    if n == 0:
+        return Agreement(0, nan, nan)
+    far = _far(share.shape, placed)
+    return Agreement(n, _at_claim(share, placed), float(share[far].max()) if far.any() else nan)
