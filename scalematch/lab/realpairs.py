@@ -327,7 +327,10 @@ def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, An
     info = {"inliers": r.n_inliers, "order": r.order, "model": r.model, "reason": r.reason,
             "view_tilt": e.view_tilt, "best_inliers": e.inliers, "log10_nfa": e.log10_nfa,
             "judged_by": e.judged_by, "unique_ratio": e.unique_ratio,
-            "second_inliers": e.second_inliers, "parallax": e.parallax}
+            "second_inliers": e.second_inliers, "parallax": e.parallax,
+            "pixel_margin": e.pixel_margin, "footprint_inside": e.footprint_inside,
+            "unique_windows": e.unique_windows, "windows_agreeing": e.windows_agreeing,
+            "windows_elsewhere": e.windows_elsewhere}
     return (r.transform if r.matched else None), r.order == "given", info
 
 
@@ -374,7 +377,8 @@ def run_limited(name: str, pair: Pair, timeout: float):
 
 #: What a row keeps of a method's own figures
 JUDGED_KEYS = ("inliers", "order", "model", "reason", "view_tilt", "best_inliers", "log10_nfa",
-               "judged_by", "unique_ratio", "second_inliers", "parallax")
+               "judged_by", "unique_ratio", "second_inliers", "parallax", "pixel_margin",
+               "footprint_inside", "unique_windows", "windows_agreeing", "windows_elsewhere")
 
 
 def judge(method: str, pair: Pair, out) -> Dict[str, Any]:
