@@ -43,7 +43,8 @@ from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import FitSpec, model_of
 from .guided import GuidedParams, grow
-from .pixelcheck import Agreement, PixelParams, pixel_check, uniqueness, window_agreement
+from .pixelcheck import (Agreement, PixelParams, agreement_of, pixel_check, unique_template,
+                         uniqueness_of)
 from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
                      Second)
 from .threads import thread_map
@@ -711,12 +712,18 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
     ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
     t, log10_nfa, vouched = claim.transform, claim.log10_nfa, claim.vouched
+    placed = None  # the template of the uniqueness ratio, and of the windows where it refuses
+
+    def unique():
+        nonlocal placed
+        placed = unique_template(coarser, finer, t, pixel, vouched)
+        return uniqueness_of(placed, pixel)
+
     if near is None:  # side by side: neither needs the other
-        u, near = thread_map(lambda job: job(), [
-            lambda: uniqueness(coarser, finer, t, pixel, vouched=vouched),
-            lambda: pixel_check(coarser, finer, t, pixel)])
+        u, near = thread_map(lambda job: job(), [unique,
+                                                 lambda: pixel_check(coarser, finer, t, pixel)])
     else:
-        u = uniqueness(coarser, finer, t, pixel, vouched=vouched)
+        u = unique()
     geometric = log10_nfa <= params.max_log_nfa_geometry
     final = FinalFigures(unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
                          unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
@@ -724,7 +731,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
     if geometric:
         return final, "", ""
     if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
-        a = window_agreement(coarser, finer, t, pixel, vouched=vouched)
+        a = agreement_of(placed, pixel)
         final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
                         windows_elsewhere=a.elsewhere)
         if not windows_agree(a, params):

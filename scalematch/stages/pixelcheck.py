@@ -495,8 +495,12 @@ def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     >>> 0.8 < u.ratio < 1.25
     True
     """
+    return uniqueness_of(unique_template(low, high, t, params, vouched), params)
+
+
+def uniqueness_of(placed: Optional["Template"], params: PixelParams) -> Uniqueness:
+    """:func:`uniqueness` of a template made already (None: cannot tell, all nan)."""
     nan = float("nan")
-    placed = unique_template(low, high, t, params, vouched)
     if placed is None:
         return Uniqueness(nan, nan, nan)
     r = masked_zncc_map(placed.low, placed.tpl, placed.mask, params.min_std)
@@ -615,8 +619,12 @@ def window_agreement(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     repeated structure is alike, not the same: fewer of its windows agree at the claim, and as
     many agree at the other copies. nan shares (0 windows): cannot tell.
     """
+    return agreement_of(unique_template(low, high, t, params, vouched), params)
+
+
+def agreement_of(placed: Optional[Template], params: PixelParams) -> Agreement:
+    """:func:`window_agreement` of a template made already (None: cannot tell)."""
     nan = float("nan")
-    placed = unique_template(low, high, t, params, vouched)
     if placed is None:
         return Agreement(0, nan, nan)
     share, n = agreement_map(placed.low, placed.tpl, placed.mask, params.window_px,
