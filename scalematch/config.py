@@ -211,6 +211,9 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # the default searching for a homography (``--model homography``: Oxford, perspective
     # pairs), so that the null set can be run with it (docs/NULLS.md, "Mode homography")
     "homography": lambda: Config(model="homography"),
+    # the default searching for a fundamental matrix (``--model fundamental``: 3-D scenes), so
+    # that the null set can be run with it (docs/NULLS.md, "Mode fundamental")
+    "fundamental": lambda: Config(model="fundamental"),
     # the default without the rotation-consistency filter: one group holding every candidate
     "default-no-rotation-check": lambda: Config(
         orientation=OrientationParams(tolerance_deg=180.0, max_peaks=1)),

@@ -429,7 +429,8 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
 
 
 #: The configurations a null set is run in (``Config.preset`` names)
-NULL_MODES = ("default", "paper", "tilt-4", "budget-1s", "homography", "no-views")
+NULL_MODES = ("default", "paper", "tilt-4", "budget-1s", "homography", "fundamental",
+              "no-views")
 
 
 def _config(mode: str, seed: int):
@@ -1035,8 +1036,9 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     mode : str
         A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "tilt-4"
         (the default without its views at tilts 6 and 8),
-        "budget-1s" (the default with a 1 s time budget), "homography" (the default searching
-        for a homography) or "no-views" (the default without tilted views, ``--no-views``).
+        "budget-1s" (the default with a 1 s time budget), "homography" and "fundamental" (the
+        default searching for that model) or "no-views" (the default without tilted views,
+        ``--no-views``).
     jobs : int
         Worker processes (1: this process).
     limit : int, optional
@@ -1253,7 +1255,8 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
               show_default=True, help="scalematch's configuration (a preset: paper is "
               "Config.paper(), tilt-4 the default without its views at tilts 6 and 8, budget-1s "
               "the default with --time-budget 1, homography the default with --model "
-              "homography, no-views the default with --no-views).")
+              "homography, fundamental the default with --model fundamental, no-views the default "
+              "with --no-views).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (more than 1: one OpenCV thread each).")
 @click.option("--limit", type=click.IntRange(min=1), default=None,
