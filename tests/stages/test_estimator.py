@@ -51,9 +51,9 @@ def test_fundamental_epipolar_residuals_small_on_inliers():
     assert np.median(residuals("fundamental", est.transform, src, dst)) < 0.5
 
 
-def test_fundamental_among_noise_and_outliers_is_kept_as_magsac_fits_it():
-    """MAGSAC++ (no least-squares refit after it): 1 px of noise on 120 true pairs and 60
-    random ones; the noise-free points lie within 0.5 px of the estimated epipolar lines."""
+def test_fundamental_among_noise_and_outliers():
+    """1 px of noise on 120 true pairs and 60 random ones: the true pairs are the inliers, and
+    the noise-free points lie within the noise (1 px) of the estimated epipolar lines."""
     rng = np.random.default_rng(5)
     x = rng.uniform(-6, 6, (120, 3)) + [0, 0, 25]
     k = np.array([[600, 0, 320], [0, 600, 240], [0, 0, 1.0]])
@@ -66,7 +66,7 @@ def test_fundamental_among_noise_and_outliers_is_kept_as_magsac_fits_it():
     noisy_dst = np.vstack([dst + rng.normal(0, 1, dst.shape), rng.uniform(0, 640, (60, 2))])
     est = estimate("fundamental", noisy_src, noisy_dst, seed=0)
     assert est.inliers[:120].mean() >= 0.9 and est.inliers[120:].mean() <= 0.2
-    assert np.mean(residuals("fundamental", est.transform, src, dst)) < 0.5
+    assert np.mean(residuals("fundamental", est.transform, src, dst)) < 1.0
 
 
 def test_too_few_points_is_an_empty_estimate():
