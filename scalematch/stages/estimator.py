@@ -57,22 +57,34 @@ class Estimate:
     model: str
     transform: Optional[np.ndarray] = field(repr=False)  #: 2x3 or 3x3, None when failed
     inliers: np.ndarray = field(repr=False)  #: (K,) bool over the input correspondences
-    residuals: np.ndarray = field(repr=False)  #: (K,) low px (Sampson distance for "fundamental")
+    residuals: np.ndarray = field(repr=False)  #: (K,) low px (for "fundamental": the epipolar distance, ``_epipolar_distance``)
 
     @property
     def n_inliers(self) -> int:
         return int(self.inliers.sum())
 
 
-def _sampson_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Sampson distance, px, of each pair to the epipolar geometry ``x_low^T F x_high = 0``."""
+def _epipolar_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Each pair's distance, px, to the epipolar geometry ``x_low^T F x_high = 0``: the larger
+    of its two one-sided distances (the coarser point to the epipolar line of the finer one,
+    and the finer point to the line of the coarser one).
+
+    The a-contrario test counts a chance inlier as a coarser point falling in a band of
+    ``2 threshold_px`` along its line (``_band_area``); a pair within the threshold on both
+    sides is within that band, so the count stays within the chance the test assumes. The
+    Sampson distance is not: where the epipole lies among the points (|F x| small) it lets a
+    pair lie far from its line, and unrelated photos found F of 53 such "inliers" at log10
+    NFA -37 (docs/NULLS.md, "Mode fundamental"; ORSA counts the one-sided distance, Moisan &
+    Stival 2004).
+    """
     x1 = np.hstack([src, np.ones((len(src), 1))])
     x2 = np.hstack([dst, np.ones((len(dst), 1))])
-    fx1 = x1 @ f.T
-    ftx2 = x2 @ f
-    num = np.einsum("ij,ij->i", x2, fx1) ** 2
-    den = fx1[:, 0] ** 2 + fx1[:, 1] ** 2 + ftx2[:, 0] ** 2 + ftx2[:, 1] ** 2
-    return np.sqrt(num / np.maximum(den, 1e-18))
+    lines_low = x1 @ f.T  # the epipolar line of each finer point in the coarser image
+    lines_high = x2 @ f  # ... of each coarser point in the finer image
+    num = np.abs(np.einsum("ij,ij->i", x2, lines_low))
+    d_low = num / np.maximum(np.hypot(lines_low[:, 0], lines_low[:, 1]), 1e-18)
+    d_high = num / np.maximum(np.hypot(lines_high[:, 0], lines_high[:, 1]), 1e-18)
+    return np.maximum(d_low, d_high)
 
 
 def _disc_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
@@ -141,7 +153,7 @@ MODELS: Dict[str, Model] = {m.name: m for m in (
     Model("similarity", 2, _fit_similarity, transfer_error, _disc_area),
     Model("affine", 3, _fit_affine, transfer_error, _disc_area),
     Model("homography", 4, _fit_homography, transfer_error, _disc_area),
-    Model("fundamental", 8, _fit_fundamental, _sampson_distance, _band_area, has_ratio=False),
+    Model("fundamental", 8, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False),
 )}
 #: minimal sample of each model by name (kept for callers of the mapping; see MODELS)
 MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}
@@ -159,7 +171,8 @@ def model_of(name: str) -> Model:
 
 
 def residuals(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Transfer error |T(src) - dst| in low px (Sampson distance for the fundamental matrix)."""
+    """Transfer error |T(src) - dst| in low px (for the fundamental matrix, the larger one-sided
+    distance to the epipolar lines, px)."""
     return model_of(model).residuals(t, np.asarray(src, np.float64), np.asarray(dst, np.float64))
 
 

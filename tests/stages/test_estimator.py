@@ -69,6 +69,16 @@ def test_fundamental_among_noise_and_outliers():
     assert np.mean(residuals("fundamental", est.transform, src, dst)) < 1.0
 
 
+def test_fundamental_residual_is_the_larger_one_sided_distance_to_the_epipolar_lines():
+    """A sideways translation: the epipolar lines are the rows (F = [e]_x, e = (1, 0, 0)). A
+    pair 3 rows apart lies 3 px from its line in each image (the Sampson distance would say
+    3 / sqrt(2): less than the band of chance the a-contrario test counts)."""
+    f = np.array([[0.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    src = np.array([[10.0, 20.0], [50.0, 7.0]])
+    dst = np.array([[30.0, 23.0], [-4.0, 7.0]])
+    np.testing.assert_allclose(residuals("fundamental", f, src, dst), [3.0, 0.0], atol=1e-9)
+
+
 def test_too_few_points_is_an_empty_estimate():
     est = estimate("homography", np.zeros((3, 2)), np.zeros((3, 2)))
     assert est.transform is None and est.n_inliers == 0
