@@ -535,6 +535,14 @@ def footprint_ncc(low: np.ndarray, high: np.ndarray, transform: np.ndarray) -> f
     return float((a * b).sum() / den) if den > 0 else math.nan
 
 
+def _maps_points(row: Dict[str, Any]) -> bool:
+    """Whether a row's transform maps a point to a point (has a footprint): not a fundamental
+    matrix, which maps a point to a line."""
+    from ..stages.estimator import model_of
+
+    return model_of(row.get("model") or "similarity").has_ratio
+
+
 def add_footprint_ncc(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[str, Any]],
                       folder: PathLike) -> None:
     """Set ``footprint_ncc`` on every matched row lacking it (in place; from the stored PNGs).
@@ -544,7 +552,8 @@ def add_footprint_ncc(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[st
     ``swapped``), else the other way round.
     """
     for r in rows:
-        if not r.get("matched") or r.get("transform") is None or "footprint_ncc" in r:
+        if not r.get("matched") or r.get("transform") is None or "footprint_ncc" in r \
+                or not _maps_points(r):
             continue
         e = entries.get(r.get("pair_id"))
         if e is None:
@@ -565,7 +574,8 @@ def false_claim_figure(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[s
     is no false claim."""
     seen, tiles = set(), []
     for r in rows:
-        if not r.get("false_claim") or r.get("pair_id") in seen or r.get("transform") is None:
+        if not r.get("false_claim") or r.get("pair_id") in seen or r.get("transform") is None \
+                or not _maps_points(r):
             continue
         e = entries.get(r["pair_id"])
         if e is None:

@@ -279,3 +279,22 @@ def test_false_claim_figure_shows_each_claimed_pair_once(tmp_path):
     assert img is not None and (tmp_path / "fc.png").is_file()
     assert img.shape[1] == 3 * (2 * 100 + 6 + 16)  # two pairs in a row of three cells
     assert false_claim_figure(rows[:0], entries, tmp_path / "pairs", tmp_path / "x.png") is None
+
+
+def test_a_claimed_fundamental_matrix_gets_no_footprint_figures(tmp_path):
+    """A fundamental matrix maps a point to a line: the recorder neither warps the image by it
+    (footprint NCC) nor draws its footprint, where a claimed similarity gets both."""
+    from scalematch.lab.nulls import add_footprint_ncc
+
+    rng = np.random.default_rng(0)
+    img = (rng.uniform(0, 255, (60, 80))).astype(np.uint8)
+    cv2.imwrite(str(tmp_path / "low.png"), img)
+    cv2.imwrite(str(tmp_path / "high.png"), img)
+    entries = {"p": {"low_file": "low.png", "high_file": "high.png"}}
+    f_row = {"pair_id": "p", "matched": True, "model": "fundamental", "order": "given",
+             "transform": [[0.0, 0, 0], [0, 0, -1], [0, 1, 0]]}
+    s_row = {"pair_id": "p", "matched": True, "model": "similarity", "order": "given",
+             "transform": [[1.0, 0, 0], [0, 1.0, 0]]}
+    add_footprint_ncc([f_row, s_row], entries, tmp_path)
+    assert "footprint_ncc" not in f_row
+    assert s_row["footprint_ncc"] == pytest.approx(1.0, abs=1e-6)
