@@ -95,22 +95,15 @@ class DecisionParams:
     #: docs/design/DECISION.md, "The ground for each threshold" and "Guided growth and the
     #: pixel check, alone"); the uniqueness check (``min_unique_ratio``) follows, as for all
     few_min_margin: float = 0.1
-    #: ... or, with a pixel margin of at least ``few_strong_margin``, a log10 NFA of at most
-    #: ``few_strong_max_log_nfa``: the NFA counts every search made (32 for a pair that reaches
-    #: the views in both orders), which pushes a true 4-inlier answer at ratio 16 to -4.5
-    #: (hard set, cathedral x16: pixel margin 0.47) while the pixels speak clearly. On the null
-    #: set no best transform of 3 or more inliers reached a margin of 0.13, those of 4-5
-    #: inliers 0.018 (docs/NULLS.md; docs/design/DECISION.md, "The ground for each threshold")
-    few_strong_margin: float = 0.3
-    few_strong_max_log_nfa: float = -4.0
     #: ... or, with a pixel margin of at least this, the plain a-contrario bound
-    #: (``max_log_nfa``): the pixels then decide. A footprint that overhangs the coarser image
-    #: leaves few points to match and sinks the NFA of a true 4-inlier answer to -2.9 to -4.5
-    #: (realistic partial pairs at ratios 6-8: pixel margins 0.53 to 0.87), while the best
-    #: transforms of the null runs' second looks reached 0.043 at the most (238 of 600 runs;
-    #: docs/design/DECISION.md, "The ground for each threshold"); every true few-inlier answer
-    #: of the clean sets measured below it (0.05 to 0.47) passes by the tiers above
-    few_clear_margin: float = 0.5
+    #: (``max_log_nfa``): the pixels then decide. The NFA counts every search made (202 for a
+    #: "no" that reaches every view), and few points remain where the footprint is small or
+    #: overhangs the coarser image: true 4-5 inlier answers reach only -2.5 to -4.5 (hard set,
+    #: cathedral x16: margin 0.47; realistic partial pairs at ratios 6-8: 0.53 to 0.87; Oxford
+    #: boat 1->5 shrunk by 8, at scale 16: 0.27). No null run's best transform of 3 or more
+    #: inliers reached half of it: 0.127 at the most in 1216 runs, 0.043 in the 600 runs of
+    #: the rule with windows (docs/design/DECISION.md, "The ground for each threshold")
+    few_clear_margin: float = 0.25
     #: a transform about to be accepted must place the finer image better than anywhere else in
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
     #: times the claimed one's (``stages.pixelcheck.uniqueness``). A repeated structure (the
@@ -193,8 +186,6 @@ class DecisionParams:
             in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
         in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
         in_range("decision", "few_min_margin", self.few_min_margin, Bounds(lo=-2, hi=2))
-        in_range("decision", "few_strong_margin", self.few_strong_margin, Bounds(lo=-2, hi=2))
-        in_range("decision", "few_strong_max_log_nfa", self.few_strong_max_log_nfa)
         in_range("decision", "few_clear_margin", self.few_clear_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
         in_range("decision", "min_window_agreement", self.min_window_agreement,
@@ -410,19 +401,18 @@ def repeats(second: Second, second_nfa: float, k: int, area: float, winner: np.n
 
 
 def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> bool:
-    """Whether a few-inlier transform's NFA and pixel margin reach one of the three tiers: a
-    modest margin with a low NFA, a wide margin with a weaker one, or a margin no wrong
-    placement reaches with the plain a-contrario bound (``few_*`` and ``max_log_nfa`` of
-    :class:`DecisionParams`). A nan margin (cannot tell) confirms nothing.
+    """Whether a few-inlier transform's NFA and pixel margin reach one of the two tiers: a
+    modest margin with a low NFA, or a margin no wrong placement reaches with the plain
+    a-contrario bound (``few_*`` and ``max_log_nfa`` of :class:`DecisionParams`). A nan
+    margin (cannot tell) confirms nothing.
 
     >>> p = DecisionParams()
     >>> pixels_confirm(-7.0, 0.15, p), pixels_confirm(-4.5, 0.15, p), pixels_confirm(-4.5, 0.4, p)
     (True, False, True)
-    >>> pixels_confirm(-2.9, 0.4, p), pixels_confirm(-2.9, 0.87, p), pixels_confirm(-1.5, 0.87, p)
-    (False, True, False)
+    >>> pixels_confirm(-2.5, 0.27, p), pixels_confirm(-2.9, 0.2, p), pixels_confirm(-1.5, 0.87, p)
+    (True, False, False)
     """
     tiers = ((params.few_max_log_nfa, params.few_min_margin),
-             (params.few_strong_max_log_nfa, params.few_strong_margin),
              (params.max_log_nfa, params.few_clear_margin))
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
 
