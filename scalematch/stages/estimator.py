@@ -57,7 +57,8 @@ class Estimate:
     model: str
     transform: Optional[np.ndarray] = field(repr=False)  #: 2x3 or 3x3, None when failed
     inliers: np.ndarray = field(repr=False)  #: (K,) bool over the input correspondences
-    residuals: np.ndarray = field(repr=False)  #: (K,) low px (for "fundamental": the epipolar distance, ``_epipolar_distance``)
+    #: (K,) low px (for "fundamental": the distance to the epipolar lines, ``_epipolar_distance``)
+    residuals: np.ndarray = field(repr=False)
 
     @property
     def n_inliers(self) -> int:
