@@ -225,6 +225,27 @@ def transfer_error(t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarra
     return np.linalg.norm(apply(t, src) - np.asarray(dst, np.float64).reshape(-1, 2), axis=1)
 
 
+def epipolar_distances(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(N, 2) distances, px, of the pairs (src, dst) to an epipolar geometry
+    ``x_dst^T F x_src = 0``: column 0, of each dst point to the line ``F x_src``; column 1, of
+    each src point to the line ``F^T x_dst``. A line at infinity gives ``inf``.
+
+    >>> f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
+    >>> epipolar_distances(f, np.array([[10.0, 20], [5, 5]]), np.array([[30.0, 20], [50, 7]]))
+    array([[0., 0.],
+           [2., 2.]])
+    """
+    f = np.asarray(f, np.float64)
+    xs = np.hstack([np.asarray(src, np.float64), np.ones((len(src), 1))])
+    xd = np.hstack([np.asarray(dst, np.float64), np.ones((len(dst), 1))])
+    line_dst, line_src = xs @ f.T, xd @ f  # F x_src (in dst's image), F^T x_dst (in src's)
+    residual = np.abs(np.einsum("ij,ij->i", xd, line_dst))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_dst = residual / np.hypot(line_dst[:, 0], line_dst[:, 1])
+        d_src = residual / np.hypot(line_src[:, 0], line_src[:, 1])
+    return np.nan_to_num(np.stack([d_dst, d_src], axis=1), nan=np.inf)
+
+
 def resize_map(fx: float, fy: Optional[float] = None) -> np.ndarray:
     """2x3 map from a pixel of an image to its pixel in a copy resized by (fx, fy).
 

@@ -35,6 +35,7 @@ import click
 import cv2
 import numpy as np
 
+from ..geometry import epipolar_distances as geometric_distances
 from ..result import Direction
 from .baselines import RATIO_TEST, detect_and_describe, make_detector, ratio_matches, to_uint8
 from .datasets import find_shared
@@ -141,13 +142,9 @@ def load_pair(folder: PathLike, name: str) -> EfPair:
 # The score and the convention
 # --------------------------------------------------------------------------------------------
 
-def _homogeneous(xy: np.ndarray) -> np.ndarray:
-    return np.hstack([xy, np.ones((len(xy), 1))])
-
-
 def epipolar_distances(f: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(N, 2) distances, px, for an F with ``x_B^T F x_A = 0``: column 0, of x_B to the line
-    ``F x_A``; column 1, of x_A to the line ``F^T x_B``. A line at infinity gives ``inf``.
+    ``F x_A``; column 1, of x_A to the line ``F^T x_B`` (:func:`scalematch.geometry.epipolar_distances`).
 
     Parameters
     ----------
@@ -163,13 +160,7 @@ def epipolar_distances(f: np.ndarray, points: np.ndarray) -> np.ndarray:
     if f.shape != (3, 3):
         raise ValueError(f"F must be 3x3, got shape {f.shape}")
     pts = np.asarray(points, np.float64).reshape(-1, 4)
-    xa, xb = _homogeneous(pts[:, :2]), _homogeneous(pts[:, 2:])
-    line_b, line_a = xa @ f.T, xb @ f  # F x_A (in B), F^T x_B (in A)
-    residual = np.abs(np.sum(xb * line_b, axis=1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d_b = residual / np.hypot(line_b[:, 0], line_b[:, 1])
-        d_a = residual / np.hypot(line_a[:, 0], line_a[:, 1])
-    return np.nan_to_num(np.stack([d_b, d_a], axis=1), nan=np.inf)
+    return geometric_distances(f, pts[:, :2], pts[:, 2:])
 
 
 def symmetric_epipolar_error(f: Optional[np.ndarray], points: np.ndarray) -> float:

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from ..checks import Bounds, in_range
-from ..geometry import transfer_error
+from ..geometry import epipolar_distances, transfer_error
 
 @dataclass(frozen=True)
 class RansacParams:
@@ -78,14 +78,7 @@ def _epipolar_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.nd
     NFA -37 (docs/NULLS.md, "Mode fundamental"; ORSA counts the one-sided distance, Moisan &
     Stival 2004).
     """
-    x1 = np.hstack([src, np.ones((len(src), 1))])
-    x2 = np.hstack([dst, np.ones((len(dst), 1))])
-    lines_low = x1 @ f.T  # the epipolar line of each finer point in the coarser image
-    lines_high = x2 @ f  # ... of each coarser point in the finer image
-    num = np.abs(np.einsum("ij,ij->i", x2, lines_low))
-    d_low = num / np.maximum(np.hypot(lines_low[:, 0], lines_low[:, 1]), 1e-18)
-    d_high = num / np.maximum(np.hypot(lines_high[:, 0], lines_high[:, 1]), 1e-18)
-    return np.maximum(d_low, d_high)
+    return epipolar_distances(f, src, dst).max(axis=1)
 
 
 def _disc_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
