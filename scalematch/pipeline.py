@@ -30,7 +30,7 @@ from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRe
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
-                              final_checks, look_again)
+                              final_checks, look_again, on_lines)
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
@@ -110,8 +110,61 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     attempts, records, timings, stopped = run_plan(search, plan, t0)
     search.meter.finish()
     timings["total"] = time.perf_counter() - t0
-    result = build_result(search, attempts, tuple(records), plan, stopped, timings)
-    return in_original(result, work, config)
+    result = in_original(build_result(search, attempts, tuple(records), plan, stopped, timings),
+                         work, config)
+    if result.matched and not model_of(config.model).has_ratio:
+        result = anchored(result, low, high, config, decoded_factors)
+    return result
+
+
+#: The model a fundamental matrix's plane map is searched with (:func:`anchored`): the
+#: default's, which the model check turns into an affine map or a homography where the scene
+#: asks for one
+PLANE_MODEL = "similarity"
+
+
+def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
+             decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
+    """A matched fundamental matrix ``result``, kept only where a plane map of the same pair
+    passes the decision and lies on it (``DecisionParams.min_plane_on_lines``); refused
+    otherwise, with the matrix shown as ``rejected`` (test "plane").
+
+    A 3-D scene seen from two places has a dominant plane, and the default search finds its
+    map (``evidence.parallax``). That map faces the tests an epipolar geometry cannot: a
+    plausible scale and footprint, no repeated structure, the pixels. The plane map is
+    searched as the default would search it (``config`` with :data:`PLANE_MODEL`); its inliers
+    must lie within the inlier threshold of the matrix's epipolar lines.
+    """
+    t0 = time.perf_counter()
+    plane = match(low, high, replace(config, model=PLANE_MODEL), decoded_factors=decoded_factors)
+    pairs = np.asarray(plane.inliers, np.float64).reshape(-1, 4)
+    if plane.matched and plane.order != result.order:  # the other image taken as the coarser
+        pairs = pairs[:, [2, 3, 0, 1]]
+    e = result.evidence
+    f_coarser = e.low_working_factor if result.order is Direction.GIVEN else e.high_working_factor
+    share = on_lines(result.transform, pairs, config.ransac.threshold_px * f_coarser) \
+        if plane.matched else math.nan
+    evidence = replace(e, plane_inliers=plane.n_inliers if plane.matched else 0,
+                       plane_on_lines=share)
+    timings = dict(result.timings, plane=time.perf_counter() - t0)
+    timings["total"] = result.seconds + timings["plane"]
+    limit = config.decision.min_plane_on_lines
+    if plane.matched and share >= limit:
+        return replace(result, evidence=evidence, timings=timings)
+    if plane.matched:
+        reason = (f"the plane map found ({plane.n_inliers} inliers) is off this epipolar "
+                  f"geometry: {share:.0%} of its inliers lie on its lines, at least "
+                  f"{limit:.0%} needed")
+    else:
+        reason = (f"an epipolar geometry fits {result.n_inliers} inliers, but no plane map of "
+                  f"the scene passes the decision, which a fundamental matrix is claimed "
+                  f"with: a repeated structure or points along a line fit one too (the plane "
+                  f"map: {plane.reason})")
+    rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
+                        figures("plane", evidence, config.decision), result.order)
+    return replace(result, matched=False, reason=reason, transform=None,
+                   inliers=np.zeros((0, 4)), evidence=evidence, timings=timings,
+                   order=Direction.GIVEN, rejected=rejected)
 
 
 def run_plan(search: "Search", plan: Sequence[Step], t0: float

@@ -92,6 +92,12 @@ class Evidence:
     #: transform that of its dominant plane (``--model fundamental`` gives the epipolar geometry)
     parallax_points: int = 0
     parallax: bool = False
+    #: a fundamental matrix is claimed only where a plane map of the same pair passes the
+    #: decision, on its epipolar lines (``pipeline.anchored``): that map's distinct inliers
+    #: (0: no plane map passed), and the share of them within the inlier threshold of the
+    #: matrix's epipolar lines (nan: not measured)
+    plane_inliers: int = 0
+    plane_on_lines: float = math.nan
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

@@ -14,6 +14,7 @@ from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
 from scalematch.pipeline import distinct_pairs
+from scalematch.result import Evidence, MatchResult
 from scalematch.stages.detector import HarrisParams
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
@@ -134,6 +135,44 @@ def test_fundamental_matrix_is_consistent_with_the_inliers(raccoon):
     lines = x1 @ f.T  # epipolar lines in the low image
     dist = np.abs(np.einsum("ij,ij->i", x2, lines)) / np.hypot(lines[:, 0], lines[:, 1])
     assert np.median(dist) < 2.0
+
+
+def test_fundamental_matrix_is_claimed_with_its_plane_map(raccoon):
+    """The plane map of the same pair passes the decision and lies on the matrix's lines."""
+    pair = _pair(raccoon, 2.0, 0)
+    r = match(pair.low, pair.high, Config(model="fundamental"))
+    assert r.matched, r.reason
+    assert r.evidence.plane_inliers >= Config().decision.min_inliers
+    assert r.evidence.plane_on_lines >= Config().decision.min_plane_on_lines
+    assert "plane" in r.timings
+
+
+def _claimed_f(f):
+    """A matched fundamental matrix ``f`` as the search would report it (inliers: none)."""
+    return MatchResult(matched=True, model="fundamental", transform=f, inliers=np.zeros((0, 4)),
+                       timings={"total": 0.1}, evidence=Evidence(inliers=30, log10_nfa=-20.0))
+
+
+def test_fundamental_matrix_without_a_plane_map_is_refused(raccoon):
+    """Two halves of one photo: nothing in common, so no plane map passes; any F is refused."""
+    left, right = raccoon[:, :480], raccoon[:, 544:]
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
+    r = pipeline.anchored(_claimed_f(f), left[:240, :320], right[:240, :320],
+                          Config(model="fundamental", views=ViewParams(enabled=False)))
+    assert not r.matched and r.transform is None
+    assert r.rejected.test == "plane" and r.rejected.transform is not None
+    assert r.evidence.plane_inliers == 0 and "no plane map" in r.reason
+
+
+def test_fundamental_matrix_off_its_plane_map_is_refused(raccoon):
+    """A zoom pair turned by its angle: the plane map passes, but the lines y' = y miss it."""
+    pair = _pair(raccoon, 2.0, 0)
+    assert abs(similarity_parts(pair.truth)[1]) > 5  # the pair is turned: y' = y cannot hold
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
+    r = pipeline.anchored(_claimed_f(f), pair.low, pair.high, Config(model="fundamental"))
+    assert not r.matched and r.rejected.test == "plane"
+    assert r.evidence.plane_inliers > 0
+    assert r.evidence.plane_on_lines < Config().decision.min_plane_on_lines
 
 
 def test_paper_mode_matches_a_ratio_3_pair(raccoon):

@@ -7,7 +7,8 @@ import math
 import numpy as np
 
 from scalematch.geometry import similarity_matrix
-from scalematch.stages.decision import chance_probability, log10_binom, log10_nfa, mean_transfer_gap
+from scalematch.stages.decision import (chance_probability, log10_binom, log10_nfa,
+                                       mean_transfer_gap, on_lines)
 
 
 def test_log10_binom_known_values():
@@ -261,3 +262,16 @@ def test_a_repeated_facade_shows_a_second_transform_and_is_refused_as_ambiguous(
     weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640),
                   **_params(Config()))
     assert weak.matched and weak.evidence.second_inliers == 12
+
+
+def test_on_lines_counts_the_pairs_on_both_epipolar_lines():
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
+    rng = np.random.default_rng(0)
+    finer = rng.uniform(0, 100, (40, 2))
+    on = np.hstack([finer, finer + [[30.0, 0.0]]])  # shifted along the lines
+    off = np.hstack([finer, finer + [[0.0, 5.0]]])  # 5 px across them
+    assert on_lines(f, on, 1.0) == 1.0
+    assert on_lines(f, off, 1.0) == 0.0
+    assert on_lines(f, np.vstack([on[:30], off[:10]]), 1.0) == 0.75
+    assert math.isnan(on_lines(f, np.zeros((0, 4)), 1.0))
+
