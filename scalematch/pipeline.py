@@ -157,9 +157,9 @@ def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Con
                   f"{limit:.0%} needed")
     else:
         reason = (f"an epipolar geometry fits {result.n_inliers} inliers, but no plane map of "
-                  f"the scene passes the decision, which a fundamental matrix is claimed "
-                  f"with: a repeated structure or points along a line fit one too (the plane "
-                  f"map: {plane.reason})")
+                  f"the scene passes the decision ({plane.reason}); a fundamental matrix is "
+                  f"claimed only with one, since a repeated structure or points along a line "
+                  f"fit an epipolar geometry too")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
                         figures("plane", evidence, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,
