@@ -137,6 +137,21 @@ def test_fundamental_matrix_is_consistent_with_the_inliers(raccoon):
     assert np.median(dist) < 2.0
 
 
+def test_the_answer_is_grown_by_guided_matching(raccoon):
+    """Step (iv) of the paper: a homography of few inliers (12 here, at ratio 5) predicts every
+    point of the scales matched in full; it then explains more matches than the decision
+    counted, each within the inlier threshold of it, and stays within the known answer's
+    tolerances."""
+    pair = _pair(raccoon, 5.0, 1)
+    r = match(pair.low, pair.high, Config(model="homography"))
+    _check_known_answer(r, pair)
+    assert r.model == "homography"
+    assert r.evidence.inliers < pipeline.GROW_BELOW_INLIERS
+    assert r.n_inliers > 2 * r.evidence.inliers
+    moved = np.linalg.norm(apply(r.transform, r.inliers[:, :2]) - r.inliers[:, 2:], axis=1)
+    assert np.all(moved <= Config().ransac.threshold_px + 1e-6)
+
+
 def test_fundamental_matrix_is_claimed_with_its_plane_map(raccoon):
     """The plane map of the same pair passes the decision and lies on the matrix's lines."""
     pair = _pair(raccoon, 2.0, 0)

@@ -11,8 +11,10 @@ from scalematch.config import Config
 from scalematch.geometry import apply
 from scalematch.result import ScaleRow
 from scalematch.search import ScaleOutcome
+from scalematch.stages.descriptors import Described
 from scalematch.stages.estimator import Estimate, FitSpec, estimate
-from scalematch.stages.refit import union_homography
+from scalematch.stages.guided import GuidedParams
+from scalematch.stages.refit import guided_refit, union_homography
 from scalematch.stages.views import identity_view
 
 #: a perspective map of a 640x480 high image: the local ratio grows about 4x across it
@@ -115,3 +117,75 @@ def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
     assert model == "affine" and len(inliers) == 40
     assert np.abs(apply(t, src) - apply(truth, src)).max() < 1e-3
     assert np.abs(inliers[:, 2:4] - apply(truth, src)).max() < 1e-3
+
+
+def _described(xy: np.ndarray, desc: np.ndarray, s: float = 1.0) -> Described:
+    return Described(s=s, xy=np.asarray(xy, np.float64), index=np.arange(len(xy)),
+                     angle=np.zeros(len(xy)), desc=desc.astype(np.float32))
+
+
+def _scene(truth: np.ndarray, n: int = 300, seed: int = 0):
+    """Finer points over a 640x480 image and their coarser partners under ``truth``, with the
+    same unit descriptors, among as many unrelated coarser points."""
+    rng = np.random.default_rng(seed)
+    xy = np.column_stack([rng.uniform(0, 639, n), rng.uniform(0, 479, n)])
+    desc = rng.normal(size=(n, 32))
+    desc /= np.linalg.norm(desc, axis=1, keepdims=True)
+    other = rng.normal(size=(n, 32))
+    other /= np.linalg.norm(other, axis=1, keepdims=True)
+    low_xy = np.vstack([apply(truth, xy), rng.uniform(0, 800, (n, 2))])
+    return _described(xy, desc), _described(low_xy, np.vstack([desc, other]))
+
+
+def _scale(described: Described):
+    row = ScaleRow(s=1.0, ratio=1.0, points=len(described), initial=0, kept=0, inliers=0,
+                   outlier_pct=0.0)
+    est = Estimate("homography", np.eye(3), np.zeros(0, bool), np.zeros(0))
+    return ScaleOutcome(row, est, np.zeros((0, 2)), np.zeros((0, 2)), 0, described)
+
+
+def test_guided_refit_pins_a_loose_homography_over_the_whole_footprint():
+    """A homography fitted to 8 noisy pairs in one corner is px off at the far corners; the
+    guided matches it predicts over the whole image make it exact."""
+    high, low = _scene(PERSPECTIVE)
+    rng = np.random.default_rng(1)
+    corner = np.nonzero((high.xy[:, 0] < 200) & (high.xy[:, 1] < 150))[0][:8]
+    src = high.xy[corner]
+    dst = apply(PERSPECTIVE, src) + rng.normal(0, 0.5, (len(corner), 2))
+    loose = estimate("homography", src, dst, Config().ransac, seed=0).transform
+    assert _grid_error(loose, PERSPECTIVE) > 2
+    fit = (loose, np.hstack([src, dst]), "homography")
+    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
+                                     low, GuidedParams(), Config().ransac)
+    assert model == "homography" and len(inliers) >= 290
+    assert _grid_error(t, PERSPECTIVE) < 0.05
+
+
+#: a milder perspective: the local ratio changes by about a third across the image
+MILD = np.array([[0.5, 0.01, 100.0], [-0.005, 0.48, 80.0], [2e-4, 2e-5, 1.0]])
+
+
+def test_guided_refit_turns_a_similarity_into_the_homography_its_matches_show():
+    """A similarity fitted in the middle band of a perspective map holds near that band; a
+    homography fitted to its guided matches grows over the whole image (the model check)."""
+    high, low = _scene(MILD)
+    band = np.nonzero((high.xy[:, 0] > 260) & (high.xy[:, 0] < 380))[0]
+    src, dst = high.xy[band], apply(MILD, high.xy[band])
+    est = estimate("similarity", src, dst, Config().ransac, seed=0)
+    fit = (est.transform, np.hstack([src[est.inliers], dst[est.inliers]]), "similarity")
+    config = Config()
+    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
+                                     low, GuidedParams(), config.ransac,
+                                     check=config.model_check)
+    assert model == "homography"
+    assert _grid_error(t, MILD) < 0.05
+
+
+def test_guided_refit_keeps_a_fit_that_nothing_grows():
+    """Coarser points unrelated to the finer ones: no guided match, the fit is returned as is."""
+    high, _ = _scene(PERSPECTIVE)
+    _, low = _scene(PERSPECTIVE, seed=5)  # other descriptors everywhere
+    fit = (PERSPECTIVE, np.zeros((0, 4)), "homography")
+    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
+                                     low, GuidedParams(), Config().ransac)
+    assert t is PERSPECTIVE and model == "homography" and len(inliers) == 0
