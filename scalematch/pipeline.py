@@ -709,9 +709,8 @@ def fit_spec(config: Config) -> FitSpec:
     return FitSpec(config.model, config.ransac, config.seed)
 
 
-def final_fit(attempt: Attempt, search: Search):
+def final_fit(attempt: Attempt, config: Config):
     """(t, inliers, model): a matched attempt's transform refit in the images' own pixels."""
-    config = search.config
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
     spec = fit_spec(config)
@@ -767,8 +766,8 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)
-        return winner, (final_fit(winner, search) if winner is not None else None), None
-    fits = [final_fit(a, search) for a in matched]
+        return winner, (final_fit(winner, config) if winner is not None else None), None
+    fits = [final_fit(a, config) for a in matched]
     checks = [pixel_check(*work.shown(a.step.direction), fit[0], config.pixel)
               for a, fit in zip(matched, fits)]
 

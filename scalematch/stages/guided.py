@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from ..checks import Bounds, in_range
 from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
-from .matcher import distinct_rows
+from .matcher import distinct_pairs
 
 #: High points sampled (evenly, no randomness) to estimate the fraction of compatible pairs.
 _CHANCE_SAMPLE = 256
@@ -242,20 +242,46 @@ def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarit
         raise ValueError(f"guided growth needs a point-to-point model, not {model!r}")
     t = np.asarray(t, np.float64)
     chance = chance_matches(t, high, low, params)
-    best_t, best_in = t, np.zeros((0, 4))
-    counts = []
+    best_t, best_in, counts = grow_rounds(t, model, [high], low, params, ransac)
+    return Growth(model=model, transform=best_t, inliers=best_in, rounds=len(counts),
+                  counts=tuple(counts), chance=float(chance))
+
+
+def guided_pool(t: np.ndarray, highs: Sequence[Described], low: Described,
+                params: GuidedParams = GuidedParams()) -> Tuple[np.ndarray, np.ndarray]:
+    """The distinct guided matches of ``t`` (:func:`guided_matches`) at every scale of
+    ``highs``: (finer px (K, 2), coarser px (K, 2)); a keypoint described twice counts once."""
+    src: List[np.ndarray] = [np.zeros((0, 2))]
+    dst: List[np.ndarray] = [np.zeros((0, 2))]
+    for high in highs:
+        i, j, _ = guided_matches(t, high, low, params)
+        src.append(high.xy[i])
+        dst.append(low.xy[j])
+    return distinct_pairs(np.vstack(src), np.vstack(dst))
+
+
+def grow_rounds(t: np.ndarray, model: str, highs: Sequence[Described], low: Described,
+                params: GuidedParams = GuidedParams(), ransac: RansacParams = RansacParams(),
+                inliers: Optional[np.ndarray] = None,
+                allowed: Optional[Callable[[np.ndarray], bool]] = None
+                ) -> Tuple[np.ndarray, np.ndarray, List[int]]:
+    """``t`` refit on its guided matches at every scale of ``highs`` (:func:`guided_pool`),
+    round after round while they explain more pairs than ``inliers`` ((N, 4), none by
+    default), at most ``params.max_rounds`` rounds: (transform, its inliers (N, 4) float64,
+    the distinct inliers after each round). ``allowed(t)``, when given, must hold for a refit
+    to be taken (the final answer's: not folded over)."""
+    best_t = np.asarray(t, np.float64)
+    best_in = np.zeros((0, 4)) if inliers is None else inliers
+    counts: List[int] = []
     for _ in range(max(int(params.max_rounds), 1)):
-        i, j, _ = guided_matches(best_t, high, low, params)
-        keep = distinct_rows(high.xy[i], low.xy[j])
-        src, dst = high.xy[i[keep]], low.xy[j[keep]]
+        src, dst = guided_pool(best_t, highs, low, params)
         if len(src) == 0:
             break
         est = refine(model, best_t, src, dst, ransac, threshold=params.threshold_px)
-        n = est.n_inliers
-        counts.append(n)
-        if n <= len(best_in):
+        counts.append(est.n_inliers)
+        if est.n_inliers <= len(best_in) or (allowed is not None and not allowed(est.transform)):
             break
         best_t = est.transform
         best_in = np.hstack([src[est.inliers], dst[est.inliers]])
-    return Growth(model=model, transform=best_t, inliers=best_in, rounds=len(counts),
-                  counts=tuple(counts), chance=float(chance))
+    return best_t, best_in, counts
+

@@ -38,7 +38,7 @@ from .decision import Decision, folded
 from .descriptors import Described
 from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, model_of, refine,
                         residuals)
-from .guided import GuidedParams, guided_matches
+from .guided import GuidedParams, grow_rounds, guided_pool
 from .matcher import distinct_pairs
 from .views import View, to_high
 
@@ -215,40 +215,12 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelChe
     return fit
 
 
-def _guided_pool(t: np.ndarray, highs: Sequence[Described], low: Described,
-                 params: GuidedParams) -> Tuple[np.ndarray, np.ndarray]:
-    """The distinct guided matches of ``t`` (finer px, coarser px) at every scale of ``highs``."""
-    src, dst = [np.zeros((0, 2))], [np.zeros((0, 2))]
-    for high in highs:
-        i, j, _ = guided_matches(t, high, low, params)
-        src.append(high.xy[i])
-        dst.append(low.xy[j])
-    return distinct_pairs(np.vstack(src), np.vstack(dst))
-
-
-def _grown(t: np.ndarray, model: str, inliers: np.ndarray, highs: Sequence[Described],
-           low: Described, guided: GuidedParams, ransac: RansacParams,
-           shape) -> Tuple[np.ndarray, np.ndarray]:
-    """``t`` refit on its guided matches round after round while they grow (at most
-    ``guided.max_rounds``): (transform, inliers (N, 4)); ``t`` and ``inliers`` when nothing
-    grows. ``shape``: the finer image's, which a refit may not fold over."""
-    best_t, best_in = t, inliers
-    for _ in range(max(int(guided.max_rounds), 1)):
-        src, dst = _guided_pool(best_t, highs, low, guided)
-        if len(src) <= len(best_in):
-            break
-        est = refine(model, best_t, src, dst, ransac, threshold=guided.threshold_px)
-        if est.n_inliers <= len(best_in) or folded(est.transform, shape):
-            break
-        best_t, best_in = est.transform, np.hstack([src[est.inliers], dst[est.inliers]])
-    return best_t, best_in
-
-
 def guided_refit(fit: Refit, view: View, outcomes: Sequence, low: Described,
                  guided: GuidedParams, ransac: RansacParams,
                  coarser: Optional[View] = None, check: Optional[ModelCheckParams] = None,
                  seed: int = 0) -> Refit:
-    """``fit`` grown by guided matching at every scale matched in full (:func:`_grown`): kept
+    """``fit`` grown by guided matching at every scale matched in full
+    (:func:`scalematch.stages.guided.grow_rounds`, as the decision's second look grows one): kept
     unless its guided matches explain more pairs than its own inliers, and the inliers
     reported are then those matches.
 
@@ -259,8 +231,8 @@ def guided_refit(fit: Refit, view: View, outcomes: Sequence, low: Described,
     scene does reaches the far corners. A similarity that stays one is returned as it was:
     four parameters are pinned by its own inliers, and the guided matches, looser, moved the
     zoom pairs' answers by hundredths of a px either way (median 0.157 -> 0.19 px on 220
-    answers of under 30 inliers, docs/BENCHMARKS.md). ``low``: the coarser image's points (s = 1, its px).
-    Only on a search made on the images themselves (``view`` the identity, ``coarser`` None):
+    answers of under 30 inliers, docs/BENCHMARKS.md). ``low``: the coarser image's points
+    (s = 1, its px). Only on a search made on the images themselves (``view`` the identity, ``coarser`` None):
     a view's points and orientations are in the view's frame.
     """
     t, inliers, model = fit
@@ -269,17 +241,19 @@ def guided_refit(fit: Refit, view: View, outcomes: Sequence, low: Described,
     if not view.is_identity or coarser is not None or not model_of(model).has_ratio \
             or not highs:
         return fit
-    shape = view.source_shape
-    best_t, best_in = _grown(t, model, inliers, highs, low, guided, ransac, shape)
+    def unfolded(m: np.ndarray) -> bool:
+        return not folded(m, view.source_shape)
+
+    best_t, best_in, _ = grow_rounds(t, model, highs, low, guided, ransac, inliers, unfolded)
     richer = [m for m in check.models if MIN_SAMPLE[m] > MIN_SAMPLE[model]] \
         if check is not None and check.enabled else []
     for m in richer:
-        src, dst = _guided_pool(best_t, highs, low, guided)
+        src, dst = guided_pool(best_t, highs, low, guided)
         alt = estimate(m, src, dst, ransac, seed=seed)
-        if alt.transform is None or folded(alt.transform, shape):
+        if alt.transform is None or not unfolded(alt.transform):
             continue
-        alt_t, alt_in = _grown(alt.transform, m, np.zeros((0, 4)), highs, low, guided, ransac,
-                               shape)
+        alt_t, alt_in, _ = grow_rounds(alt.transform, m, highs, low, guided, ransac,
+                                       allowed=unfolded)
         if check.clearly_more(len(alt_in), len(best_in)):
             model, best_t, best_in = m, alt_t, alt_in
     if model == "similarity":  # its own inliers pin it: growth adds only looser matches
