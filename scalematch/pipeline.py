@@ -55,6 +55,12 @@ __all__ = ["match", "distinct_pairs"]
 #: images. The result is the same either way.
 KEEP_LEVELS_MAX_PX = 4_000_000
 
+#: Bytes of tilted views a search keeps while it searches one pass of views (:meth:`Memo.view`).
+#: A pass views each image twice, as the finer image of one direction and as the coarser image
+#: of the other, with the same views: a view kept is made once. A view past the budget is made
+#: again, the same view; the budget bounds what a pair of camera-size images adds to the peak.
+VIEW_CACHE_MAX_BYTES = 100_000_000
+
 
 def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
           progress: Optional[Callable[[int, int], None]] = None,
@@ -193,6 +199,7 @@ def run_plan(search: "Search", plan: Sequence[Step], t0: float
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
+    search.memo.forget_views()
     return attempts, records, timings, stopped
 
 
@@ -321,6 +328,59 @@ class Memo:
     _gradients: Dict[Tuple[int, float], Gradients] = field(default_factory=dict, repr=False)
     _locks: Dict[Tuple[int, float], threading.Lock] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    #: the views of one pass (``_view_pass``) by (image, view key), and their bytes
+    _views: Dict[tuple, View] = field(default_factory=dict, repr=False)
+    _view_bytes: int = 0
+    _view_pass: int = -1
+    #: the s = 1 points of those views as the finer side found them (:class:`FirstLevel`)
+    _firsts: Dict[tuple, "FirstLevel"] = field(default_factory=dict, repr=False)
+
+    def _enter(self, view_pass: int) -> None:
+        """Forget the views of another pass (called with ``_lock`` held)."""
+        if view_pass != self._view_pass:
+            self._views.clear()
+            self._firsts.clear()
+            self._view_bytes, self._view_pass = 0, view_pass
+
+    def view(self, image: np.ndarray, key: Tuple[float, float], view_pass: int,
+             make: Callable[[], View]) -> View:
+        """The view ``key`` (tilt, longitude) of ``image`` in pass ``view_pass``: ``make()``
+        the first time, kept within ``VIEW_CACHE_MAX_BYTES`` for the rest of the pass."""
+        if key[0] <= 1.0:  # the image itself: nothing to make
+            return make()
+        k = (id(image), *key)
+        with self._lock:
+            self._enter(view_pass)
+            kept = self._views.get(k)
+        if kept is not None:
+            return kept
+        view = make()
+        size = view.image.nbytes + getattr(view.inside_distance, "nbytes", 0)
+        with self._lock:
+            if view_pass == self._view_pass and self._view_bytes + size <= VIEW_CACHE_MAX_BYTES:
+                self._views[k] = view
+                self._view_bytes += size
+        return view
+
+    def forget_views(self) -> None:
+        """Drop the views kept for the last pass (the search is over)."""
+        with self._lock:
+            self._enter(-1)
+
+    def keep_first(self, image: np.ndarray, key: Tuple[float, float], view_pass: int,
+                   first: "FirstLevel") -> None:
+        """Keep the s = 1 points the finer side found on a view (for :meth:`first_level`)."""
+        with self._lock:
+            self._enter(view_pass)
+            self._firsts[(id(image), *key)] = first
+
+    def first_level(self, image: np.ndarray, key: Tuple[float, float],
+                    view_pass: int) -> Optional["FirstLevel"]:
+        """The s = 1 points of view ``key`` of ``image`` kept by :meth:`keep_first` in this
+        pass (None: not found by the finer side)."""
+        with self._lock:
+            self._enter(view_pass)
+            return self._firsts.get((id(image), *key))
 
     def contrast(self, image: np.ndarray, params) -> Optional[Contrast]:
         """``image_contrast(image, params.sigma)`` once per image (None: not adaptive). Threads
@@ -403,6 +463,17 @@ def _joined(head: Described, rest: Described, offset: int) -> Described:
                      desc=np.vstack([head.desc, rest.desc]))
 
 
+class FirstLevel(NamedTuple):
+    """A view's points at s = 1 as the coarser image's detector finds them (``harris_low``,
+    whose strongest are the finer detector's: :func:`shares_first_level`) and the descriptors
+    of the ``described`` strongest, found when the view was the finer image's; the view as the
+    coarser image's (:func:`describe_coarser_view`) describes only the others."""
+
+    keypoints: Keypoints
+    head: Described
+    described: int
+
+
 class Detected(NamedTuple):
     """One scale of a view, detected and (its probe's points) described."""
 
@@ -420,7 +491,9 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None,
                 known: Optional[LowFeatures] = None,
                 measured: Measured = Measured(None),
-                every: int = 1) -> Tuple[Tuple[Detected, ...], bool]:
+                every: int = 1,
+                share: Optional[Callable[[FirstLevel], None]] = None
+                ) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale
@@ -431,7 +504,9 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
     image's contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector
     adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used when ``view`` is the
     image itself. ``every``: with the probe, only every ``every``-th scale is detected (the
-    others are ``pending`` until :func:`complete_probe`).
+    others are ``pending`` until :func:`complete_probe`). ``share``: given the view's s = 1
+    points as the coarser image's detector finds them (:class:`FirstLevel`), when the same view
+    is searched as the coarser image later in the pass.
     """
     config = search.config
     contrast, grads = measured
@@ -441,6 +516,7 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
     n_probe = config.probe.points if probing else config.harris.max_points
     reuse = known is not None and view.is_identity and shares_first_level(config)
+    share = share if share is not None and not reuse and shares_first_level(config) else None
     detected = []
     for n, level in enumerate(scale_space(view.image, scales, **_space(config))):
         if min(level.image.shape) < MIN_SIDE_PX // 2:
@@ -451,6 +527,14 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
         elif reuse and level.s == 1.0:  # found already: the coarser image of the other direction
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
+        elif share is not None and level.s == 1.0:  # the coarser detector's points, shared
+            wide = detect_on_level(level, config.harris_low, contrast, None,
+                                   view.inside_distance, config.views.edge_margin_px)
+            kp = _part(wide, slice(config.harris.max_points))
+            part = _part(kp, slice(n_probe))
+            desc = search.mode.describe(level, part)
+            share(FirstLevel(wide, desc, len(part)))
+            detected.append(Detected(kp, desc, level if keep else None))
         else:
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
@@ -577,6 +661,37 @@ def run_step(search: Search, step: Step,
     return attempts, record, time.perf_counter() - t0
 
 
+class Leaders:
+    """The views of a step as they are probed (``probed``, in the step's order), where only
+    the ``keep`` best so far keep their scale-space levels: the views matched in full are
+    among the best ``full_searches`` (:func:`match_chosen`), and the levels of every view of a
+    pass were most of a search's peak memory. Best: highest score, the earlier view on a tie
+    (the order of ``sorted(..., key=-score)``). A view that leaves the best never returns (the
+    bar only rises); were it chosen after all, its levels would be made again, the same."""
+
+    def __init__(self, keep: int) -> None:
+        self.keep = keep
+        self.probed: List[Optional[Probed]] = []
+        self._best: List[int] = []
+        self._lock = threading.Lock()
+
+    def add(self, k: int, probed: Probed) -> None:
+        """Record view ``k``'s probe; the levels of the view that leaves the best are dropped."""
+        with self._lock:
+            self.probed.extend([None] * (k + 1 - len(self.probed)))
+            self.probed[k] = probed
+            self._best.append(k)
+            if len(self._best) > self.keep:
+                worst = max(self._best, key=lambda j: (-self.probed[j].score, j))
+                self._best.remove(worst)
+                self.probed[worst] = without_levels(self.probed[worst])
+
+
+def without_levels(probed: Probed) -> Probed:
+    """``probed`` without its kept scale-space levels (:func:`_levels` makes them again)."""
+    return replace(probed, detected=tuple(d._replace(level=None) for d in probed.detected))
+
+
 #: A view probed in a step: (the finer image's view probed, the coarser features it was
 #: probed against, the view of the coarser image they come from or None: the image itself)
 Candidate = Tuple["Probed", LowFeatures, Optional[View]]
@@ -588,7 +703,6 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     cfg, memo, tick = search.config, search.memo, search.meter.tick
     lo_img, hi_img = search.work.coarser_finer(step.direction)
     lo_valid, hi_valid = search.work.valid(step.direction)
-    probed = []
     # the finer image described as the coarser one by the other direction: its s = 1 points
     coarser = memo.coarser
     known = coarser.get(step.direction.other)
@@ -596,26 +710,39 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     # the detector adapts to the finer image's contrast (measured once, on the image itself,
     # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
 
+    def view_of(key) -> View:  # made once in the pass (memo.view): the other side views it too
+        return memo.view(hi_img, key, step.view_pass,
+                         lambda: tilt_view(hi_img, *key, cfg.views, hi_valid))
+
+    def shared(key) -> Optional[Callable[[FirstLevel], None]]:
+        if step.view_pass == 0 or not cfg.views.coarser:
+            return None
+        return lambda first: memo.keep_first(hi_img, key, step.view_pass, first)
+
     def probe(key) -> Probed:
-        view = tilt_view(hi_img, *key, cfg.views, hi_valid)
+        view = view_of(key)
         return score_view(view, *detect_view(view, search, step.scales, tick, known,
-                                             Measured(memo.contrast(hi_img, cfg.harris)), every),
+                                             Measured(memo.contrast(hi_img, cfg.harris)), every,
+                                             shared(key)),
                           coarser[step.direction], search)
 
     def first_view(view: View):  # the gradients: for the image itself
         return detect_view(view, search, step.scales, tick, known,
-                           memo.measured(hi_img, cfg.harris), every)
+                           memo.measured(hi_img, cfg.harris), every, shared(keys[0]))
 
     keys = list(step.views)
+    leaders = Leaders(step.full_searches)
     if step.direction not in coarser:  # described while the first view is detected
-        view = tilt_view(hi_img, *keys[0], cfg.views, hi_valid)
+        view = view_of(keys[0])
         coarser[step.direction], detected = thread_map(lambda job: job(), [
             lambda: describe_low(lo_img, search, *memo.measured(lo_img, cfg.harris_low),
                                  distance_inside(lo_valid)),
             lambda: first_view(view)])
-        probed.append(score_view(view, *detected, coarser[step.direction], search))
-        keys = keys[1:]
-    probed += thread_map(probe, keys)  # the views side by side (each one alone: same answer)
+        leaders.add(0, score_view(view, *detected, coarser[step.direction], search))
+    start = len(leaders.probed)
+    # the views side by side (each one alone: same answer); only the best ones keep their levels
+    thread_map(lambda k: leaders.add(k, probe(keys[k])), range(start, len(keys)))
+    probed = leaders.probed
     if every > 1:  # the views whose probe of some scales scores best are probed at them all
         top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
         done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], search,
@@ -627,16 +754,23 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
     return [(p, coarser[step.direction], None) for p in probed]
 
 
-def describe_coarser_view(view: View, search: Search,
-                          contrast: Optional[Contrast]) -> LowFeatures:
+def describe_coarser_view(view: View, search: Search, contrast: Optional[Contrast],
+                          first: Optional[FirstLevel] = None) -> LowFeatures:
     """A view of the coarser image described as the coarser image is (at s = 1,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
-    image's own (the detector adapts to it as for the image itself)."""
+    image's own (the detector adapts to it as for the image itself). ``first``: the same
+    view's points found as the finer image's (:class:`FirstLevel`): only the points it did
+    not describe are described (a point's descriptors depend on that point alone)."""
     config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
-                         config.views.edge_margin_px)
-    return LowFeatures(view.image, search.mode.describe(level, kp), kp)
+    if first is None:
+        kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
+                             config.views.edge_margin_px)
+        return LowFeatures(view.image, search.mode.describe(level, kp), kp)
+    kp, desc, n = first
+    if len(kp) > n:
+        desc = _joined(desc, search.mode.describe(level, _part(kp, slice(n, None))), n)
+    return LowFeatures(view.image, desc, kp)
 
 
 def plain_probed(search: Search, step: Step) -> Probed:
@@ -662,8 +796,10 @@ def probe_coarser_views(search: Search, step: Step) -> List[Candidate]:
     contrast = search.memo.contrast(lo_img, search.config.harris_low)
 
     def probe(key) -> Candidate:
-        view = tilt_view(lo_img, *key, search.config.views, work.valid(step.direction)[0])
-        feats = describe_coarser_view(view, search, contrast)
+        view = search.memo.view(lo_img, key, step.view_pass, lambda: tilt_view(
+            lo_img, *key, search.config.views, work.valid(step.direction)[0]))
+        feats = describe_coarser_view(view, search, contrast,
+                                      search.memo.first_level(lo_img, key, step.view_pass))
         search.meter.tick()
         return score_view(plain.view, plain.detected, plain.probing, feats, search), feats, view
 

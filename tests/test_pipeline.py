@@ -578,3 +578,104 @@ def test_probing_views_at_every_other_scale_keeps_a_tilt_of_4_answer(raccoon):
                   replace(Config(), views=replace(ViewParams(), probe_every=1)))
     assert sampled.matched and every.matched and sampled.evidence.view_tilt == 4.0
     assert np.array_equal(sampled.transform, every.transform)
+
+
+def _search(config, low, high):
+    from scalematch.modes import mode_of
+    from scalematch.working import at_working_size
+
+    return pipeline.Search(at_working_size(low, high, config), config, mode_of(config),
+                           pipeline.Memo(), pipeline.Meter(None, 0))
+
+
+def test_a_view_found_as_the_finer_image_is_described_as_the_coarser_one_found_alone(raccoon):
+    """A view searched as the finer image keeps its s = 1 points (``FirstLevel``, through
+    ``detect_view``'s ``share``); the same view searched as the coarser image, from them,
+    has the points and descriptors of a view detected and described on its own, and the
+    finer side's detection is the one it has without sharing (the same descriptors, to the
+    rounding of float32 products)."""
+    from scalematch.stages.views import tilt_view
+
+    config = Config()
+    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
+    search = _search(config, pair.low, pair.high)
+    view = tilt_view(pair.high, 4.0, 36.0, config.views)
+    measured = pipeline.Measured(pipeline.image_contrast(pair.high, config.harris.sigma))
+    kept = []
+    shared, _ = pipeline.detect_view(view, search, config.scales, measured=measured, every=2,
+                                     share=kept.append)
+    alone, _ = pipeline.detect_view(view, search, config.scales, measured=measured, every=2)
+    assert len(kept) == 1 and kept[0].described == config.probe.points
+    for a, b in zip(shared, alone):
+        assert np.array_equal(a.keypoints.xy, b.keypoints.xy)
+        assert (a.probe is None) == (b.probe is None)
+        assert a.probe is None or np.array_equal(a.probe.desc, b.probe.desc)
+    from_first = pipeline.describe_coarser_view(view, search, measured.contrast, kept[0])
+    own = pipeline.describe_coarser_view(view, search, measured.contrast)
+    assert len(own.keypoints) > config.probe.points  # some points were left to describe
+    assert np.array_equal(from_first.keypoints.xy, own.keypoints.xy)
+    for name in ("xy", "index", "angle"):
+        assert np.array_equal(getattr(from_first.described, name), getattr(own.described, name))
+    # the descriptors of the points described apart differ by the rounding of a product over
+    # fewer rows (BLAS blocks by size), as where a view's full pass joins its probe's
+    assert np.allclose(from_first.described.desc, own.described.desc, rtol=0, atol=1e-6)
+
+
+def test_the_best_views_of_a_step_keep_their_levels_and_only_they():
+    """``Leaders``: views added in any order; the ``keep`` best (highest score, the earlier
+    one on a tie: the order ``match_chosen`` sorts them in) keep their levels, the others
+    lose them; every view stays in the step's order."""
+    from scalematch.stages.detector import Keypoints
+
+    scores = [3.0, 9.0, 5.0, 9.0, 1.0, 5.0, 7.0]
+    level = np.zeros((4, 4), np.float32)
+    rng = np.random.default_rng(0)
+    leaders = pipeline.Leaders(3)
+    for k in rng.permutation(len(scores)):
+        detected = (pipeline.Detected(Keypoints.empty(1.0), None, level),)
+        leaders.add(int(k), pipeline.Probed(None, detected, (), (), scores[k], True))
+    best = sorted(range(len(scores)), key=lambda k: -scores[k])[:3]
+    assert best == [1, 3, 6]
+    assert [p.score for p in leaders.probed] == scores
+    assert [k for k, p in enumerate(leaders.probed) if p.detected[0].level is not None] == best
+
+
+def test_a_view_is_made_once_in_a_pass_within_the_budget(monkeypatch):
+    """``Memo.view``: the same view of the same image in one pass is made once; another pass
+    makes it again; past ``VIEW_CACHE_MAX_BYTES`` every request makes it."""
+    from scalematch.stages.views import tilt_view
+
+    image = np.random.default_rng(0).random((60, 80)).astype(np.float32)
+    made = []
+
+    def make():
+        made.append(1)
+        return tilt_view(image, 2.0, 36.0)
+
+    memo = pipeline.Memo()
+    first = memo.view(image, (2.0, 36.0), 1, make)
+    assert memo.view(image, (2.0, 36.0), 1, make) is first and len(made) == 1
+    memo.view(image, (2.0, 36.0), 2, make)
+    assert len(made) == 2
+    monkeypatch.setattr(pipeline, "VIEW_CACHE_MAX_BYTES", 0)
+    memo = pipeline.Memo()
+    memo.view(image, (2.0, 36.0), 1, make)
+    memo.view(image, (2.0, 36.0), 1, make)
+    assert len(made) == 4
+
+
+def test_views_made_once_and_shared_give_the_answer_of_views_made_each_time(raccoon,
+                                                                            monkeypatch):
+    """The oblique pair solved by a view of the coarser image (which the other direction
+    searched as its finer image): the same transform and evidence with the views and their
+    s = 1 points shared as with every view made and detected where it is searched."""
+    from scalematch.lab.synthetic import make_oblique_pair
+
+    pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(2), high_size=(160, 120))
+    shared = match(pair.low, pair.high)
+    monkeypatch.setattr(pipeline, "VIEW_CACHE_MAX_BYTES", 0)
+    monkeypatch.setattr(pipeline.Memo, "first_level", lambda self, *args: None)
+    alone = match(pair.low, pair.high)
+    assert shared.matched and shared.evidence.view_of == "coarser"
+    assert np.array_equal(shared.transform, alone.transform)
+    assert shared.evidence == alone.evidence
