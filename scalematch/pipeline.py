@@ -961,6 +961,20 @@ def evidence_of(shown: Attempt, records: Sequence[StepRecord], plan: Sequence[St
                    footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
 
 
+def out_of_reach(config: Config, work: WorkImages) -> str:
+    """Why an empty plan searched nothing: at every scale of ``config.scales`` the finer image
+    of either order would span fewer than ``config.min_footprint_px`` coarser pixels
+    (:func:`scalematch.search.within_reach`)."""
+    sizes = " and ".join(f"{w}x{h}" for h, w in (work.low.shape, work.high.shape))
+    floor = f"under {config.min_footprint_px:g} px of the coarser one"
+    if max(max(work.low.shape), max(work.high.shape)) < config.min_footprint_px:
+        return f"the images are too small ({sizes} px): the finer one would span {floor}"
+    scales = ", ".join(f"{s:g}" for s in config.scales)
+    return (f"no scale searched fits these images ({sizes} px at working size): at every scale "
+            f"searched ({scales}) the finer image would span {floor}; try smaller scales "
+            f"(--scales)")
+
+
 def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
                  plan: Sequence[Step], stopped: str, timings: Dict[str, float]) -> MatchResult:
     """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next),
@@ -972,6 +986,13 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     repeated structure is refused there.
     """
     config, work = search.config, search.work
+    if not attempts:  # an empty plan: no scale asked for is within reach of these images
+        return MatchResult(
+            matched=False, model=config.model, reason=out_of_reach(config, work),
+            timings=timings, config=config, search=records,
+            covariance_used=search.mode.covariance_used,
+            evidence=Evidence(steps_planned=len(plan), stopped=stopped,
+                              low_working_factor=work.f_low, high_working_factor=work.f_high))
     winner, fit, near = best_fitting(search, attempts)
     refused = best_refused(attempts)
     shown = winner or refused or attempts[0]

@@ -27,6 +27,7 @@ from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
 from .stages.estimator import model_of
+from .stages.nodata import valid_mask
 from .working import in_decoded
 
 PathLike = Union[str, Path]
@@ -270,6 +271,13 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     return _captioned(out, lines, footer, outline)
 
 
+def _shows_scene(grey: np.ndarray) -> np.ndarray:
+    """(H, W) bool: where ``grey`` shows the scene, not a no-data canvas
+    (:func:`scalematch.stages.nodata.valid_mask`)."""
+    valid = valid_mask(grey)
+    return np.ones(grey.shape[:2], bool) if valid is None else valid
+
+
 def _outline_thickness(hh: int, ww: int) -> int:
     """The footprint outline's thickness on an ``hh`` x ``ww`` picture, px."""
     return max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
@@ -283,7 +291,13 @@ def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray):
     high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
     warped, mask = _warp_high(high_grey, t, (ww, hh))
     inside = mask > 0
-    warped = match_grey_levels(warped, low_grey, inside)  # grey where they agree
+    # grey where they agree: the levels matched where both show the scene (a canvas's black
+    # corners would pull the gain and offset, and the whole overlay would read as one colour)
+    both = inside & _shows_scene(low_grey)
+    high_valid = valid_mask(high_grey)
+    if high_valid is not None:
+        both &= _warp_high(high_valid.astype(np.uint8) * 255, t, (ww, hh))[0] >= 250
+    warped = match_grey_levels(warped, low_grey, both if both.any() else inside)
     dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
     out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
     out[inside, 0] = low_grey[inside]  # B: low

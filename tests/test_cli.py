@@ -145,6 +145,17 @@ def test_parse_scales():
         parse_scales("1-4:0")
 
 
+@needs_pipeline
+def test_scales_out_of_reach_exit_1_with_the_reason(tmp_path):
+    """The demo's high image is 480 px wide: at scale 16 it would span 30 coarser px, under the
+    smallest footprint (32), so nothing is searched: an answer about the images (exit 1)."""
+    result = run(DEMO_LOW, DEMO_HIGH, "--scales", "16", "--json", "-", "-q", "-o", tmp_path)
+    assert result.exit_code == 1, result.output
+    answer = json.loads(result.stdout)
+    assert not answer["matched"] and answer["reason"].startswith("no scale searched fits")
+    assert answer["scales"] == []
+
+
 def test_time_budget_inf_is_no_limit(flat_pair):
     result = run(*flat_pair, "--time-budget", "inf", "--json", "-", "-q")
     assert result.exit_code == 1, result.output  # flat images: searched in full, no match

@@ -224,6 +224,19 @@ def test_flat_pair_is_no_reliable_match():
     assert "no scale" in r.reason or "inliers" in r.reason
 
 
+def test_no_scale_within_reach_is_a_no_with_its_reason(raccoon):
+    """Images whose every scale falls under the smallest footprint are answered "no" at once,
+    with the reason, and nothing searched (not an internal error)."""
+    low, high = raccoon[:377, :419], raccoon[300:660, 400:880]  # 480 px / 16 = 30 < 32 px
+    r = match(low, high, Config(scales=(16.0,)))
+    assert not r.matched and r.search == () and r.scales == ()
+    assert r.reason.startswith("no scale searched fits these images") and "(16)" in r.reason
+    assert r.evidence.steps_planned == 0
+    tiny = raccoon[100:130, 100:130]  # 30 px: under the footprint even at scale 1
+    r = match(tiny, tiny)
+    assert not r.matched and r.reason.startswith("the images are too small"), r.reason
+
+
 def test_too_small_image_is_a_clear_error():
     with pytest.raises(ValueError, match="at least"):
         match(np.zeros((10, 10), np.float32), np.zeros((100, 100), np.float32))

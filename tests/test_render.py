@@ -99,6 +99,24 @@ def test_overlay_is_grey_where_they_agree_whatever_the_exposure(pair):
     assert diff.mean() < 6.0
 
 
+def test_overlay_is_grey_where_they_agree_beside_a_no_data_canvas(pair):
+    """Half of the footprint on the low image's black canvas (no data, touching its border):
+    the grey levels are matched where both images show the scene, so the other half still
+    reads grey (green = red within 6 levels on average), not tinted by the black."""
+    low, high, t = pair
+    corners = footprint(t, high.shape)
+    cut = int(round(corners[:, 0].mean()))
+    canvas = low.copy()
+    canvas[:, :cut] = 0.0
+    out = overlay(canvas, high, make_result(t))
+    inside = np.zeros(out.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, np.round(corners).astype(np.int32), 1)
+    inside = cv2.erode(inside, np.ones((7, 7), np.uint8)).astype(bool)
+    inside[:, :cut + 4] = False  # the half that shows the scene in both
+    gap = np.abs(out[..., 1].astype(float) - out[..., 2].astype(float))[inside]
+    assert inside.sum() > 1000 and gap.mean() < 6.0
+
+
 def test_overlay_of_a_wrong_transform_disagrees(pair):
     low, high, t = pair
     wrong = t.copy()
