@@ -248,7 +248,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
             src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
             est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
-                best, best_src, best_dst, kept = est, src, dst, int(mask.sum())
+                best, best_src, best_dst, kept = est, src, dst, len(src)
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
     if n_in and model_of(config.model).has_ratio:

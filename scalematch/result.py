@@ -139,8 +139,10 @@ class ScaleRow:
     s: float  #: scale of the high-resolution image
     ratio: float  #: resolution ratio implied by this scale's transform (nan when none)
     points: int  #: interest points in the high-resolution image at s
-    initial: int  #: candidate (descriptor) matches
-    kept: int  #: candidates surviving the local geometric constraints
+    #: candidate (descriptor) matches, as distinct point pairs (a point described at two
+    #: orientations is one)
+    initial: int
+    kept: int  #: distinct candidate pairs surviving the local geometric constraints
     inliers: int  #: inliers of the robust estimate (0 when none)
     outlier_pct: float  #: 100 * (1 - inliers / initial) (100 when no initial match)
     rotation_deg: float = float("nan")  #: rotation implied by this scale's transform

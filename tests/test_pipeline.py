@@ -105,6 +105,8 @@ def test_result_contract(raccoon):
     # the table holds the scales within reach: the finer image spans 32+ coarser px there
     reach = [s for s in r.config.scales if max(pair.high.shape) / s >= r.config.min_footprint_px]
     assert [row.s for row in r.scales] == reach and len(reach) < len(r.config.scales)
+    # each row narrows down: distinct candidate pairs, those the constraints keep, inliers
+    assert all(row.initial >= row.kept >= row.inliers for row in r.scales)
     assert r.timings["total"] > 0
 
 
