@@ -171,7 +171,7 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
     pairs = []
     for n, cells in rows:
         if columns is None and len(cells) != 2:
-            raise BatchError(f"{path} line {n} has {len(cells)} columns; without a header a "
+            raise BatchError(f"{path} line {n} has {len(cells)} column{'s' if len(cells) != 1 else ''}; without a header a "
                              f"pairs CSV has two, low,high (or name the columns low and high in "
                              f"a header row)")
         lo, hi = columns or (0, 1)

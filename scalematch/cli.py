@@ -869,9 +869,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the same: a file holding results made with other options is refused (exit 2), never mixed.
 
     An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
-    --no-views a "no" takes a median 0.14 s of matching instead of 2.7 s (1 MP images;
-    docs/NULLS.md, "Mode no-views"), but oblique pairs that only a tilted view solves
-    are missed.
+    --no-views a "no" takes about half of SIFT's time instead of 9.6 times it (1 MP images;
+    docs/NULLS.md, "Mode no-views" and "Mode default"), but oblique pairs that only a tilted
+    view solves are missed.
 
     \b
     Examples:

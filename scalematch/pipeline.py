@@ -87,7 +87,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         (scaled by 255/65535), or floats in [0, 1] (scaled by 255); ``ValueError`` for bool,
         NaN or constant arrays, more than two dimensions, a side under 24 px.
     config : Config
-        Every parameter; recorded in the result.
+        Every parameter; recorded in the result (``TypeError`` for anything else).
     progress : callable, optional
         ``progress(done, total)`` as the search goes; ``total`` is the plan's length, and
         ``done`` reaches it when the search ends (early or not).
@@ -104,6 +104,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
         ``order`` says whether the images were found in the order given; ``transform`` always
         maps the finer image's pixels to the coarser image's; ``search`` lists the steps run.
     """
+    if not isinstance(config, Config):
+        raise TypeError(f"config must be a scalematch.Config, not {type(config).__name__}: "
+                        f"Config(model=\"affine\") or Config.preset(\"no-views\"), say")
     warm_up_blas()
     t0 = time.perf_counter()
     # the one check at the door, before anything is shrunk: ValueError for what cannot match

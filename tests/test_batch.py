@@ -90,7 +90,7 @@ def test_read_pairs_columns(tmp_path, text):
 @pytest.mark.parametrize("text,needle", [
     ("name,a.png,b.png\n", "3 columns"),  # no header: a third column is not silently dropped
     ("a.png,b.png\nx.png,y.png,z.png\n", "line 2 has 3 columns"),
-    ("only-one-column\n", "1 columns"),
+    ("only-one-column\n", "has 1 column; without"),
     ("name,low,other\nx,a.png,b.png\n", "no column named 'high'"),
     ("low_a,low_b,high\na.png,b.png,c.png\n", "several columns named 'low'"),
     ("low,high\na.png,\n", "line 2 does not have two paths"),

@@ -239,6 +239,11 @@ def test_no_scale_within_reach_is_a_no_with_its_reason(raccoon):
     assert not r.matched and r.reason.startswith("the images are too small"), r.reason
 
 
+def test_a_config_that_is_not_a_config_is_a_clear_error(raccoon):
+    with pytest.raises(TypeError, match="config must be a scalematch.Config, not dict"):
+        match(raccoon, raccoon, {"model": "affine"})
+
+
 def test_too_small_image_is_a_clear_error():
     with pytest.raises(ValueError, match="at least"):
         match(np.zeros((10, 10), np.float32), np.zeros((100, 100), np.float32))
