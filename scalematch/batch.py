@@ -171,9 +171,10 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
     pairs = []
     for n, cells in rows:
         if columns is None and len(cells) != 2:
-            raise BatchError(f"{path} line {n} has {len(cells)} column{'s' if len(cells) != 1 else ''}; without a header a "
-                             f"pairs CSV has two, low,high (or name the columns low and high in "
-                             f"a header row)")
+            plural = "" if len(cells) == 1 else "s"
+            raise BatchError(f"{path} line {n} has {len(cells)} column{plural}; without a header "
+                             f"a pairs CSV has two, low,high (or name the columns low and high "
+                             f"in a header row)")
         lo, hi = columns or (0, 1)
         low = cells[lo] if lo < len(cells) else ""
         high = cells[hi] if hi < len(cells) else ""

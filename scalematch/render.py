@@ -68,16 +68,18 @@ OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
 # --------------------------------------------------------------------------- helpers
 
-def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
-               size: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray]:
-    """high warped onto a ``size`` (w, h) canvas by ``transform``; (image, mask 0/255).
+def _warp_high(high_grey: np.ndarray, transform: np.ndarray,
+               size: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """high warped onto a ``size`` (w, h) canvas by ``transform``: (image, footprint mask 0/255,
+    mask 0/255 of where high shows the scene, not a no-data canvas: ``nodata.valid_mask``).
 
     The high image is first shrunk by INTER_AREA to about the target resolution so the warp does
-    not alias (a plain bilinear warp at 10x shrink keeps 1 pixel in 100).
+    not alias (a plain bilinear warp at 10x shrink keeps 1 pixel in 100); its no-data is found
+    on that shrunk copy.
     """
     ratio, _, _ = similarity_parts(transform)
     t3 = as_matrix3(transform)
-    img = high_bgr
+    img = high_grey
     f = 1.0 / ratio if np.isfinite(ratio) and ratio > 1.0 else 1.0
     if f < 0.9:
         h, w = img.shape[:2]
@@ -88,13 +90,15 @@ def _warp_high(high_bgr: np.ndarray, transform: np.ndarray,
         back = as_matrix3(resize_map(1 / fx, 1 / fy))
         t3 = t3 @ back
     ones = np.full(img.shape[:2], 255, np.uint8)
-    if np.asarray(transform).shape == (2, 3):
-        warped = cv2.warpAffine(img, t3[:2], size, flags=cv2.INTER_LINEAR)
-        mask = cv2.warpAffine(ones, t3[:2], size, flags=cv2.INTER_NEAREST)
-    else:
-        warped = cv2.warpPerspective(img, t3, size, flags=cv2.INTER_LINEAR)
-        mask = cv2.warpPerspective(ones, t3, size, flags=cv2.INTER_NEAREST)
-    return warped, mask
+    valid = valid_mask(img)
+    scene = ones if valid is None else valid.astype(np.uint8) * 255
+
+    def warp(a: np.ndarray, flags: int) -> np.ndarray:
+        if np.asarray(transform).shape == (2, 3):
+            return cv2.warpAffine(a, t3[:2], size, flags=flags)
+        return cv2.warpPerspective(a, t3, size, flags=flags)
+
+    return warp(img, cv2.INTER_LINEAR), warp(ones, cv2.INTER_NEAREST), warp(scene, cv2.INTER_NEAREST)
 
 
 def text_style(width: int) -> Tuple[float, int, int]:
@@ -271,13 +275,6 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     return _captioned(out, lines, footer, outline)
 
 
-def _shows_scene(grey: np.ndarray) -> np.ndarray:
-    """(H, W) bool: where ``grey`` shows the scene, not a no-data canvas
-    (:func:`scalematch.stages.nodata.valid_mask`)."""
-    valid = valid_mask(grey)
-    return np.ones(grey.shape[:2], bool) if valid is None else valid
-
-
 def _outline_thickness(hh: int, ww: int) -> int:
     """The footprint outline's thickness on an ``hh`` x ``ww`` picture, px."""
     return max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
@@ -289,14 +286,14 @@ def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray):
     the caption (None: no footprint), and the caption line that explains the colours."""
     hh, ww = low_grey.shape[:2]
     high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
-    warped, mask = _warp_high(high_grey, t, (ww, hh))
+    warped, mask, scene = _warp_high(high_grey, t, (ww, hh))
     inside = mask > 0
     # grey where they agree: the levels matched where both show the scene (a canvas's black
     # corners would pull the gain and offset, and the whole overlay would read as one colour)
-    both = inside & _shows_scene(low_grey)
-    high_valid = valid_mask(high_grey)
-    if high_valid is not None:
-        both &= _warp_high(high_valid.astype(np.uint8) * 255, t, (ww, hh))[0] >= 250
+    both = inside & (scene > 0)
+    low_valid = valid_mask(low_grey)
+    if low_valid is not None:
+        both &= low_valid
     warped = match_grey_levels(warped, low_grey, both if both.any() else inside)
     dim = (low_grey.astype(np.float32) * OUTSIDE_DIM).astype(np.uint8)
     out = cv2.cvtColor(dim, cv2.COLOR_GRAY2BGR)
