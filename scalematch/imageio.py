@@ -88,7 +88,8 @@ def to_bgr8(image: np.ndarray) -> np.ndarray:
 
 
 def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
-    """The check at the edge of ``match``: a 2-D grey array -> float32 8-bit grey levels.
+    """The check at the edge of ``match``: a 2-D grey array (or one channel, (H, W, 1)) ->
+    float32 8-bit grey levels.
 
     Scaled as ``to_grey`` scales: floats in [0, 1] (scikit-image's convention) by 255, 16-bit by
     255/65535; other values are taken as grey levels. Raises ``ImageError`` (a ``ValueError``)
@@ -102,6 +103,8 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     if img.dtype.kind not in "uif":
         raise ImageError(f"the {name} image has dtype {img.dtype}; give grey levels as an "
                          f"integer or float array")
+    if img.ndim == 3 and img.shape[2] == 1:  # one channel, as some readers give grey images
+        img = img[:, :, 0]
     if img.ndim != 2:
         raise ImageError(f"the {name} image has shape {img.shape}; give a 2-D grey image "
                          f"(scalematch.read_grey reads and converts any image file)")

@@ -258,6 +258,16 @@ def test_float_images_in_0_1_match_as_8_bit_grey_levels(raccoon):
     assert r.n_inliers == match(low * 255.0, high * 255.0).n_inliers
 
 
+def test_one_channel_arrays_match_as_grey_images(raccoon):
+    """(H, W, 1), as some readers give a grey image, is that grey image."""
+    pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(0), high_size=(200, 150),
+                          low_max=(200, 150))
+    grey = match(pair.low, pair.high)
+    one = match(pair.low[:, :, None], pair.high[:, :, None])
+    assert grey.matched and one.matched
+    assert np.array_equal(one.transform, grey.transform) and one.n_inliers == grey.n_inliers
+
+
 @pytest.mark.parametrize("bad,needle", [
     (np.full((100, 100), 0.5), "constant"),
     (np.where(np.eye(100) > 0, np.nan, 0.5), "NaN"),
