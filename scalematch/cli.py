@@ -119,11 +119,11 @@ def exit_code_table(codes: Iterable[int] = tuple(c for c, _ in EXIT_CODES),
 #: ``lab`` is the lab's group; the other three are short aliases of its commands.
 LAZY_COMMANDS = {
     "lab": ("scalematch.lab.cli", "lab", "Research commands: benchmark, studies, covariance."),
-    "bench": ("scalematch.lab.bench", "bench_command", "Benchmark against OpenCV SIFT, ORB..."),
+    "bench": ("scalematch.lab.bench", "bench_command", "Short for: scalematch lab bench."),
     "repeatability": ("scalematch.lab.repeatability", "repeatability_command",
-                      "Repeatability of standard vs scale-adapted Harris..."),
+                      "Short for: scalematch lab repeatability."),
     "covariance": ("scalematch.lab.covariance", "covariance_command",
-                   "Re-estimate the jet covariance Lambda from your own..."),
+                   "Short for: scalematch lab covariance."),
 }
 
 #: Named threshold options: (option, Config paths, type, help). An option is offered only when
