@@ -371,6 +371,9 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
 #: the first ``HEADER_BYTES`` is not in the file.
 _HEADER_FIRST = (b"GIF87a", b"GIF89a", b"BM", b"RIFF")
 _JPEG_SOI = b"\xff\xd8"
+#: The first bytes of the image files OpenCV decodes (PNG, JPEG, TIFF both byte orders, GIF,
+#: BMP, WebP): a file that starts so and does not decode is broken, not of another kind
+_IMAGE_SIGNATURES = (_PNG_SIGNATURE, _JPEG_SOI, b"II*\x00", b"MM\x00*") + _HEADER_FIRST
 #: JPEG markers of a frame header (SOF0..SOF15 but DHT 0xC4, JPG 0xC8, DAC 0xCC): the size.
 _JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 
@@ -498,6 +501,8 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
     if head.scan >= 0 and raw.rfind(b"\xff\xd9") < head.scan:
         raise ImageError(f"{p}: JPEG file is truncated (no end-of-image marker); "
                          "copy or download it again")
+    if raw.startswith(_PNG_SIGNATURE) and raw.rfind(b"IEND") < 0:  # libpng would say it first
+        raise ImageError(f"{p}: PNG file is truncated (no IEND chunk); copy or download it again")
     # orientation is applied below from the header, the same way for every format and build
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
     if factor > 1:
@@ -514,9 +519,10 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
     finally:
         cv2.utils.logging.setLogLevel(level)
     if img is None:
-        if size is None:
+        if size is None and not raw.startswith(_IMAGE_SIGNATURES):
             raise _not_decodable(p)
-        _room_for(p, size)  # out of memory is not a corrupt file
+        if size is not None:
+            _room_for(p, size)  # out of memory is not a corrupt file
         raise _corrupt(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]

@@ -165,6 +165,24 @@ def test_bad_files_raise_one_line_image_error(tmp_path, bgr, case, needle):
     assert needle in msg and "\n" not in msg and str(path) in msg
 
 
+def test_a_jpeg_cut_inside_its_metadata_is_called_truncated_not_unknown(tmp_path, bgr):
+    """A camera JPEG cut before its frame header (inside a large EXIF block, so no size can be
+    read) is a broken JPEG: the user is told to copy it again, not to give another format."""
+    data = jpeg_bytes(bgr)
+    app1 = b"\xff\xe1" + (60_000).to_bytes(2, "big") + b"Exif\x00\x00" + bytes(59_992)
+    path = write(tmp_path / "cut.jpg", (data[:2] + app1 + data[2:])[:20_000])
+    with pytest.raises(ImageError, match="truncated or corrupt"):
+        read_grey(path)
+
+
+def test_a_truncated_png_is_said_once_without_libpng_noise(tmp_path, bgr, capfd):
+    data = cv2.imencode(".png", bgr)[1].tobytes()
+    path = write(tmp_path / "cut.png", data[: len(data) // 2])
+    with pytest.raises(ImageError, match="PNG file is truncated"):
+        read_grey(path)
+    assert capfd.readouterr().err == ""  # libpng's own "input buffer is incomplete" not run
+
+
 def test_to_bgr8_layouts(bgr):
     grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
     for img in (bgr, grey, grey.astype(np.float32), bgr.astype(np.uint16) * 257,
