@@ -1,12 +1,14 @@
 """What ``--no-views`` buys and costs: the default search against the plain search alone.
 
 Usage: python scripts/fast_no.py [--every 4] [--sets zoom,tilted,unrelated] [--big-rounds 3]
+       [--methods default,no-views,sift]
 
 The default search tries tilted views of the finer image when the plain search finds nothing,
 in both orders: that is most of the time of a "no". The preset ``no-views`` (``--no-views`` on
 the command line) searches the image itself in both orders only. In one process, alternately
-pair by pair (the order of the three turned each pair), this script runs the default, the
-preset and the SIFT reference (``scalematch.lab.baselines``, EVALUATION.md) on:
+pair by pair (the order of the methods turned each pair), this script runs the default, the
+preset and the SIFT reference (``scalematch.lab.baselines``, EVALUATION.md), or the
+``--methods`` named (``sift`` and any ``Config.preset``: ``tilt-4``, ``budget-1s``, ...), on:
 
 * the stored null pairs of ``scalematch lab nulls`` (every ``--every``-th pair of ``--nulls``,
   by default ``bench-out/nulls/pairs-seed0``, where ``scalematch lab nulls`` stores them; both
@@ -45,7 +47,7 @@ from scalematch.lab.datasets import find_shared, list_photos  # noqa: E402
 from scalematch.lab.realpairs import PHOTO_STEP, canonical, pair_error, synthetic_sets  # noqa: E402
 from scalematch.lab.evaluation import is_success  # noqa: E402
 
-METHODS = ("default", "no-views", "sift")
+METHODS = ("default", "no-views", "sift")  #: the methods run unless ``--methods`` says
 BIG_PAIR = ("snowpeak_IMG_2168.JPG", "monstree_IMG_1042.JPG")  # 4608 and 4032 px, unrelated
 
 
@@ -59,32 +61,32 @@ def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity
     return (r.transform if r.matched else None), r.order == "given", time.perf_counter() - t0
 
 
-def alternate(items, judge):
+def alternate(items, judge, methods=METHODS):
     """Each item run by every method, the methods' order turned each item; rows per method."""
-    rows = {m: [] for m in METHODS}
+    rows = {m: [] for m in methods}
     for n, item in enumerate(items):
-        order = METHODS[n % 3:] + METHODS[:n % 3]
+        order = methods[n % len(methods):] + methods[:n % len(methods)]
         for m in order:
             t, fwd, sec = run(m, item.low, item.high, getattr(item, "model", "similarity"))
             rows[m].append((judge(item, t, fwd), sec))
     return rows
 
 
-def nulls_table(folder: Path, every: int) -> str:
+def nulls_table(folder: Path, every: int, methods=METHODS) -> str:
     pairs = _stored_nulls(folder, every)
     runs = pairs + [_Stored(p.high, p.low) for p in pairs]  # both orders
-    rows = alternate(runs, lambda item, t, fwd: t is not None)
+    rows = alternate(runs, lambda item, t, fwd: t is not None, methods)
     out = [f"Null runs: every {every}th stored pair of {folder}, both orders ({len(runs)} runs)",
            "", "| method | runs | claims (all false) | median s | 90th percentile s |",
            "|---|---:|---:|---:|---:|"]
-    for m in METHODS:
+    for m in methods:
         secs = [s for _, s in rows[m]]
         out.append(f"| {m} | {len(secs)} | {sum(c for c, _ in rows[m])} | "
                    f"{np.median(secs):.3f} | {np.percentile(secs, 90):.3f} |")
     return "\n".join(out)
 
 
-def sets_table(shared: Path, names) -> str:
+def sets_table(shared: Path, names, methods=METHODS) -> str:
     sets = synthetic_sets(list_photos(shared)[::PHOTO_STEP], 0, wanted=names)
     out = ["| set | method | pairs | solved | wrong claims | median s |",
            "|---|---|---:|---:|---:|---:|"]
@@ -95,8 +97,8 @@ def sets_table(shared: Path, names) -> str:
             ok = t is not None and is_success(pair_error(pair, canonical(pair, t, fwd)))
             return (ok, t is not None and not ok)
 
-        rows = alternate(sets[name], judge)
-        for m in METHODS:
+        rows = alternate(sets[name], judge, methods)
+        for m in methods:
             rs = rows[m]
             out.append(f"| {name} | {m} | {len(rs)} | {sum(r[0][0] for r in rs)} | "
                        f"{sum(r[0][1] for r in rs)} | {np.median([s for _, s in rs]):.3f} |")
@@ -135,7 +137,14 @@ def main() -> None:
                     help="a pairs folder of `scalematch lab nulls` (its manifest.json and PNGs)")
     ap.add_argument("--sets", default="zoom,tilted,unrelated")
     ap.add_argument("--big-rounds", type=int, default=3)
+    ap.add_argument("--methods", default=",".join(METHODS),
+                    help="sift and Config presets, comma-separated (the big pair: always "
+                         "default and no-views)")
     a = ap.parse_args()
+    methods = tuple(m for m in a.methods.split(",") if m)
+    for m in methods:
+        if m != "sift":
+            Config.preset(m)  # an unknown name fails here, before any run
     shared = find_shared()
     if shared is None:
         sys.exit("../shared is absent")
@@ -146,10 +155,10 @@ def main() -> None:
         print(f"No stored null pairs in {a.nulls}: `scalematch lab nulls --limit 40` makes 40 "
               "(and runs them); the null table is skipped.\n")
     elif a.every:
-        print(nulls_table(Path(a.nulls), a.every) + "\n")
+        print(nulls_table(Path(a.nulls), a.every, methods) + "\n")
     names = [s for s in a.sets.split(",") if s]
     if names:
-        print(sets_table(shared, names) + "\n")
+        print(sets_table(shared, names, methods) + "\n")
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
 
 
