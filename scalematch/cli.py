@@ -204,6 +204,8 @@ def _has_path(obj: Any, path: str) -> bool:
 
 def _coerce(text: str, current: Any, path: str) -> Any:
     """``text`` converted to the type of the field's current value."""
+    if path == "scales":  # as --scales writes them: "1-8", "2-12:0.5", "1,2,3.5"
+        return parse_scales(text)
     try:
         if isinstance(current, bool):
             low = text.strip().lower()
@@ -230,8 +232,11 @@ def _coerce(text: str, current: Any, path: str) -> Any:
         if isinstance(current, Path):
             return Path(text)
     except ValueError:
-        kind = type(current).__name__
-        raise ValueError(f"{path} needs a {kind} value, got {text!r}") from None
+        kind = ("groups of numbers split by ';' (e.g. 2;4;6,8)"
+                if isinstance(current, tuple) and current and isinstance(current[0], tuple)
+                else "comma-separated numbers (e.g. 1,2,4)" if isinstance(current, tuple)
+                else f"a {type(current).__name__} value")
+        raise ValueError(f"{path} needs {kind}, got {text!r}") from None
     return text
 
 
@@ -240,13 +245,19 @@ def set_path(config: Any, path: str, value: Any, whole: Optional[str] = None) ->
     (``whole``: the path as the user wrote it, for the messages; ``path`` by default)."""
     whole = whole or path
     head, _, rest = path.partition(".")
-    if not dataclasses.is_dataclass(config) or head not in {f.name for f in dataclasses.fields(config)}:
-        names = ", ".join(f.name for f in dataclasses.fields(config)) \
-            if dataclasses.is_dataclass(config) else ""
+    done = whole[:len(whole) - len(path)]  # the groups already entered, "views." say
+    if not dataclasses.is_dataclass(config):
+        raise ValueError(f"no parameter {whole!r}: {done.rstrip('.')} is a value, not a group")
+    if head not in {f.name for f in dataclasses.fields(config)}:
+        names = ", ".join(f.name for f in dataclasses.fields(config))
         raise ValueError(f"no parameter {whole!r} (known here: {names})")
+    current = getattr(config, head)
     if rest:
-        return dataclasses.replace(config, **{head: set_path(getattr(config, head), rest, value,
-                                                             whole)})
+        return dataclasses.replace(config, **{head: set_path(current, rest, value, whole)})
+    if dataclasses.is_dataclass(current) and not dataclasses.is_dataclass(value):
+        names = ", ".join(f.name for f in dataclasses.fields(current))
+        raise ValueError(f"{whole!r} is a group of parameters: set one of them, "
+                         f"{whole}.NAME=VALUE (its names: {names})")
     if isinstance(value, str):
         value = _coerce(value, getattr(config, head), whole)
     return dataclasses.replace(config, **{head: value})

@@ -528,6 +528,13 @@ def test_retry_errors_keeps_exit_3_while_a_pair_still_fails(images, tmp_path):
         in result.stderr
 
 
+def test_a_bad_set_stops_the_batch_before_any_pair_runs(images):
+    pairs = write(images / "p13.csv", "low.png,high.png\n")
+    result = run("batch", pairs, "--set", "ransac=1")
+    assert_one_line_error(result, "'ransac' is a group of parameters")
+    assert result.stdout == ""  # no line for any pair
+
+
 def test_retry_errors_needs_an_output_file(images):
     pairs = write(images / "p12.csv", "low.png,high.png\n")
     assert_one_line_error(run("batch", pairs, "--retry-errors"), "give that file with --output")

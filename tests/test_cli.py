@@ -119,10 +119,31 @@ def test_set_takes_groups_of_tilts_for_the_view_passes():
 
     config = build_config("default", None, None, None, {}, ["views.passes=2;4;6,8"])
     assert config.views.passes == ((2.0,), (4.0,), (6.0, 8.0))
-    with pytest.raises(ValueError, match="views.passes needs a tuple value"):
+    with pytest.raises(ValueError, match="views.passes needs groups of numbers split by ';'"):
         build_config("default", None, None, None, {}, ["views.passes=2;x"])
     with pytest.raises(ValueError, match="views.passes"):
         build_config("default", None, None, None, {}, ["views.passes=2;0.5"])  # a tilt < 1
+
+
+def test_set_scales_reads_what_the_scales_option_reads():
+    from scalematch.cli import build_config
+
+    by_set = build_config("default", None, None, None, {}, ["scales=1-8"])
+    assert by_set.scales == build_config("default", None, "1-8", None, {}, []).scales
+    assert by_set.scales == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+
+
+@pytest.mark.parametrize("item,needle", [
+    ("harris=3", "'harris' is a group of parameters: set one of them, harris.NAME=VALUE"),
+    ("ransac=1", "'ransac' is a group"),
+    ("harris.threshold.x=2", "harris.threshold is a value, not a group"),
+])
+def test_set_on_a_group_is_a_usage_error_naming_its_parameters(item, needle):
+    """A group given a value was taken as the value and failed deep in the search (exit 4)."""
+    from scalematch.cli import build_config
+
+    with pytest.raises(ValueError, match=needle):
+        build_config("default", None, None, None, {}, [item])
 
 
 def test_version():
@@ -203,6 +224,8 @@ def _bad_input(tmp_path: Path, case: str):
         return [good, good, "--scales", "8-1"], "scales"
     if case == "bad_set":
         return [good, good, "--set", "harris.nope=3"], "no parameter 'harris.nope'"
+    if case == "bad_set_group":
+        return [good, good, "--set", "harris=3"], "is a group of parameters"
     if case == "bad_set_value":
         return [good, good, "--set", "harris.threshold=abc"], "float"
     if case == "constant":
@@ -213,7 +236,8 @@ def _bad_input(tmp_path: Path, case: str):
 
 @pytest.mark.parametrize("case", ["missing", "directory", "empty", "truncated", "text", "tiny",
                                   "too_many_pixels", "unwritable_out_dir", "unwritable_json",
-                                  "bad_scales", "bad_set", "bad_set_value", "constant"])
+                                  "bad_scales", "bad_set", "bad_set_group", "bad_set_value",
+                                  "constant"])
 def test_bad_input_exits_2_with_one_line_error(tmp_path, case):
     args, needle = _bad_input(tmp_path, case)
     assert_one_line_error(run(*args), needle)
