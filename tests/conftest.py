@@ -1,4 +1,5 @@
-"""Shared fixtures: the photo the repo ships, and ../shared when it is present."""
+"""Shared fixtures: the photo the repo ships, and the shared data folder when it is present
+($SCALEMATCH_SHARED, else ../shared beside the repository)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ import numpy as np
 import pytest
 
 from scalematch.imageio import read_grey
+from scalematch.lab.datasets import find_shared
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
+#: where the commands look too (``find_shared``): $SCALEMATCH_SHARED, else ../shared
+SHARED = find_shared() or ROOT.parent / "shared"
 
 
 @pytest.fixture(scope="session")
@@ -21,7 +24,7 @@ def raccoon() -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
-    """../shared, or skip the test when it is absent."""
+    """The shared data folder, or skip the test when it is absent."""
     if not (SHARED / "data" / "photos").is_dir():
-        pytest.skip("../shared is absent")
+        pytest.skip(f"the shared data is absent ({SHARED}; set SCALEMATCH_SHARED)")
     return SHARED

@@ -27,9 +27,11 @@ from typing import List, NamedTuple
 
 import pytest
 
+from scalematch.lab.datasets import find_shared
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ("README.md", "docs/GUIDE.md")
-SHARED = ROOT.parent / "shared"
+SHARED = find_shared() or ROOT.parent / "shared"  # $SCALEMATCH_SHARED, else ../shared
 SHELLS = {"bash", "sh", "shell", "console"}
 MARKS = {"skip", "shared", "dask"}
 #: What a block reaches for in the repository root.
@@ -108,7 +110,7 @@ def test_code_block_runs(block: Block, tmp_path):
     if "skip" in block.marks:
         pytest.skip("marked as not runnable here")
     if "shared" in block.marks and not (SHARED / "data" / "photos").is_dir():
-        pytest.skip("../shared is absent")
+        pytest.skip(f"the shared data is absent ({SHARED}; set SCALEMATCH_SHARED)")
     if "dask" in block.marks and importlib.util.find_spec("distributed") is None:
         pytest.skip("distributed is not installed")
     cwd = _workdir(tmp_path)
