@@ -20,9 +20,11 @@ import numpy as np
 
 #: Default canvas (width, height), px: readable on a screen and in a Markdown page.
 DEFAULT_SIZE = (900, 600)
-#: Bar colours, BGR: ordinary bars and the highlighted (winning) bar.
+#: Bar colours, BGR: ordinary bars, the highlighted (winning) bar, and muted bars (counted,
+#: but not candidates: e.g. a fit whose ratio contradicts its scale)
 BAR_COLOUR = (200, 170, 130)
 HIGHLIGHT_COLOUR = (40, 39, 214)
+MUTED_COLOUR = (218, 218, 218)
 BLACK = (0, 0, 0)
 GRID = (225, 225, 225)
 TEXT = (40, 40, 40)
@@ -250,7 +252,7 @@ class Titles:
 def bar_chart(labels: Sequence[object], values: Sequence[float],
               path: Optional[PathLike] = None, titles: Titles = Titles(),
               highlight: Optional[int] = None, size: Tuple[int, int] = DEFAULT_SIZE,
-              annotate: bool = True) -> np.ndarray:
+              annotate: bool = True, muted: Sequence[int] = ()) -> np.ndarray:
     """A bar chart over categories (e.g. inliers against scale), one bar optionally highlighted.
 
     Parameters
@@ -270,6 +272,8 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
         Canvas (width, height), px.
     annotate : bool
         Write each bar's value above it.
+    muted : sequence of int
+        Indices of the bars drawn in a light grey (shown, but not in the running).
 
     Returns
     -------
@@ -293,7 +297,7 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
     _axes(img, fr, layout, _bar_xticks(labs, slot, f, highlight), vertical_grid=False)
     if not fin.size:
         _no_data(img, fr, f)
-    _draw_bars(img, fr, vals, highlight)
+    _draw_bars(img, fr, vals, highlight, frozenset(muted))
     # values are drawn after all bars so a tall neighbour never covers them
     if annotate and (_text_size("0000", 0.45 * f)[0] <= slot or n <= 20):
         _draw_values(img, fr, vals, highlight, f)
@@ -323,16 +327,18 @@ def _bar_xticks(labs: Sequence[str], slot: float, f: float, highlight: Optional[
     return Ticks(tuple(float(i) for i in shown), tuple(labs[i] for i in shown))
 
 
-def _draw_bars(img: np.ndarray, fr: Frame, vals: np.ndarray, highlight: Optional[int]) -> None:
+def _draw_bars(img: np.ndarray, fr: Frame, vals: np.ndarray, highlight: Optional[int],
+               muted: frozenset = frozenset()) -> None:
     """Bar i of height ``vals[i]`` centred on data x = i (none where the value is not finite),
-    bar ``highlight`` in the highlight colour."""
+    bar ``highlight`` in the highlight colour, the bars ``muted`` in light grey."""
     half = 0.38  # half a bar's width, data units (a slot is 1)
     base_v = fr.px(0.0, 0.0)[1]
     for i, v in enumerate(vals):
         if not math.isfinite(v):
             continue
         (ua, vv), (ub, _) = fr.px(np.array([i - half, i + half]), np.array([v, v]))
-        colour = HIGHLIGHT_COLOUR if i == highlight else BAR_COLOUR
+        colour = HIGHLIGHT_COLOUR if i == highlight else MUTED_COLOUR if i in muted \
+            else BAR_COLOUR
         y_a, y_b = sorted((int(round(vv)), int(round(base_v))))
         cv2.rectangle(img, (int(round(ua)), y_a), (int(round(ub)), max(y_b, y_a + 1)), colour, -1,
                       cv2.LINE_AA)

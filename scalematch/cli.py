@@ -301,9 +301,13 @@ def scale_table(result: MatchResult) -> str:
     """The per-scale table (the paper's Table 1) as text."""
     head = f"{'s':>7} {'points':>7} {'initial':>7} {'kept':>6} {'inliers':>7} {'outl%':>6} " \
            f"{'ratio':>7} {'rot':>7}"
+    from .render import disagreeing_rows
+
     lines = [head]
-    for r in result.scales:
-        flag = "  skipped" if r.skipped else ("  <- best" if r.s == result.best_scale else "")
+    off = set(disagreeing_rows(result))
+    for k, r in enumerate(result.scales):
+        flag = "  skipped" if r.skipped else ("  <- best" if r.s == result.best_scale else
+                                              "  ratio far from s" if k in off else "")
         ratio = f"{r.ratio:7.3f}" if np.isfinite(r.ratio) and abs(r.ratio) < 1e3 else f"{'-':>7}"
         rot = f"{r.rotation_deg:7.1f}" if np.isfinite(r.rotation_deg) else f"{'-':>7}"
         lines.append(f"{r.s:7.3g} {r.points:7d} {r.initial:7d} {r.kept:6d} {r.inliers:7d} "

@@ -26,6 +26,7 @@ from .chart import Titles, bar_chart
 from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
+from .stages.decision import disagrees
 from .stages.estimator import model_of
 from .stages.nodata import valid_mask
 from .working import in_decoded
@@ -512,7 +513,9 @@ def scale_labels(rows: Sequence[ScaleRow]) -> list:
 def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.ndarray:
     """Bar chart of inliers against scale s, the winning scale highlighted.
 
-    Scales the probe skipped as hopeless have no bar and an asterisk on their label.
+    Scales the probe skipped as hopeless have no bar and an asterisk on their label; a scale
+    whose fit's ratio contradicts it (:func:`disagreeing_rows`) has a light grey bar, as the
+    decision does not count it, however many inliers it has.
     """
     rows = list(result.scales)
     labels = scale_labels(rows)
@@ -526,10 +529,27 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
     else:
         title = "inliers per scale: no reliable match"
     xlabel = "scale s of the high-resolution image"
+    notes = []
     if any(r.skipped for r in rows):
-        xlabel += "   (* skipped: hopeless from its initial matches)"
+        notes.append("* skipped: hopeless from its initial matches")
+    muted = [i for i in disagreeing_rows(result) if i != best]
+    if muted:
+        notes.append("grey: fit's ratio far from s, not counted")
+    if notes:
+        xlabel += "   (" + "; ".join(notes) + ")"
     return bar_chart(labels, values, titles=Titles(title, xlabel, "inliers"), highlight=best,
-                     size=size)
+                     size=size, muted=muted)
+
+
+def disagreeing_rows(result: MatchResult) -> list:
+    """Indices of the per-scale rows whose fit's ratio contradicts their scale (beyond the
+    decision's ``scale_agreement``): the decision does not count them (a fit that collapses
+    many finer points onto a few coarser ones can have many inliers). None for a model
+    without a ratio, or without the configuration."""
+    if result.config is None or not model_of(result.model).has_ratio:
+        return []
+    return [i for i, r in enumerate(result.scales)
+            if not r.skipped and disagrees(r, result.config.decision)]
 
 
 # --------------------------------------------------------------------------- files

@@ -11,7 +11,9 @@ import pytest
 from scalematch.config import Config
 from scalematch.geometry import apply, compose, footprint, similarity_parts
 from scalematch.lab.synthetic import zoom_warp
-from scalematch.render import OUTLINE, matches_image, overlay, scale_plot, verdict, write_outputs
+from scalematch.chart import MUTED_COLOUR
+from scalematch.render import (OUTLINE, disagreeing_rows, matches_image, overlay, scale_plot,
+                               verdict, write_outputs)
 from scalematch.result import MatchResult, ScaleRow
 
 RATIO, ANGLE = 3.0, 25.0
@@ -150,6 +152,37 @@ def test_matches_image_and_scale_plot(pair):
     # the winner (s = 3, index 2) is drawn in the highlight colour: some red pixels exist
     assert np.any(np.all(plot == (40, 39, 214), axis=2))
     assert scale_plot(make_result(None, matched=False)).ndim == 3
+
+
+def collapsed_fit_result(model="similarity") -> MatchResult:
+    """A match at s = 2.52 (ratio 4.01) beside a fit at s = 1.59 that collapses many finer
+    points onto a few coarser ones (ratio 406, 79 inliers: measured on a 185 px low image)."""
+    rows = (ScaleRow(1.587, 406.6, 6000, 1559, 356, 79, 94.9, 104.6),
+            ScaleRow(2.52, 4.01, 3198, 862, 181, 19, 97.8, -29.9),
+            ScaleRow(4.0, 4.6, 1412, 90, 20, 4, 95.6, -30.0),
+            ScaleRow(8.0, 2.9e20, 346, 102, 24, 5, 95.1, 150.5))
+    return MatchResult(matched=True, model=model, best_scale=2.52, resolution_ratio=4.01,
+                       scales=rows, config=Config())
+
+
+def test_a_fit_whose_ratio_contradicts_its_scale_is_shown_as_not_counted():
+    res = collapsed_fit_result()
+    assert disagreeing_rows(res) == [0, 3]  # 4.6 at s = 4 is within the 1.6x agreement
+    plot = scale_plot(res)
+    grey = np.all(plot == MUTED_COLOUR, axis=2)
+    assert grey.any() and not np.all(plot == (40, 39, 214), axis=2)[grey].any()
+    # the tall grey bar is the first slot's (left quarter), the red one the second's
+    cols = np.nonzero(grey.any(axis=0))[0]
+    assert cols.min() < plot.shape[1] // 4
+    assert disagreeing_rows(collapsed_fit_result("fundamental")) == []  # no ratio to compare
+
+
+def test_the_verbose_table_says_which_rows_are_not_counted():
+    from scalematch.cli import scale_table
+
+    lines = scale_table(collapsed_fit_result()).splitlines()[1:]
+    assert lines[0].endswith("ratio far from s") and lines[3].endswith("ratio far from s")
+    assert lines[1].endswith("<- best") and "far" not in lines[2]
 
 
 def test_write_outputs(tmp_path, pair):

@@ -465,8 +465,23 @@ class Winner:
 
 def _closeness(o) -> float:
     """How far an outcome's implied ratio is from its scale, |log(ratio / s)| (inf: no ratio)."""
-    r = o.row.ratio
-    return abs(math.log(r / o.row.s)) if r > 0 and math.isfinite(r) else math.inf
+    return ratio_distance(o.row.ratio, o.row.s)
+
+
+def ratio_distance(ratio: float, s: float) -> float:
+    """|log(ratio / s)|: how far a fit's ratio is from the scale it was found at (inf: none).
+
+    >>> round(ratio_distance(4.0, 2.0), 3), ratio_distance(float("nan"), 2.0)
+    (0.693, inf)
+    """
+    return abs(math.log(ratio / s)) if ratio > 0 and math.isfinite(ratio) else math.inf
+
+
+def disagrees(row, params: "DecisionParams") -> bool:
+    """True when a per-scale row's fit has a ratio that contradicts its scale (beyond
+    ``params.scale_agreement``): not that scale's answer, whatever its inliers (a fit that
+    collapses many finer points onto a few coarser ones counts many). False without a fit."""
+    return row.inliers > 0 and ratio_distance(row.ratio, row.s) > math.log(params.scale_agreement)
 
 
 def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
