@@ -172,6 +172,12 @@ class DecisionParams:
     parallax_share: float = 0.25
     #: distance to the epipolar line within which a candidate fits it, px
     parallax_threshold_px: float = 1.5
+    #: ... among the candidates the winner's map sends at most this share of the candidates'
+    #: extent (its diagonal, coarser px) from their match: the eight 3-D pairs of
+    #: ../shared/data/ef moved 90 % of their off-plane points under 0.17 of it, while false
+    #: matches sliding along a flat scene's edges lined up at offsets of 0.2 to 1.1
+    #: (``stages.rivals.off_plane``)
+    parallax_max_offset: float = 0.25
     #: a fundamental matrix is claimed only where a plane map of the same pair passes this
     #: decision with at least this share of its inliers on the matrix's epipolar lines
     #: (:func:`on_lines`; ``pipeline.anchored``). An epipolar geometry has room for what a
@@ -212,6 +218,8 @@ class DecisionParams:
         in_range("decision", "parallax_min_points", self.parallax_min_points, Bounds(lo=0),
                  integer=True)
         in_range("decision", "parallax_share", self.parallax_share, Bounds(lo=0))
+        in_range("decision", "parallax_max_offset", self.parallax_max_offset, Bounds(lo=0),
+                 allow_inf=True)
         in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
                  Bounds(lo=0, lo_open=True))
         in_range("decision", "min_plane_on_lines", self.min_plane_on_lines, Bounds(lo=0, hi=1))
@@ -668,7 +676,8 @@ def _rival_test(w: Winner, finer_shape, evidence: Evidence, params: DecisionPara
     rival = second_transform(best.src, best.dst, inl, est.transform, finer_shape,
                              fit.ransac, fit.seed)
     rival_nfa = w.nfa_of(rival.inliers)
-    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, fit.seed)
+    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, fit.seed,
+                         est.transform, params.parallax_max_offset)
     evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
                        second_gap_px=rival.gap_px, parallax_points=parallax,
                        parallax=parallax >= max(params.parallax_min_points,

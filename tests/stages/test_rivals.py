@@ -3,6 +3,7 @@ transform, a 3-D scene's parallax."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from scalematch.geometry import apply, similarity_matrix
@@ -62,3 +63,20 @@ def test_matches_off_the_plane_that_an_epipolar_geometry_explains_show_parallax(
     flat_dst[40:] = rng.uniform(0, 640, (60, 2))
     assert off_plane(src, flat_dst, on_plane, 1.5) <= 10
     assert off_plane(src[:10], dst[:10], on_plane[:10], 1.5) == 0  # too few to tell
+
+
+def test_false_matches_sliding_one_way_on_a_flat_scene_are_not_parallax():
+    """Matches that slide along a flat scene's edges share one direction, so a translation's
+    epipolar geometry lines them all up; offset by more than a quarter of the candidates'
+    extent, they are not counted as parallax. A 3-D scene's points off the plane still are."""
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 640, (120, 2))
+    t = similarity_matrix(0.25, 20.0, 10.0, 10.0)  # finer -> a 220 px square of the coarser
+    dst = apply(t, src)
+    on_plane = np.arange(120) < 80
+    dst[80:] += np.column_stack([rng.uniform(130.0, 200.0, 40), np.zeros(40)])  # slid along x
+    assert off_plane(src, dst, on_plane, 1.5) >= 30  # an epipolar geometry explains them
+    assert off_plane(src, dst, on_plane, 1.5, plane=t, max_offset=0.25) <= 2
+    src3, dst3, on3 = _two_views(40, 60)
+    plane3, _ = cv2.findHomography(src3[on3], dst3[on3])
+    assert off_plane(src3, dst3, on3, 1.5, plane=plane3, max_offset=0.25) >= 50
