@@ -320,6 +320,15 @@ def test_the_progress_bar_counts_the_plan_from_start_to_end():
     assert done == sorted(done) and done[-1] == shown[-1][1]
 
 
+def test_the_progress_bar_shows_no_time_left():
+    """Its units differ several times in cost, so a rate-based time left misleads."""
+    from scalematch.cli import PlanBar
+
+    with PlanBar(_Terminal()) as bar:
+        bar(1, 100)
+        assert bar.bar is not None and bar.bar.show_eta is False
+
+
 # --------------------------------------------------------------------------- no match: exit 1
 
 @needs_pipeline
