@@ -162,7 +162,10 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = [(n, _trimmed(r)) for n, r in enumerate(csv.reader(fh), 1)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+    except UnicodeDecodeError:
+        raise BatchError(f"{path} is not a text file (an image?); give a CSV with columns "
+                         f"low,high, one pair of image paths a line") from None
+    except (OSError, csv.Error) as exc:
         raise BatchError(f"cannot read {path}: {exc}; give a CSV with columns low,high")
     rows = [(n, r) for n, r in rows if r]
     columns = _header(rows[0][1], path) if rows else None

@@ -19,6 +19,10 @@ ValueError: matcher.ratio must be in (0, 1], got 5.0
 Traceback (most recent call last):
 ...
 ValueError: ransac.max_iters must be an integer >= 1, got 2.5
+>>> in_range("harris", "threshold", float("inf"), Bounds(lo=0))
+Traceback (most recent call last):
+...
+ValueError: harris.threshold must be finite and >= 0, got inf
 """
 
 from __future__ import annotations
@@ -84,6 +88,9 @@ def in_range(owner: str, name: str, value: Any, bounds: Bounds = Bounds(), *,
         kind = "an integer" if integer else "a number"
         must = rule if rule == "a finite number" and not integer else (
             kind if rule == "a finite number" else (f"{kind} {rule}" if integer else rule))
+        if number and not integer and math.isinf(float(value)) and not allow_inf \
+                and rule != "a finite number":
+            must = f"finite and {must}"  # ">= 0, got inf" read as a contradiction
         raise ValueError(f"{_path(owner, name)} must be {must}, got {value!r}")
 
 

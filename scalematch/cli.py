@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import difflib
 import importlib
 import importlib.machinery
 import importlib.util
@@ -476,6 +477,10 @@ class ScalematchGroup(click.Group):
             ctx.exit(EXIT_BAD_INPUT)
         own = {"--help", "-h", "--version"}
         if args and args[0] not in self._known() and args[0] not in own:
+            near = mistyped_command(args[0], self._known())
+            if near:
+                raise click.UsageError(f"no command or file {args[0]!r}; did you mean "
+                                       f"'{near}'?", ctx)
             args = [self.default_command] + list(args)
         return super().parse_args(ctx, args)
 
@@ -514,6 +519,19 @@ def closed_pipe_ends_quietly() -> Iterator[None]:
         yield
     except BrokenPipeError:
         sys.exit(EXIT_BROKEN_PIPE)
+
+
+def mistyped_command(word: str, commands: Sequence[str]) -> Optional[str]:
+    """The command ``word`` looks like a typo of, when it is no file and no path either
+    (``scalematch mtch a b`` would otherwise say "File 'mtch' does not exist").
+
+    >>> mistyped_command("mtch", ["match", "batch", "lab"]), mistyped_command("low.png", ["match"])
+    ('match', None)
+    """
+    if word.startswith("-") or os.path.exists(word) or any(c in word for c in "./\\"):
+        return None
+    near = difflib.get_close_matches(word, sorted(commands), n=1, cutoff=0.6)
+    return near[0] if near else None
 
 
 def _module_exists(name: str) -> bool:
@@ -960,14 +978,17 @@ def _batch_plan(pairs_csv: Path, output: Optional[Path], retry_errors: bool,
 def _batch_notes(plan: Plan, pairs_csv: Path, output: Optional[Path]) -> List[str]:
     """What the run says on stderr before it starts: repeated rows, pairs skipped, retried."""
     notes = []
+    if not plan.pairs:
+        notes.append(f"{pairs_csv} lists no pairs")
     if plan.repeated_rows:
         notes.append(f"rows repeated in {pairs_csv}: {plan.repeated_rows} (each pair is "
                      f"matched once)")
     if plan.skipped:
         notes.append(f"resuming: {plan.skipped} of {len(plan.pairs)} pairs already in {output}")
     if plan.retried:
-        notes.append(f"retrying {len(plan.retried)} pairs whose line was an error (removed from "
-                     f"{output})")
+        n = len(plan.retried)
+        notes.append(f"retrying {n} pair{'' if n == 1 else 's'} whose line was an error (removed "
+                     f"from {output})")
     return notes
 
 

@@ -235,10 +235,20 @@ def _orient(img: np.ndarray, orientation: int) -> np.ndarray:
     return img
 
 
+def _megapixels(n: float) -> str:
+    """``n`` pixels in MP, with as many digits as a small count needs.
+
+    >>> _megapixels(24e6), _megapixels(31635), _megapixels(1000)
+    ('24.0 MP', '0.032 MP', '0.001 MP')
+    """
+    mp = n / 1e6
+    return f"{mp:.1f} MP" if mp >= 1 else f"{mp:.2g} MP" if mp >= 0.01 else f"{mp:.1g} MP"
+
+
 def _too_many(p: Path, w: int, h: int, max_pixels: int) -> ImageError:
     return ImageError(
-        f"{p}: image is {w}x{h} = {w * h / 1e6:.1f} MP, above the limit of "
-        f"{max_pixels / 1e6:g} MP; shrink it, or raise the limit with --max-pixels "
+        f"{p}: image is {w}x{h} = {_megapixels(w * h)}, above the limit of "
+        f"{_megapixels(max_pixels)} ({max_pixels} px); shrink it, or raise the limit with --max-pixels "
         f"(max_pixels= in Python) if you have the memory")
 
 

@@ -506,7 +506,7 @@ def test_retry_errors_matches_again_a_pair_whose_image_is_fixed(images, tmp_path
     new = json.loads(after[3])
     assert len(after) == 4 and new["high"]["path"] == str(later) and new["matched"] is True
     assert abs(new["resolution_ratio"] - RATIO) < 0.05
-    assert "resuming: 2 of 3" in result.stderr and "retrying 1 pairs" in result.stderr
+    assert "resuming: 2 of 3" in result.stderr and "retrying 1 pair whose" in result.stderr
     assert "1 pair: 1 matched, 0 no reliable match, 0 errors (2 done before, 0 of them errors)" \
         in result.stderr
     assert stat.S_IMODE(out.stat().st_mode) == 0o640
@@ -533,6 +533,15 @@ def test_a_bad_set_stops_the_batch_before_any_pair_runs(images):
     result = run("batch", pairs, "--set", "ransac=1")
     assert_one_line_error(result, "'ransac' is a group of parameters")
     assert result.stdout == ""  # no line for any pair
+
+
+def test_an_image_given_as_the_csv_is_named_not_a_text_file(images):
+    assert_one_line_error(run("batch", images / "low.png"), "is not a text file (an image?)")
+
+
+def test_an_empty_csv_says_it_lists_no_pairs(images):
+    result = run("batch", write(images / "empty.csv", ""))
+    assert result.exit_code == 0 and "empty.csv lists no pairs" in result.stderr
 
 
 def test_retry_errors_needs_an_output_file(images):

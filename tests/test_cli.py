@@ -249,6 +249,11 @@ def test_over_the_limit_message_names_size_and_limit(tmp_path):
     assert "480x360" in last and "limit" in last
 
 
+def test_a_mistyped_command_is_named_as_such(tmp_path):
+    last = assert_one_line_error(run("mtch", str(tmp_path / "a.png"), "b.png"), "'mtch'")
+    assert "did you mean 'match'?" in last
+
+
 def test_unknown_option_is_a_usage_error(flat_pair):
     last = assert_one_line_error(run(*flat_pair, "--no-such-option"), "No such option")
     assert "--help" in last  # where to look, in place of click's usage block
