@@ -16,6 +16,7 @@ runs through (-0.5, -0.5) .. (W - 0.5, H - 0.5); that is the footprint outline d
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 from typing import Dict, Sequence, Tuple, Union
 
@@ -29,6 +30,7 @@ from .result import MatchResult, ScaleRow
 from .stages.decision import disagrees
 from .stages.estimator import model_of
 from .stages.nodata import valid_mask
+from .stages.scalespace import CAMERA_BLUR_PX
 from .working import in_decoded
 
 PathLike = Union[str, Path]
@@ -63,6 +65,10 @@ NEAR_ONE_RATIO = 1.05
 #: above and below the picture instead: on a 296x222 low image (an oblique pair's coarser crop)
 #: the strips covered 70 % of it, on the 1024x768 benchmark images they cover 39 %
 MAX_CAPTION_SHARE = 0.5
+#: A coarser image whose longer side is under this is drawn enlarged by a whole factor in the
+#: overlay (the finer image warped onto the enlarged grid, so its detail shows): at its own
+#: 185 x 171 px, the verdict wrapped into six lines of minimal text over a thumbnail
+MIN_OVERLAY_SIDE_PX = 600
 #: The files ``write_outputs`` writes into its folder.
 OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
@@ -238,7 +244,7 @@ def match_grey_levels(image: np.ndarray, reference: np.ndarray, mask: np.ndarray
 
 
 def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
-            footer: Sequence[str] = ()) -> np.ndarray:
+            footer: Sequence[str] = (), enlarged_by: int = 1) -> np.ndarray:
     """The high image warped onto the low one, false-colour blended, footprint outlined.
 
     Parameters
@@ -254,6 +260,10 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     footer : sequence of str
         Lines of a caption at the bottom (``write_outputs``: the files' names). The outline is
         drawn over both captions, so the strips never hide it.
+    enlarged_by : int
+        ``low`` is its image enlarged this many times (:func:`enlarged`): the warped high image
+        is blurred as much as the enlargement blurs the low one's pixels, so that where they
+        agree they read grey (sharper, it fringes every edge in colour).
 
     Returns
     -------
@@ -267,7 +277,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     lines = [verdict(result), evidence_line(result)]
     outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
     if result.matched and t is not None and model_of(result.model).has_ratio:
-        out, outline, legend = _blended(low_grey, high, t)
+        out, outline, legend = _blended(low_grey, high, t, enlarged_by)
         lines.append(legend)
     elif not result.matched and rejected_footprint(result, high.shape) is not None:
         lines.append(_draw_rejected(out, result, high.shape))
@@ -281,13 +291,15 @@ def _outline_thickness(hh: int, ww: int) -> int:
     return max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
 
 
-def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray):
+def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray, enlarged_by: int = 1):
     """(picture, outline, legend): the high image warped by ``t`` onto ``low_grey`` in false
     colour, the low image dimmed outside the footprint; the footprint's outline to draw over
     the caption (None: no footprint), and the caption line that explains the colours."""
     hh, ww = low_grey.shape[:2]
     high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
     warped, mask, scene = _warp_high(high_grey, t, (ww, hh))
+    if enlarged_by > 1:  # the low image's camera blur, in the enlarged grid's px
+        warped = cv2.GaussianBlur(warped, (0, 0), CAMERA_BLUR_PX * enlarged_by)
     inside = mask > 0
     # grey where they agree: the levels matched where both show the scene (a canvas's black
     # corners would pull the gain and offset, and the whole overlay would read as one colour)
@@ -412,14 +424,36 @@ def size_label(width: int, height: int, factor: float) -> str:
 
 
 def drawn_note(factor: float) -> str:
-    """The overlay footer's note when the low image is drawn smaller than its file: the overlay
-    has the size of the low image as decoded (the high one is warped onto it at that size, so
-    how it was decoded does not show).
+    """The overlay footer's note when the low image is drawn at another size than its file's
+    (``factor``: file px per drawn px): the overlay has the size of the low image as drawn (the
+    high one is warped onto it at that size, so how it was decoded does not show).
 
-    >>> drawn_note(2.0), drawn_note(1.0)
-    ('   low drawn at 1/2 of its file size', '')
+    >>> drawn_note(2.0), drawn_note(1.0), drawn_note(0.25)
+    ('   low drawn at 1/2 of its file size', '', '   low drawn 4x enlarged')
     """
-    return f"   low drawn at 1/{factor:g} of its file size" if factor != 1.0 else ""
+    if factor == 1.0:
+        return ""
+    if factor < 1.0:
+        return f"   low drawn {1.0 / factor:g}x enlarged"
+    return f"   low drawn at 1/{factor:g} of its file size"
+
+
+def overlay_zoom(shape) -> int:
+    """The whole factor the overlay enlarges a coarser image of ``shape`` by: the least that
+    brings its longer side to ``MIN_OVERLAY_SIDE_PX`` (1 when it is there already).
+
+    >>> overlay_zoom((171, 185)), overlay_zoom((377, 419)), overlay_zoom((768, 1024))
+    (4, 2, 1)
+    """
+    side = max(int(shape[0]), int(shape[1]), 1)
+    return max(1, int(math.ceil(MIN_OVERLAY_SIDE_PX / side)))
+
+
+def enlarged(image: np.ndarray, zoom: int) -> np.ndarray:
+    """``image`` enlarged ``zoom`` times, centre-aligned as ``cv2.resize`` (the grid
+    :func:`scalematch.working.in_decoded` maps to with a factor of 1 / ``zoom``)."""
+    h, w = image.shape[:2]
+    return cv2.resize(image, (w * zoom, h * zoom), interpolation=cv2.INTER_CUBIC)
 
 
 def rejected_footprint(result: MatchResult, high_shape) -> "np.ndarray | None":
@@ -605,15 +639,20 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     # the pictures show the finer image on the coarser one: a "no", its refused candidate's
     order = result.rejected.order if not result.matched and result.rejected is not None \
         else result.order
-    if order == "swapped":
+    swapped = order == "swapped"
+    if swapped:
         low_path, high_path, low, high = high_path, low_path, high, low
         f_low, f_high = f_high, f_low
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {name: out / name for name in OUTPUT_FILES}
     low_name, high_name = told_apart(low_path, high_path)
-    ov = overlay(low, high, drawn,
-                 footer=[f"low: {low_name}   high: {high_name}{drawn_note(f_low)}"])
+    zoom = overlay_zoom(low.shape)
+    big = drawn if zoom == 1 else in_decoded(
+        result, *((factors[0], factors[1] / zoom) if swapped else (factors[0] / zoom, factors[1])))
+    ov = overlay(low if zoom == 1 else enlarged(low, zoom), high, big,
+                 footer=[f"low: {low_name}   high: {high_name}{drawn_note(f_low / zoom)}"],
+                 enlarged_by=zoom)
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, drawn, factors=(f_low, f_high)))
     _write_png(paths["scales.png"], scale_plot(result))

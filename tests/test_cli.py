@@ -352,9 +352,9 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     assert data["config"]["model"] == "similarity"
     for name in ("overlay.png", "scales.png", "matches.csv"):
         assert (out / name).is_file(), name
-    # the low image's width; on a picture this small the captions are bands above and below it
+    # the low image enlarged 4 times (under 600 px: render.MIN_OVERLAY_SIDE_PX)
     overlay_shape = cv2.imread(str(out / "overlay.png")).shape
-    assert overlay_shape[1:] == (160, 3) and overlay_shape[0] > 120
+    assert overlay_shape[1:] == (640, 3) and overlay_shape[0] >= 480
 
 
 # --------------------------------------------------------------------------- the demo: exit 0
@@ -390,8 +390,8 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     with open(out / "matches.csv") as fh:
         rows = list(csv.reader(fh))
     assert rows[0] == ["x_high", "y_high", "x_low", "y_low"] and len(rows) == data["inliers"] + 1
-    low = cv2.imread(str(DEMO_LOW))
-    assert cv2.imread(str(out / "overlay.png")).shape == low.shape
+    low = cv2.imread(str(DEMO_LOW))  # 419 px wide: drawn twice as large
+    assert cv2.imread(str(out / "overlay.png")).shape == (2 * low.shape[0], 2 * low.shape[1], 3)
     assert (out / "matches.png").is_file() and (out / "scales.png").is_file()
 
 
@@ -537,10 +537,9 @@ def test_a_jpeg_above_twice_the_working_size_is_decoded_reduced(tmp_path):
     gap = np.linalg.norm(cv2.transform(corners, np.array(a["transform"]))
                          - cv2.transform(corners, np.array(b["transform"])), axis=2)
     assert gap.max() < 1.0
-    # ceil(419 / 2) wide; 189 = ceil(377 / 2) px of picture, and the caption bands (so small
-    # a picture keeps its captions outside it)
+    # decoded ceil(419 / 2) = 210 px wide, then drawn 3 times as large (under 600 px)
     overlay_shape = cv2.imread(str(out / "overlay.png")).shape
-    assert overlay_shape[1] == 210 and overlay_shape[0] > 189
+    assert overlay_shape[1] == 630 and overlay_shape[0] >= 3 * 189
     rows = list(csv.reader(open(out / "matches.csv")))[1:]  # in the file's pixels
     pts = np.array(rows, float)
     fit = cv2.transform(pts[None, :, :2], np.array(a["transform"]))[0]
