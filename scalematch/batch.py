@@ -44,7 +44,7 @@ from .config import Config
 from .errors import internal_error
 from .imageio import to_grey
 from .pipeline import match, warm_up_blas
-from .result import dumps, to_jsonable
+from .result import dumps, error_record, to_jsonable
 from .working import read_pair
 
 #: Header names of the two path columns; a column named exactly so wins, else the one column
@@ -445,9 +445,7 @@ def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
                kind: str = INPUT) -> Dict[str, Any]:
     """The line of a pair that could not be matched (docs/GUIDE.md, "JSON"); ``kind`` is
     ``INPUT`` or ``INTERNAL`` (whose message then starts "internal error")."""
-    return {"low": {"path": pair.low}, "high": {"path": pair.high}, "matched": False,
-            "error": error, "error_kind": kind, "seconds": round(seconds, 3),
-            "config": to_jsonable(config), "version": __version__}
+    return error_record(pair.low, pair.high, error, kind, config, seconds)
 
 
 def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:

@@ -717,13 +717,14 @@ def _run_match(low: np.ndarray, high: np.ndarray, config: Config,
 # --------------------------------------------------------------------------- match
 
 @cli.command("match", context_settings=CONTEXT)
-@click.argument("low", type=click.Path(exists=True, dir_okay=False))
-@click.argument("high", type=click.Path(exists=True, dir_okay=False))
+@click.argument("low", type=click.Path())
+@click.argument("high", type=click.Path())
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Write overlay.png, matches.png, scales.png and matches.csv here.")
 @click.option("--json", "json_path", metavar="PATH",
               help="Write the result as JSON here ('-' for stdout; a missing folder is created, "
-                   "as for --out-dir); written whether or not a match was found.")
+                   "as for --out-dir); written whether or not a match was found, and for an "
+                   "image that cannot be read or matched (exit 2) with its \"error\".")
 @matching_options
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar on stderr.")
 @click.option("-v", "--verbose", is_flag=True,
@@ -755,11 +756,19 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     # the outputs are checked before the match, not after a minute's work, and before the
     # inputs are read: an output never overwrites an input
     _check_not_inputs(out_dir, json_file, (low, high))
-    low_read, high_read = _load(low, high, config, max_pixels)
+    try:
+        low_read, high_read = _load(low, high, config, max_pixels)
+    except InputError as exc:
+        _json_of_error(json_path, json_file, low, high, exc, config)
+        raise
     factors = (float(low_read.factor), float(high_read.factor))
     _check_writable(out_dir, json_file)
-    result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config, factors,
-                           quiet)
+    try:
+        result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config,
+                               factors, quiet)
+    except InputError as exc:  # an image the pipeline refuses (constant, too small)
+        _json_of_error(json_path, json_file, low, high, exc, config)
+        raise
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
         _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
     written: Dict[str, Path] = {}
@@ -771,6 +780,24 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
         for text in _match_report(result, written, json_written, verbose):
             click.echo(text, err=True)
     sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
+
+
+def _json_of_error(json_path: Optional[str], json_file: Optional[Path], low: str, high: str,
+                   exc: Exception, config: Config) -> None:
+    """With ``--json``, an input error's record (``result.error_record``, as a batch writes
+    it), so that a script reading the JSON learns why rather than finding nothing; nothing
+    more when the JSON cannot be written either."""
+    if not json_path:
+        return
+    from .result import dumps, error_record
+
+    text = dumps(error_record(low, high, exc.format_message(), "input", config), 2) + "\n"
+    try:
+        if json_file is not None:
+            check_out_file(json_file, "--json")
+        _write_json(text, json_file)
+    except click.ClickException:
+        pass
 
 
 def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],

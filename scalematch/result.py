@@ -295,6 +295,18 @@ class MatchResult:
         return dumps(self.to_dict(low_path, high_path, low_shape, high_shape), indent) + "\n"
 
 
+def error_record(low_path: str, high_path: str, error: str, kind: str, config: Any,
+                 seconds: float = 0.0) -> Dict[str, Any]:
+    """The JSON of a pair that could not be matched (docs/GUIDE.md, "JSON"), as a batch line
+    and ``scalematch LOW HIGH --json`` write it: ``kind`` "input" (the pair's files or values)
+    or "internal" (an unexpected error, whose message then starts "internal error")."""
+    from . import __version__
+
+    return {"low": {"path": str(low_path)}, "high": {"path": str(high_path)}, "matched": False,
+            "error": error, "error_kind": kind, "seconds": round(seconds, 3),
+            "config": to_jsonable(config), "version": __version__}
+
+
 def to_jsonable(obj: Any) -> Any:
     """Dataclasses, numpy arrays and scalars -> plain JSON types (nan -> None)."""
     if is_dataclass(obj) and not isinstance(obj, type):

@@ -194,7 +194,7 @@ def _bad_input(tmp_path: Path, case: str):
     cv2.imwrite(str(good), img)
     bad = tmp_path / "bad.png"
     if case == "missing":
-        return [tmp_path / "nope.png", good], "does not exist"
+        return [tmp_path / "nope.png", good], "no such file"
     if case == "directory":
         return [tmp_path, good], "directory"
     if case == "empty":
@@ -247,6 +247,17 @@ def test_over_the_limit_message_names_size_and_limit(tmp_path):
     args, _ = _bad_input(tmp_path, "too_many_pixels")
     last = assert_one_line_error(run(*args))
     assert "480x360" in last and "limit" in last
+
+
+@pytest.mark.parametrize("case", ["missing", "text", "constant"])
+def test_json_of_an_input_error_says_why_as_a_batch_line_does(tmp_path, case):
+    """``--json -`` of a pair that cannot be matched: its error, not nothing (exit 2)."""
+    args, needle = _bad_input(tmp_path, case)
+    result = run(*args, "--json", "-", "-q")
+    assert result.exit_code == 2
+    data = json.loads(result.stdout)
+    assert data["matched"] is False and data["error_kind"] == "input"
+    assert needle.lower() in data["error"].lower() and data["low"]["path"] == str(args[0])
 
 
 def test_a_mistyped_command_is_named_as_such(tmp_path):
