@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterable, Iterator,
                     List, Optional, Sequence, Set, Tuple)
 
-from . import __version__
 from .config import Config
 from .errors import internal_error
 from .imageio import to_grey
