@@ -232,8 +232,9 @@ class MatchResult:
     def seconds(self) -> float:
         return float(self.timings.get("total", sum(self.timings.values())))
 
-    def to_dict(self, low_path: str, high_path: str, low_shape: Sequence[int],
-                high_shape: Sequence[int]) -> Dict[str, Any]:
+    def to_dict(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
+                low_shape: Optional[Sequence[int]] = None,
+                high_shape: Optional[Sequence[int]] = None) -> Dict[str, Any]:
         """The documented JSON object of this match (README.md, "Output"; docs/GUIDE.md, "JSON"):
         plain types only.
 
@@ -242,10 +243,11 @@ class MatchResult:
 
         Parameters
         ----------
-        low_path, high_path : str
-            The inputs as the user named them, in the order given (recorded, not read).
-        low_shape, high_shape : (H, W) tuples
-            The images' sizes in px, after EXIF orientation.
+        low_path, high_path : str, optional
+            The inputs as the user named them, in the order given (recorded, not read); None
+            (arrays matched in Python) writes null.
+        low_shape, high_shape : (H, W) tuples, optional
+            The images' sizes in px, after EXIF orientation; None writes null width and height.
 
         >>> r = MatchResult(matched=False, reason="too few inliers", model="similarity",
         ...                 transform=None, resolution_ratio=float("nan"),
@@ -255,6 +257,8 @@ class MatchResult:
         >>> d = r.to_dict("a.png", "b.png", (120, 160), (480, 640))
         >>> d["matched"], d["reason"], d["resolution_ratio"], d["high"]
         (False, 'too few inliers', None, {'path': 'b.png', 'width': 640, 'height': 480})
+        >>> r.to_dict()["low"]  # arrays matched in Python: nothing to record
+        {'path': None, 'width': None, 'height': None}
         """
         from . import __version__
 
@@ -283,16 +287,23 @@ class MatchResult:
             "covariance_used": self.covariance_used or None,
             "rejected": None if self.rejected is None else self.rejected.to_dict(),
             "version": __version__,
-            "low": {"path": str(low_path), "width": int(low_shape[1]), "height": int(low_shape[0])},
-            "high": {"path": str(high_path), "width": int(high_shape[1]),
-                     "height": int(high_shape[0])},
+            "low": _image_record(low_path, low_shape),
+            "high": _image_record(high_path, high_shape),
         }
 
-    def to_json(self, low_path: str, high_path: str, low_shape: Sequence[int],
-                high_shape: Sequence[int], indent: Optional[int] = 2) -> str:
+    def to_json(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
+                low_shape: Optional[Sequence[int]] = None,
+                high_shape: Optional[Sequence[int]] = None, indent: Optional[int] = 2) -> str:
         """The text of ``scalematch LOW HIGH --json FILE``: :meth:`to_dict` as JSON, ending in a
         newline (``indent=None``: one line, as ``batch`` writes)."""
         return dumps(self.to_dict(low_path, high_path, low_shape, high_shape), indent) + "\n"
+
+
+def _image_record(path: Optional[str], shape: Optional[Sequence[int]]) -> Dict[str, Any]:
+    """An image's "low"/"high" object: its path and size, null where not known."""
+    return {"path": None if path is None else str(path),
+            "width": None if shape is None else int(shape[1]),
+            "height": None if shape is None else int(shape[0])}
 
 
 def error_record(low_path: str, high_path: str, error: str, kind: str, config: Any,

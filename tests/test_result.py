@@ -71,3 +71,11 @@ def test_the_library_json_is_the_command_line_file(tmp_path):
     lib = scalematch.match(low_img, high_img).to_dict(low, high, low_img.shape, high_img.shape)
     lib["seconds"], lib["timings"] = from_file["seconds"], from_file["timings"]
     assert dumps(lib, indent=2) + "\n" == file_text
+
+
+def test_to_dict_without_paths_or_sizes_writes_null_there():
+    """Arrays matched in Python have no file to name: the record still comes, null there."""
+    r = MatchResult(matched=False, model="similarity", reason="too few inliers")
+    d = r.to_dict()
+    assert d["low"] == d["high"] == {"path": None, "width": None, "height": None}
+    assert json.loads(r.to_json())["matched"] is False
