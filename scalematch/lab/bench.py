@@ -904,7 +904,7 @@ def bench_command(ctx, shared, out_dir, crop, ratios, photos, seed, methods, unr
     writes success rate, median error, median time (and its ratio to SIFT's), peak memory and
     false matches.
 
-    Example: python -m scalematch.lab.bench --photos 10 --methods sift,orb,akaze,brisk
+    Example: scalematch lab bench --photos 10 --methods sift,orb,akaze,brisk
     """
     log = (lambda s: None) if silent else (lambda s: click.echo(s, err=True))
     try:

@@ -366,7 +366,7 @@ def descriptor_study_command(images, n_photos, seed, out, silent):
     <repo>/../shared). Prints the table; --out writes it with the protocol as markdown (the
     "## Reading" section of an existing --out file is kept: it is written by hand).
 
-    Example: python -m scalematch.lab.descriptor_study --photos 38 --out docs/DESCRIPTORS.md
+    Example: scalematch lab descriptor-study --photos 38 --out docs/DESCRIPTORS.md
     """
     paths, progress = study_photos(images, n_photos, silent)
     params = StudyParams()

@@ -625,7 +625,7 @@ def repeatability_command(images, n_photos, factors, seed, angle, crop, out_dir,
     repeatability.csv, repeatability_pairs.csv, repeatability.json and repeatability.png
     to --out-dir.
 
-    Example: python -m scalematch.lab.repeatability --photos 10 --out-dir out
+    Example: scalematch lab repeatability --photos 10 --out-dir out
     """
     fac = _parse_factors(factors)
     try:
