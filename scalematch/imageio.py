@@ -38,6 +38,14 @@ from .stages.detector import MIN_SIDE_PX
 DEFAULT_MAX_PIXELS = 100_000_000
 
 
+#: A float image whose largest value is at most this is taken as scaled to [0, 1] (scikit-image's
+#: convention) and multiplied by 255: a [0, 1] image brightened, or resampled with a cubic
+#: kernel, overshoots 1 a little (a copy brightened 8 % reached 1.03 and, read as 0-255 grey
+#: levels, matched nothing), while grey levels 0-255 whose brightest pixel is under 2 hold
+#: less than two levels of contrast, nothing to match either way
+UNIT_FLOAT_MAX = 2.0
+
+
 class ImageError(ValueError):
     """An input image cannot be used; the message says what is wrong."""
 
@@ -54,7 +62,7 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     if img.dtype == np.uint16:
         scale = 255.0 / 65535.0
     elif img.dtype.kind == "f":
-        scale = 255.0 if img.size and float(np.nanmax(img)) <= 1.0 else 1.0
+        scale = 255.0 if img.size and float(np.nanmax(img)) <= UNIT_FLOAT_MAX else 1.0
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[:, :, :3]
     if img.ndim == 3 and img.shape[2] == 3:
@@ -91,7 +99,8 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     """The check at the edge of ``match``: a 2-D grey array (or one channel, (H, W, 1)) ->
     float32 8-bit grey levels.
 
-    Scaled as ``to_grey`` scales: floats in [0, 1] (scikit-image's convention) by 255, 16-bit by
+    Scaled as ``to_grey`` scales: floats at most ``UNIT_FLOAT_MAX`` (images in [0, 1],
+    scikit-image's convention, a little past 1 when brightened or resampled) by 255, 16-bit by
     255/65535; other values are taken as grey levels. Raises ``ImageError`` (a ``ValueError``)
     for what would otherwise give "no match" without saying why: a bool array, a NaN or infinite
     value, a constant image; a side under ``MIN_SIDE_PX``.

@@ -258,6 +258,18 @@ def test_float_images_in_0_1_match_as_8_bit_grey_levels(raccoon):
     assert r.n_inliers == match(low * 255.0, high * 255.0).n_inliers
 
 
+def test_float_images_a_little_past_1_are_still_read_as_0_1(raccoon):
+    """A [0, 1] image brightened 8 % without clipping (max 1.03) was read as 0-255 grey levels,
+    nearly black, and matched nothing."""
+    pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(0), high_size=(200, 150),
+                          low_max=(200, 150))
+    low, high = np.clip(pair.low, 0, 255) / 255.0, np.clip(pair.high, 0, 255) / 255.0
+    bright = low * 1.08
+    assert 1.0 < bright.max() <= 1.08
+    r = match(bright, high)
+    assert r.matched and abs(r.resolution_ratio - 3.0) < 0.05
+
+
 def test_one_channel_arrays_match_as_grey_images(raccoon):
     """(H, W, 1), as some readers give a grey image, is that grey image."""
     pair = make_zoom_pair(raccoon, 3.0, np.random.default_rng(0), high_size=(200, 150),
