@@ -1000,7 +1000,9 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     refused = best_refused(attempts)
     shown = winner or refused or attempts[0]
     verdict = shown.verdict
-    common = dict(model=config.model, best_scale=verdict.best_scale,
+    # a "no" has no best scale (NaN, null in the JSON), as it has no ratio: its refused
+    # candidate is told in ``rejected``
+    common = dict(model=config.model, best_scale=math.nan,
                   scales=tuple(o.row for o in shown.outcomes), timings=timings,
                   config=config, search=records, covariance_used=search.mode.covariance_used)
     if winner is None:
@@ -1034,8 +1036,8 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
         math.nan, math.nan, (math.nan, math.nan))
-    return MatchResult(**dict(common, model=model), matched=True, transform=t,
-                       resolution_ratio=ratio, rotation_deg=angle, translation=tr,
+    return MatchResult(**dict(common, model=model, best_scale=verdict.best_scale), matched=True,
+                       transform=t, resolution_ratio=ratio, rotation_deg=angle, translation=tr,
                        inliers=inliers, evidence=evidence_of(shown, records, plan, stopped,
                                                              final, work),
                        order=Direction.SWAPPED if swapped else Direction.GIVEN)

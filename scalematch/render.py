@@ -558,7 +558,7 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
     if np.isfinite(result.best_scale) and rows:
         best = int(np.argmin([abs(r.s - result.best_scale) for r in rows]))
     if result.matched:
-        title = (f"inliers per scale: best s = {result.best_scale:g}, "
+        title = (f"inliers per scale: best s = {result.best_scale:.3g}, "
                  f"ratio {result.resolution_ratio:.2f}")
     else:
         title = "inliers per scale: no reliable match"

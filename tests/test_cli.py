@@ -358,6 +358,7 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     assert JSON_KEYS <= set(data)
     assert data["matched"] is False and data["reason"] and data["transform"] is None
     assert data["n_inliers"] == data["inliers"] == 0 and data["matches"] == []
+    assert data["best_scale"] is None and data["resolution_ratio"] is None  # as GUIDE says
     assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120}
     assert data["high"]["width"] == 240 and data["version"] == __version__
     assert data["config"]["model"] == "similarity"
