@@ -438,6 +438,18 @@ def drawn_note(factor: float) -> str:
     return f"   low drawn at 1/{factor:g} of its file size"
 
 
+def overlay_footer(low_name: str, high_name: str, turned: bool, factor: float) -> str:
+    """The overlay's footer: which file is drawn as which (``turned``: a "no" whose refused
+    candidate takes the images the other way round from the order given, which the JSON
+    keeps, is drawn as the candidate takes them, and says so), and how the low one is drawn.
+
+    >>> overlay_footer("b.png", "a.png", True, 1.0)
+    'low: b.png   high: a.png   (as the refused candidate takes them)'
+    """
+    why = "   (as the refused candidate takes them)" if turned else ""
+    return f"low: {low_name}   high: {high_name}{why}{drawn_note(factor)}"
+
+
 def overlay_zoom(shape) -> int:
     """The whole factor the overlay enlarges a coarser image of ``shape`` by: the least that
     brings its longer side to ``MIN_OVERLAY_SIDE_PX`` (1 when it is there already).
@@ -651,7 +663,8 @@ def write_outputs(out_dir: PathLike, low_path: PathLike, high_path: PathLike,
     big = drawn if zoom == 1 else in_decoded(
         result, *((factors[0], factors[1] / zoom) if swapped else (factors[0] / zoom, factors[1])))
     ov = overlay(low if zoom == 1 else enlarged(low, zoom), high, big,
-                 footer=[f"low: {low_name}   high: {high_name}{drawn_note(f_low / zoom)}"],
+                 footer=[overlay_footer(low_name, high_name, swapped and not result.matched,
+                                        f_low / zoom)],
                  enlarged_by=zoom)
     _write_png(paths["overlay.png"], ov)
     _write_png(paths["matches.png"], matches_image(low, high, drawn, factors=(f_low, f_high)))
