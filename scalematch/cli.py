@@ -862,7 +862,8 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
                   verbose: bool) -> List[str]:
     """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
     the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
-    path as given) when ``verbose``."""
+    path as given) when ``verbose``; without ``verbose``, where the files went, in one line.
+    The verdict comes last."""
     lines = []
     if verbose:
         lines.append(scale_table(result))
@@ -870,7 +871,11 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
         lines += [f"wrote {path}" for path in written.values()]
         if json_written is not None:
             lines.append(f"wrote {json_written}")
-    return lines + [summary(result)]
+        return lines + [summary(result)]
+    where = ([f"{', '.join(p.name for p in written.values())} in "
+              f"{next(iter(written.values())).parent}"] if written else []) + \
+        ([str(json_written)] if json_written is not None else [])
+    return (["wrote " + "; ".join(where)] if where else []) + [summary(result)]
 
 
 # --------------------------------------------------------------------------- batch

@@ -395,6 +395,7 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     assert data["seconds"] > 0
     assert "matched" in result.stderr
     # the time the summary gives is the match's, as the JSON's "seconds"
+    assert f"wrote overlay.png, matches.png, scales.png, matches.csv in {out}" in result.stderr
     took = re.search(r"; matching took (\d+\.\d\d) s$", result.stderr.strip())
     assert took and float(took.group(1)) == pytest.approx(data["seconds"], abs=0.006)
     said = re.search(r"ratio (\d+\.\d+)", result.stderr)
