@@ -529,9 +529,10 @@ def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
     best = max(with_t, key=lambda o: o.row.inliers)
     implied = best.row.ratio * shown_scale
     implies = (f"implies a ratio of {implied:.3g}" if 1e-3 < implied < 1e3 else
-               "is degenerate: it implies no usable ratio")  # inf, 2.5e+19: no picture
+               "implies no usable ratio")  # inf, 2.5e+19: no picture
     return Decision(False, f"no scale found a transform consistent with its own scale "
-                    f"(the best, at scale {best.row.s * shown_scale:.3g}, {implies})",
+                    f"(the one with the most inliers, {best.row.inliers} at scale "
+                    f"{best.row.s * shown_scale:.3g}, {implies})",
                     best.row.s, None, np.zeros((0, 4)), Evidence())
 
 
