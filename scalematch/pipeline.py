@@ -30,7 +30,7 @@ from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRe
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
-                              final_checks, look_again, on_lines)
+                              final_checks, look_again, on_lines, unique_threshold)
 from .stages.descriptors import Described
 from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level,
                               gradients, image_contrast)
@@ -1023,13 +1023,22 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     final = None
     if has_ratio:
         coarse, fine = work.shown(winner.step.direction)
-        claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2])
+        # a plain match of few inliers is confirmed by the first pass of views
+        # (search.stop_reason); without one (no views, or the time budget spent), the
+        # pixels must show it more clearly unique
+        unconfirmed = winner.step.view_pass == 0 and \
+            verdict.evidence.inliers < config.views.confirm_below_inliers and \
+            not any(r.view_pass > 0 for r in records)
+        claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2],
+                      unconfirmed=unconfirmed)
         final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                            pixel=config.pixel)
         if reason:
+            applied = replace(config.decision,  # the uniqueness ratio it faced
+                              min_unique_ratio=unique_threshold(config.decision, unconfirmed))
             return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
                 t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
-                figures(test, verdict.evidence, config.decision, final)),
+                figures(test, verdict.evidence, applied, final)),
                 evidence=evidence_of(shown, records, plan, stopped, final, work), **common)
         t, inliers, model = grown_answer(winner, fit, search)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,

@@ -115,6 +115,14 @@ class DecisionParams:
     #: (600 null runs, docs/design/DECISION.md, "Why the geometry can outweigh the pixels")
     #: nan (the finer image covers the coarser one: no room elsewhere) passes.
     min_unique_ratio: float = 2.0
+    #: ... and at least this for a plain match of fewer than ``views.confirm_below_inliers``
+    #: that no pass of views confirmed (``--no-views``, or a time budget spent first): the
+    #: views' pass is what catches a repeated facade seen obliquely, which the plain search
+    #: matches with a few inliers (a t = 2.83 tilted pair: 6 inliers at log10 NFA -12.5,
+    #: 67 px off, ratio 2.10, claimed with ``--no-views``). The lowest true weak plain match
+    #: measured with ``--no-views`` had 2.88 (an occluded pair at ratio 8, 5 inliers; the
+    #: realistic and tilted sets, both orders); true zoom pairs 3.75 and more
+    unconfirmed_min_unique_ratio: float = 2.5
     #: ... or, compared window by window (``stages.pixelcheck.window_agreement``), at least
     #: ``min_windows`` windows of which this share agree at the claim ...
     min_window_agreement: float = 0.6
@@ -211,6 +219,8 @@ class DecisionParams:
         in_range("decision", "min_windows", self.min_windows, Bounds(lo=1), integer=True)
         in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
         in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
+        in_range("decision", "unconfirmed_min_unique_ratio", self.unconfirmed_min_unique_ratio,
+                 Bounds(lo=0))
         in_range("decision", "second_share", self.second_share, Bounds(lo=0))
         in_range("decision", "second_scale_factor", self.second_scale_factor, Bounds(lo=1))
         in_range("decision", "second_angle_deg", self.second_angle_deg, Bounds(lo=0))
@@ -698,6 +708,9 @@ class Claim:
     log10_nfa: float  #: the decision's a-contrario figure for it
     #: the finer px (N, 2) of the inliers that vouch for it; None: the whole footprint
     vouched: Optional[np.ndarray] = field(default=None, repr=False)
+    #: a plain match of few inliers that no pass of views confirmed: its pixels must show it
+    #: unique by ``DecisionParams.unconfirmed_min_unique_ratio``
+    unconfirmed: bool = False
 
 
 def on_lines(f: np.ndarray, pairs: np.ndarray, threshold_px: float) -> float:
@@ -729,6 +742,13 @@ def windows_agree(a: Agreement, params: DecisionParams) -> bool:
     """
     return (a.windows >= params.min_windows and a.claimed >= params.min_window_agreement
             and a.claimed >= params.min_window_ratio * a.elsewhere)
+
+
+def unique_threshold(params: DecisionParams, unconfirmed: bool) -> float:
+    """The uniqueness ratio a claim needs (:func:`final_checks`): ``min_unique_ratio``, or for
+    a weak plain match no view confirmed, ``unconfirmed_min_unique_ratio`` if higher."""
+    return max(params.min_unique_ratio, params.unconfirmed_min_unique_ratio) if unconfirmed \
+        else params.min_unique_ratio
 
 
 def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
@@ -775,7 +795,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
                          judged_by="geometry" if geometric else "pixels")
     if geometric:
         return final, "", ""
-    if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, nothing to compare
+    if u.ratio < unique_threshold(params, claim.unconfirmed):  # nan: no room elsewhere, passes
         a = agreement_of(placed, pixel)
         final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
                         windows_elsewhere=a.elsewhere)

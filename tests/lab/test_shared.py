@@ -63,6 +63,11 @@ def test_a_repeated_facade_seen_obliquely_is_not_a_wrong_similarity(shared_dir):
     r = match(pair.low, pair.high)
     assert r.matched, r.reason
     assert reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape) < 3.0
+    # without views nothing confirms it: the pixels must show it unique by 2.5, and the facade
+    # (2.10) is refused rather than claimed 67 px off
+    plain = match(pair.low, pair.high, Config.preset("no-views"))
+    assert not plain.matched and plain.rejected.test == "uniqueness", plain.reason
+    assert plain.rejected.figures["min_unique_ratio"] == 2.5  # the threshold it faced
 
 
 def test_a_smooth_crop_s_tilted_view_does_not_outvote_the_right_plain_match(shared_dir):
