@@ -58,6 +58,8 @@ TEXT_SCALE_PER_PX = 1.0 / 1150
 MIN_TEXT_SCALE = 0.35
 #: Footprint outline thickness per pixel of the picture's shorter side (at least 2 px).
 OUTLINE_PER_PX = 1.0 / 300
+#: Radius of the dot on the footprint's top-left corner, in outline thicknesses
+CORNER_DOT_PER_THICKNESS = 3
 #: Below this ratio the verdict does not call either image the finer one (5 %: a ratio found at
 #: 1.000 either way round, EXIF-turned crops of one photo, was reported swapped by chance)
 NEAR_ONE_RATIO = 1.05
@@ -315,15 +317,17 @@ def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray, enlarged_by:
     out[inside, 2] = low_grey[inside]  # R: low
     outline, clipped = _footprint_outline(t, high.shape, (hh, ww))
     legend = ("magenta = low, green = high warped (grey where they agree); "
-              "outline = high footprint" + (" (cut at the picture's edge, where it "
-                                            "runs beyond)" if clipped else ""))
+              "outline = high footprint, dot = its top-left corner" +
+              (" (cut at the picture's edge, where it runs beyond)" if clipped else ""))
     return out, outline, legend
 
 
 def _footprint_outline(t: np.ndarray, high_shape, picture_shape: Tuple[int, int]):
     """(outline, clipped): the footprint of ``t`` cut to the picture (``picture_shape``, (H, W))
-    with its whole stroke inside, as (M, 1, 2) int32 in 1/16 px and its thickness (None: no
-    footprint, or none of it in the picture); True when it was cut."""
+    with its whole stroke inside, as (M, 1, 2) int32 in 1/16 px, its thickness and where the
+    high image's top-left corner falls ((x, y) in 1/16 px; None outside the picture), so that
+    a turn of more than 90 degrees reads off the picture (None: no footprint, or none of it in
+    the picture); True when it was cut."""
     corners = footprint(t, high_shape)
     if corners is None:
         return None, False
@@ -336,7 +340,10 @@ def _footprint_outline(t: np.ndarray, high_shape, picture_shape: Tuple[int, int]
         not np.allclose(shown, corners)
     if len(shown) < 2:
         return None, clipped
-    return (np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2), thick), clipped
+    x0, y0 = corners[0]  # footprint's corners run clockwise from the top-left
+    corner = (int(round(x0 * 16)), int(round(y0 * 16))) \
+        if -0.5 <= x0 <= ww - 0.5 and -0.5 <= y0 <= hh - 0.5 else None
+    return (np.round(shown * 16).astype(np.int32).reshape(-1, 1, 2), thick, corner), clipped
 
 
 def _draw_rejected(out: np.ndarray, result: MatchResult, high_shape) -> str:
@@ -371,6 +378,9 @@ def _captioned(out: np.ndarray, lines: Sequence[str], footer: Sequence[str],
         caption(out, footer, where="bottom")
     if outline is not None:  # after the caption: its dark strip must not hide the outline
         cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
+        if outline[2] is not None:  # the high image's top-left corner
+            cv2.circle(out, outline[2], 16 * CORNER_DOT_PER_THICKNESS * outline[1], OUTLINE, -1,
+                       cv2.LINE_AA, shift=4)
     if inside:
         return out
     return np.vstack([_band(lines, ww), out] + ([_band(footer, ww)] if any(footer) else []))
