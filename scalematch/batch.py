@@ -1,10 +1,11 @@
 """Batch matching: many pairs from a CSV, one JSON line each, resumable, on a local process pool
 or a Dask cluster.
 
-In the order a run uses them: ``read_pairs`` (the CSV -> (low, high) rows), ``unique_pairs``
-(repeated rows matched once, paths resolved), ``scan_output`` (what an earlier run left in the
-output file: the pairs done and which of them errored; it refuses a file holding anything but
-result lines, or results made with another configuration), ``drop_error_lines`` (with
+In the order a run uses them: ``read_rows`` (the CSV -> (low, high, other columns) rows),
+``unique_pairs`` (repeated rows matched once, paths resolved), ``scan_output`` (what an
+earlier run left in the output file: the pairs done and which of them errored; it refuses a
+file holding anything but result lines, or results made with another configuration),
+``drop_error_lines`` (with
 ``--retry-errors``: the error lines of pairs to match again removed, the file replaced in one
 step; ``resume_output`` does this or cuts a torn last line), ``plan_run`` (the ``Plan``: the
 pairs to match, those skipped, those retried), ``Counts`` (the lines written, by verdict),
@@ -101,6 +102,9 @@ class Pair:
     high: str  #: the high-resolution image's path as written in the CSV
     low_file: str  #: the file read: a relative path is taken from the CSV's folder
     high_file: str
+    #: the row's other columns of a CSV with a header, (name, value) in the CSV's order: the
+    #: line carries them as ``"csv"`` (an expected ratio, an id), so a script needs no join
+    columns: Tuple[Tuple[str, str], ...] = ()
 
     @property
     def key(self) -> Tuple[str, str]:
@@ -151,7 +155,14 @@ def _trimmed(row: Sequence[str]) -> List[str]:
 
 
 def read_pairs(path: Path) -> List[Tuple[str, str]]:
-    """The (low, high) rows of a pairs CSV, in file order, repeated rows included.
+    """The (low, high) rows of a pairs CSV, in file order, repeated rows included
+    (:func:`read_rows` without the other columns)."""
+    return [(low, high) for low, high, _ in read_rows(path)]
+
+
+def read_rows(path: Path) -> List[Tuple[str, str, Tuple[Tuple[str, str], ...]]]:
+    """The (low, high, other columns) rows of a pairs CSV, in file order, repeated rows
+    included; the other columns, (name, value) from the header, only with one.
 
     A file without header has exactly two columns, low then high. A header row names the columns:
     ``low`` and ``high`` (or names starting so, such as ``low_path,high_path``), in any position,
@@ -168,7 +179,9 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
         raise BatchError(f"cannot read {path}: {exc}; give a CSV with columns low,high")
     rows = [(n, r) for n, r in rows if r]
     columns = _header(rows[0][1], path) if rows else None
+    names: List[str] = []
     if columns is not None:
+        names = [c.strip() for c in rows[0][1]]
         rows = rows[1:]
     pairs = []
     for n, cells in rows:
@@ -182,7 +195,9 @@ def read_pairs(path: Path) -> List[Tuple[str, str]]:
         high = cells[hi] if hi < len(cells) else ""
         if not low or not high:
             raise BatchError(f"{path} line {n} does not have two paths low,high")
-        pairs.append((low, high))
+        others = tuple((name, cells[i] if i < len(cells) else "")
+                       for i, name in enumerate(names) if columns and i not in columns and name)
+        pairs.append((low, high, others))
     return pairs
 
 
@@ -191,15 +206,17 @@ def _resolve(path: str, base: Path) -> str:
     return str(p if p.is_absolute() else base / p)
 
 
-def unique_pairs(rows: Iterable[Tuple[str, str]], base: Path) -> List[Pair]:
-    """One ``Pair`` per distinct (low, high) row, in first-seen order; relative paths from
-    ``base`` (the CSV's folder). A repeated row would write a second line for the same key."""
+def unique_pairs(rows: Iterable[Tuple], base: Path) -> List[Pair]:
+    """One ``Pair`` per distinct (low, high) row, in first-seen order (with that row's other
+    columns, when ``rows`` are :func:`read_rows`'s); relative paths from ``base`` (the CSV's
+    folder). A repeated row would write a second line for the same key."""
     seen = set()
     pairs = []
-    for low, high in rows:
+    for low, high, *rest in rows:
         if (low, high) not in seen:
             seen.add((low, high))
-            pairs.append(Pair(low, high, _resolve(low, base), _resolve(high, base)))
+            pairs.append(Pair(low, high, _resolve(low, base), _resolve(high, base),
+                              tuple(rest[0]) if rest else ()))
     return pairs
 
 
@@ -444,7 +461,12 @@ def error_line(pair: Pair, error: str, config: Config, seconds: float = 0.0,
                kind: str = INPUT) -> Dict[str, Any]:
     """The line of a pair that could not be matched (docs/GUIDE.md, "JSON"); ``kind`` is
     ``INPUT`` or ``INTERNAL`` (whose message then starts "internal error")."""
-    return error_record(pair.low, pair.high, error, kind, config, seconds)
+    return with_columns(error_record(pair.low, pair.high, error, kind, config, seconds), pair)
+
+
+def with_columns(line: Dict[str, Any], pair: Pair) -> Dict[str, Any]:
+    """``line`` with the CSV row's other columns as ``"csv"`` (name -> text), when it had any."""
+    return dict(line, csv=dict(pair.columns)) if pair.columns else line
 
 
 def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
@@ -454,7 +476,7 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
         low, high = read_pair(pair.low_file, pair.high_file, config, max_pixels)
         result = match(to_grey(low.image), to_grey(high.image), config,
                        decoded_factors=(low.factor, high.factor))
-        return result.to_dict(pair.low, pair.high, low.shape, high.shape)
+        return with_columns(result.to_dict(pair.low, pair.high, low.shape, high.shape), pair)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
         error, kind = str(exc), INPUT
     except Exception as exc:  # noqa: BLE001 (a pair must never stop the batch; MemoryError too)

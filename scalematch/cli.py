@@ -922,8 +922,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
 
     PAIRS.csv has two columns low,high (no header), or a header row naming the columns low and
     high (or low_path,high_path, ...) in any position among others. Relative paths are taken
-    from the CSV's folder, and each line gives the paths as the CSV writes them (to join the
-    lines with its rows); a repeated row is matched once. Each line is the JSON of
+    from the CSV's folder, and each line gives the paths as the CSV writes them; with a header,
+    the row's other columns come back on its line as "csv" (name: text), an id or the ratio
+    expected, say. A repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
     gets a line with "error" and the batch goes on; the line's "error_kind" is "input" (the
@@ -989,7 +990,7 @@ def _batch_plan(pairs_csv: Path, output: Optional[Path], retry_errors: bool,
     try:
         if scheduler is not None:  # its form first: a malformed address fails at once
             batch.check_scheduler_address(scheduler)
-        rows = batch.read_pairs(pairs_csv)
+        rows = batch.read_rows(pairs_csv)
         pairs = batch.unique_pairs(rows, pairs_csv.resolve().parent)
         if output is not None:
             check_not_an_input(output, [pairs_csv] + [f for p in pairs

@@ -429,6 +429,20 @@ def test_batch_good_pair_no_match_and_missing_file_exit_3(images):
     assert flat["matched"] is False and flat["reason"] and "error" not in flat
 
 
+def test_a_csv_s_other_columns_come_back_on_each_line(images):
+    """A header CSV's other columns (an id, the ratio expected) ride on the pair's line, error
+    lines included, so that a CI script compares without a join."""
+    pairs = write(images / "p14.csv", f"name,low,high,expected\nfirst,low.png,high.png,{RATIO}\n"
+                                      f"second,low.png,gone.png,{RATIO}\n")
+    result = run("batch", pairs, "-q")
+    bad, good = sorted(lines_of_text(result.stdout), key=lambda x: "error" not in x)
+    assert good["csv"] == {"name": "first", "expected": str(RATIO)} and good["matched"] is True
+    assert bad["csv"] == {"name": "second", "expected": str(RATIO)} and "error" in bad
+    assert abs(good["resolution_ratio"] - float(good["csv"]["expected"])) < 0.05
+    plain = run("batch", write(images / "p15.csv", "low.png,high.png\n"), "-q")
+    assert "csv" not in lines_of_text(plain.stdout)[0]  # no header: nothing to carry
+
+
 def test_batch_exit_0_when_no_pair_errored(images):
     pairs = write(images / "p2.csv", "low.png,high.png\nnoise_low.png,noise_high.png\n")
     assert run("batch", pairs, "-q").exit_code == 0
