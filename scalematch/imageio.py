@@ -78,11 +78,12 @@ def to_grey(image: np.ndarray) -> np.ndarray:
 
 
 def to_bgr8(image: np.ndarray) -> np.ndarray:
-    """Any image array (grey float in grey levels, 8/16-bit, BGR, BGRA) -> uint8 (H, W, 3) BGR."""
+    """Any image array (grey float in grey levels or in [0, 1], as :func:`to_grey` reads it;
+    8/16-bit, BGR, BGRA) -> uint8 (H, W, 3) BGR."""
     img = np.asarray(image)
     if img.dtype == np.uint16:
         img = (img.astype(np.float32) * np.float32(255.0 / 65535.0))
-    elif img.dtype.kind == "f" and img.size and float(np.nanmax(img)) <= 1.0:
+    elif img.dtype.kind == "f" and img.size and float(np.nanmax(img)) <= UNIT_FLOAT_MAX:
         img = img * np.float32(255.0)
     img = np.clip(np.nan_to_num(img.astype(np.float32)), 0, 255).astype(np.uint8) \
         if img.dtype != np.uint8 else img

@@ -453,3 +453,13 @@ def test_an_mpo_file_is_decoded_reduced_as_a_jpeg(tmp_path, bgr):
     full = to_grey(read_image(path))
     ref = cv2.resize(full, (80, 60), interpolation=cv2.INTER_AREA)
     assert np.sqrt(np.mean((to_grey(d.image) - ref) ** 2)) < REDUCED_RMS  # measured 0.35
+
+
+def test_a_float_image_a_little_past_1_is_drawn_as_the_matcher_reads_it():
+    """The pictures scale floats as the matcher does (``UNIT_FLOAT_MAX``): a [0, 1] image
+    brightened to 1.03 is drawn bright, not black."""
+    from scalematch.imageio import to_bgr8
+
+    img = np.linspace(0.0, 1.03, 64, dtype=np.float32).reshape(8, 8)
+    drawn = to_bgr8(img)
+    assert drawn[..., 0].max() == 255 and abs(float(drawn[0, 1, 0]) - 255 * img[0, 1]) <= 1
