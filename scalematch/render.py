@@ -43,6 +43,8 @@ INLIER_DOT = (0, 215, 255)
 REJECTED = (60, 60, 255)
 REJECTED_LINE = (150, 150, 150)
 REJECTED_DOT = (190, 190, 190)
+#: The frames of the inset and of the region it enlarges (BGR)
+INSET_FRAME = (255, 255, 255)
 #: Weight of the low image outside the footprint (dimmed so the footprint stands out).
 OUTSIDE_DIM = 0.55
 #: Height range of the side-by-side matches picture, px.
@@ -58,6 +60,16 @@ TEXT_SCALE_PER_PX = 1.0 / 1150
 MIN_TEXT_SCALE = 0.35
 #: Footprint outline thickness per pixel of the picture's shorter side (at least 2 px).
 OUTLINE_PER_PX = 1.0 / 300
+#: A footprint narrower and lower than this share of the picture gets an inset: its region
+#: enlarged in a free corner. At ratio 8 to 16 the finer image covers a few hundredths of the
+#: coarser one, too little to see whether the two agree
+INSET_MAX_SHARE = 0.25
+#: The inset's side, as a share of the picture's shorter side
+INSET_SHARE = 0.4
+#: The region shown around the footprint, as a multiple of its longer side
+INSET_CONTEXT = 1.5
+#: Smallest enlargement worth an inset
+INSET_MIN_ZOOM = 2.0
 #: Radius of the dot on the footprint's top-left corner, in outline thicknesses
 CORNER_DOT_PER_THICKNESS = 3
 #: Below this ratio the verdict does not call either image the finer one (5 %: a ratio found at
@@ -281,6 +293,10 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     if result.matched and t is not None and model_of(result.model).has_ratio:
         out, outline, legend = _blended(low_grey, high, t, enlarged_by)
         lines.append(legend)
+        plan = inset_plan(outline, out.shape[:2]) if outline is not None else None
+        if plan is not None:
+            lines.append(f"inset: the footprint's region enlarged {plan[1]:.0f}x")
+        return _captioned(out, lines, footer, outline, plan)
     elif not result.matched and rejected_footprint(result, high.shape) is not None:
         lines.append(_draw_rejected(out, result, high.shape))
     elif result.matched and result.inliers.size:
@@ -366,24 +382,94 @@ def _draw_inlier_dots(out: np.ndarray, result: MatchResult) -> str:
 
 
 def _captioned(out: np.ndarray, lines: Sequence[str], footer: Sequence[str],
-               outline) -> np.ndarray:
+               outline, inset=None) -> np.ndarray:
     """``out`` with its caption ``lines`` at the top, ``footer`` at the bottom and the
     footprint ``outline`` over both; the captions go in bands above and below the picture when
-    they would cover more than ``MAX_CAPTION_SHARE`` of it."""
+    they would cover more than ``MAX_CAPTION_SHARE`` of it. ``inset``: the
+    :func:`inset_plan` of a small footprint, its region drawn enlarged in a free corner."""
     hh, ww = out.shape[:2]
-    strips = _layout(lines, ww)[2] + _layout(footer, ww)[2]
-    inside = strips <= MAX_CAPTION_SHARE * hh
+    top, bottom = _layout(lines, ww)[2], _layout(footer, ww)[2]
+    inside = top + bottom <= MAX_CAPTION_SHARE * hh
+    detail = out.copy() if inset is not None else None  # the picture the inset enlarges
     if inside:
         caption(out, lines)
         caption(out, footer, where="bottom")
     if outline is not None:  # after the caption: its dark strip must not hide the outline
-        cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
-        if outline[2] is not None:  # the high image's top-left corner
-            cv2.circle(out, outline[2], 16 * CORNER_DOT_PER_THICKNESS * outline[1], OUTLINE, -1,
-                       cv2.LINE_AA, shift=4)
+        _draw_outline(out, outline)
+    if detail is not None:
+        _place_inset(out, detail, inset[0], inset[1], top if inside else 0,
+                     bottom if inside else 0, outline)
     if inside:
         return out
     return np.vstack([_band(lines, ww), out] + ([_band(footer, ww)] if any(footer) else []))
+
+
+def _draw_outline(out: np.ndarray, outline) -> None:
+    """The footprint's outline and the dot on the finer image's top-left corner, on ``out``."""
+    cv2.polylines(out, [outline[0]], True, OUTLINE, outline[1], cv2.LINE_AA, shift=4)
+    if outline[2] is not None:
+        cv2.circle(out, outline[2], 16 * CORNER_DOT_PER_THICKNESS * outline[1], OUTLINE, -1,
+                   cv2.LINE_AA, shift=4)
+
+
+def inset_plan(outline, shape: Tuple[int, int]):
+    """(region, zoom) of the inset of a small footprint, or None: ``region`` (x0, y0, x1, y1)
+    px, a square of ``INSET_CONTEXT`` times the footprint's longer side around it (moved to lie
+    inside the picture of ``shape``, (H, W)), drawn ``zoom`` times larger, to ``INSET_SHARE`` of
+    the picture's shorter side. None when the footprint spans more than ``INSET_MAX_SHARE`` of
+    the picture's width or height, or the enlargement would be under ``INSET_MIN_ZOOM``.
+
+    >>> box = np.array([[400, 400], [560, 400], [560, 480], [400, 480]])  # 10 x 5 px, x 16
+    >>> inset_plan((box.reshape(-1, 1, 2), 2, None), (600, 800))  # 16 px at least, 240 px
+    ((22, 20, 38, 36), 15.0)
+    """
+    hh, ww = shape
+    pts = np.asarray(outline[0], np.float64).reshape(-1, 2) / 16.0
+    (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
+    if x1 - x0 > INSET_MAX_SHARE * ww or y1 - y0 > INSET_MAX_SHARE * hh:
+        return None
+    side = int(min(max(INSET_CONTEXT * max(x1 - x0, y1 - y0), 16.0), ww, hh))
+    zoom = int(INSET_SHARE * min(ww, hh)) / side
+    if zoom < INSET_MIN_ZOOM:
+        return None
+    left = int(np.clip(round((x0 + x1) / 2 - side / 2), 0, ww - side))
+    top = int(np.clip(round((y0 + y1) / 2 - side / 2), 0, hh - side))
+    return (left, top, left + side, top + side), zoom
+
+
+def _place_inset(out: np.ndarray, picture: np.ndarray, region: Tuple[int, int, int, int],
+                 zoom: float, top: int, bottom: int, outline) -> None:
+    """``region`` of ``picture`` enlarged ``zoom`` times, in the corner of ``out`` between the
+    caption strips (``top``, ``bottom`` px) farthest from the region, framed, with the
+    footprint ``outline`` drawn at the inset's scale in the picture's stroke; the region framed
+    where it is. Nothing when no corner clears the region."""
+    hh, ww = out.shape[:2]
+    x0, y0, x1, y1 = region
+    side = int(round((x1 - x0) * zoom))
+    pad = max(4, _outline_thickness(hh, ww) * 2)
+    if side + 2 * pad > hh - top - bottom:
+        return
+    spots = [(x, y) for x in (pad, ww - pad - side) for y in (top + pad, hh - bottom - pad - side)]
+    clear = [(x, y) for x, y in spots
+             if x + side + pad <= x0 or x - pad >= x1 or y + side + pad <= y0 or y - pad >= y1]
+    if not clear:
+        return
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    x, y = max(clear, key=lambda p: (p[0] + side / 2 - cx) ** 2 + (p[1] + side / 2 - cy) ** 2)
+    enlarged_region = cv2.resize(picture[y0:y1, x0:x1], (side, side),
+                                 interpolation=cv2.INTER_CUBIC)
+    if outline is not None:  # 1/16 px of the picture -> 1/16 px of the inset
+        def moved(p):
+            return np.round((np.asarray(p, np.float64) - 16.0 * np.array([x0, y0])) * zoom
+                            ).astype(np.int32)
+        _draw_outline(enlarged_region, (moved(outline[0].reshape(-1, 2)).reshape(-1, 1, 2),
+                                        outline[1], None if outline[2] is None
+                                        else tuple(int(v) for v in moved(outline[2]))))
+    out[y:y + side, x:x + side] = enlarged_region
+    line = max(1, _outline_thickness(hh, ww) // 2)
+    cv2.rectangle(out, (x - line, y - line), (x + side + line - 1, y + side + line - 1),
+                  INSET_FRAME, line)
+    cv2.rectangle(out, (x0, y0), (x1 - 1, y1 - 1), INSET_FRAME, line)
 
 
 def clip_polygon(points: np.ndarray, box: Tuple[float, float, float, float]) -> np.ndarray:

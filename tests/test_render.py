@@ -95,6 +95,35 @@ def test_overlay_fits_and_outlines_where_the_transform_says(pair, as_homography)
     assert diff.mean() < 6.0
 
 
+def test_a_small_footprint_gets_its_region_enlarged_in_a_free_corner(raccoon, monkeypatch):
+    """A 64 x 48 px crop found in the photo shrunk by 2 (a 32 x 24 px footprint in 512 x 384):
+    its region is drawn enlarged (INSET_SHARE of the shorter side) in the corner farthest
+    from it, away from the footprint; a footprint as large as the demo's gets none."""
+    import scalematch.render as render
+
+    x0, y0 = 700, 500  # lower right of the photo: the inset goes to the upper left
+    high = raccoon[y0:y0 + 48, x0:x0 + 64].copy()
+    low = cv2.resize(raccoon, (512, 384), interpolation=cv2.INTER_AREA)
+    t = np.array([[0.5, 0, x0 / 2 - 0.25], [0, 0.5, y0 / 2 - 0.25]])
+    res = make_result(t, high_shape=high.shape)
+    with_inset = overlay(low, high, res)
+    monkeypatch.setattr(render, "INSET_MAX_SHARE", 0.0)
+    without = overlay(low, high, res)
+    assert with_inset.shape == without.shape
+    changed = np.any(with_inset != without, axis=2)
+    changed[:110] = False  # the caption strip, one line longer with the inset's legend
+    ys, xs = np.nonzero(changed)
+    near = (np.abs(xs - (x0 / 2 + 16)) < 40) & (np.abs(ys - (y0 / 2 + 12)) < 40)
+    assert near.any()  # the region it enlarges is framed where it is
+    xs, ys = xs[~near], ys[~near]
+    side = int(render.INSET_SHARE * 384)
+    assert side - 2 <= xs.max() - xs.min() <= side + 12
+    assert xs.max() < x0 / 2 and ys.max() < y0 / 2  # upper left, clear of the footprint
+    assert render.inset_plan(render._footprint_outline(*((make_result(t).transform,
+                                                           (360, 480), (377, 419))))[0],
+                             (377, 419)) is None  # the demo's size of footprint
+
+
 def test_overlay_is_grey_where_they_agree_whatever_the_exposure(pair):
     """The low image darker and flatter than the high one (gain 0.6, offset 20, as the
     benchmark's pairs are): the warped high image is brought to the low one's grey levels, so
