@@ -863,8 +863,9 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
     """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
     the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
     path as given) when ``verbose``; without ``verbose``, where the files went, in one line.
+    A slow "no" of a search with views says how to get a quicker one (:func:`slow_no_hint`).
     The verdict comes last."""
-    lines = []
+    lines = [slow_no_hint(result)] if slow_no_hint(result) else []
     if verbose:
         lines.append(scale_table(result))
         lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
@@ -875,7 +876,23 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
     where = ([f"{', '.join(p.name for p in written.values())} in "
               f"{next(iter(written.values())).parent}"] if written else []) + \
         ([str(json_written)] if json_written is not None else [])
-    return (["wrote " + "; ".join(where)] if where else []) + [summary(result)]
+    return lines + (["wrote " + "; ".join(where)] if where else []) + [summary(result)]
+
+
+#: A "no" slower than this, s, with views searched, says where the time went (its views) and
+#: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 29-31 s
+#: (docs/design/SPEED.md), on 1 MP images a median 2-5 s
+SLOW_NO_HINT_S = 10.0
+
+
+def slow_no_hint(result: MatchResult) -> str:
+    """The hint a slow "no" prints, or "" (a match, a quick "no", a search without views)."""
+    views = any(step.view_pass > 0 for step in result.search)
+    if result.matched or not views or result.seconds < SLOW_NO_HINT_S:
+        return ""
+    return ("most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
+            "about 10 times sooner, and only pairs that a tilted view alone solves are missed "
+            "(--time-budget S bounds it instead)")
 
 
 # --------------------------------------------------------------------------- batch

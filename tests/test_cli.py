@@ -557,3 +557,20 @@ def test_a_jpeg_above_twice_the_working_size_is_decoded_reduced(tmp_path):
     pts = np.array(rows, float)
     fit = cv2.transform(pts[None, :, :2], np.array(a["transform"]))[0]
     assert np.linalg.norm(fit - pts[:, 2:], axis=1).max() < 2.1 * 3.0 + 1e-6
+
+
+def test_a_slow_no_with_views_says_how_to_get_a_quicker_one():
+    from dataclasses import replace
+
+    from scalematch.cli import SLOW_NO_HINT_S, _match_report, slow_no_hint
+    from scalematch.result import Direction, MatchResult, StepRecord
+
+    plain = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
+    views = replace(plain, view_pass=1, views=5)
+    slow = MatchResult(matched=False, model="similarity", reason="too few inliers",
+                       timings={"total": SLOW_NO_HINT_S + 20}, search=(plain, views))
+    assert "--no-views" in slow_no_hint(slow)
+    assert _match_report(slow, {}, None, False)[0] == slow_no_hint(slow)  # before the verdict
+    assert slow_no_hint(replace(slow, timings={"total": SLOW_NO_HINT_S / 4})) == ""
+    assert slow_no_hint(replace(slow, search=(plain,))) == ""  # no views: nothing to drop
+    assert slow_no_hint(replace(slow, matched=True, reason="")) == ""
