@@ -146,6 +146,15 @@ def _header(row: Sequence[str], path: Path) -> Optional[Tuple[int, int]]:
     return _column(cells, "low", path), _column(cells, "high", path)
 
 
+def _looks_like_names(cells: Sequence[str], base: Path) -> bool:
+    """A first row of names rather than paths: two cells or more, none holding a path
+    character or naming a file (from ``base``, the CSV's folder), some holding a letter
+    (``id,expected``)."""
+    return len(cells) >= 2 and not any(ch in c for c in cells for ch in PATH_CHARS) and \
+        any(any(ch.isalpha() for ch in c) for c in cells) and \
+        not any((base / c).exists() for c in cells if c)
+
+
 def _trimmed(row: Sequence[str]) -> List[str]:
     """The cells of a row without the empty ones at its end (spreadsheets add them)."""
     cells = [c.strip() for c in row]
@@ -179,6 +188,10 @@ def read_rows(path: Path) -> List[Tuple[str, str, Tuple[Tuple[str, str], ...]]]:
         raise BatchError(f"cannot read {path}: {exc}; give a CSV with columns low,high")
     rows = [(n, r) for n, r in rows if r]
     columns = _header(rows[0][1], path) if rows else None
+    if rows and columns is None and _looks_like_names(rows[0][1], Path(path).parent):
+        n, cells = rows[0]
+        raise BatchError(f"{path} line {n} ({','.join(cells)}) reads as a header, but names no "
+                         f"columns low and high: name them so (low,high), or give image paths")
     names: List[str] = []
     if columns is not None:
         names = [c.strip() for c in rows[0][1]]

@@ -94,6 +94,7 @@ def test_read_pairs_columns(tmp_path, text):
     ("name,low,other\nx,a.png,b.png\n", "no column named 'high'"),
     ("low_a,low_b,high\na.png,b.png,c.png\n", "several columns named 'low'"),
     ("low,high\na.png,\n", "line 2 does not have two paths"),
+    ("a,b\nx.png,y.png\n", r"line 1 \(a,b\) reads as a header, but names no columns low"),
 ])
 def test_read_pairs_refuses_what_it_cannot_read(tmp_path, text, needle):
     with pytest.raises(BatchError, match=needle):
