@@ -91,6 +91,13 @@ def _back(view: Optional[View], xy: np.ndarray) -> np.ndarray:
     return xy if view is None else to_high(view, xy)
 
 
+def candidates_in_images(view: View, best, coarser: Optional[View] = None
+                         ) -> Tuple[np.ndarray, np.ndarray]:
+    """(src, dst): every candidate of a winning scale ``best`` in the images' own pixels (the
+    finer image's, through ``view``; the coarser image's, through ``coarser`` or as they are)."""
+    return to_high(view, best.src), _back(coarser, best.dst)
+
+
 def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
                   coarser: Optional[View] = None) -> Refit:
     """The winning view's match in the images' own pixels.
@@ -108,7 +115,7 @@ def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
     model = "homography" if asked == "homography" else "affine"
     # every candidate of the winning scale, not only the view's similarity inliers: the sampled
     # tilt differs from the true one, so the similarity holds on part of the image only
-    cand_src, cand_dst = to_high(view, best.src), _back(coarser, best.dst)
+    cand_src, cand_dst = candidates_in_images(view, best, coarser)
     est = estimate(model, cand_src, cand_dst, ransac, seed=seed)
     if est.transform is not None and est.n_inliers >= len(src):
         return est.transform, np.hstack([cand_src[est.inliers], cand_dst[est.inliers]]), model
