@@ -260,7 +260,7 @@ def set_path(config: Any, path: str, value: Any, whole: Optional[str] = None) ->
         raise ValueError(f"{whole!r} is a group of parameters: set one of them, "
                          f"{whole}.NAME=VALUE (its names: {names})")
     if isinstance(value, str):
-        value = _coerce(value, getattr(config, head), whole)
+        value = _coerce(value, current, whole)
     return dataclasses.replace(config, **{head: value})
 
 
@@ -756,19 +756,13 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     # the outputs are checked before the match, not after a minute's work, and before the
     # inputs are read: an output never overwrites an input
     _check_not_inputs(out_dir, json_file, (low, high))
-    try:
+    with _json_of_input_error(json_path, json_file, low, high, config):
         low_read, high_read = _load(low, high, config, max_pixels)
-    except InputError as exc:
-        _json_of_error(json_path, json_file, low, high, exc, config)
-        raise
     factors = (float(low_read.factor), float(high_read.factor))
     _check_writable(out_dir, json_file)
-    try:
+    with _json_of_input_error(json_path, json_file, low, high, config):  # constant, too small
         result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config,
                                factors, quiet)
-    except InputError as exc:  # an image the pipeline refuses (constant, too small)
-        _json_of_error(json_path, json_file, low, high, exc, config)
-        raise
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
         _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
     written: Dict[str, Path] = {}
@@ -782,22 +776,27 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
 
 
-def _json_of_error(json_path: Optional[str], json_file: Optional[Path], low: str, high: str,
-                   exc: Exception, config: Config) -> None:
-    """With ``--json``, an input error's record (``result.error_record``, as a batch writes
-    it), so that a script reading the JSON learns why rather than finding nothing; nothing
-    more when the JSON cannot be written either."""
-    if not json_path:
-        return
-    from .result import dumps, error_record
-
-    text = dumps(error_record(low, high, exc.format_message(), "input", config), 2) + "\n"
+@contextlib.contextmanager
+def _json_of_input_error(json_path: Optional[str], json_file: Optional[Path], low: str,
+                         high: str, config: Config) -> Iterator[None]:
+    """With ``--json``, the record of an input error raised inside (``result.error_record``,
+    as a batch writes it), so that a script reading the JSON learns why rather than finding
+    nothing; the error goes on (exit 2), and nothing more is written when the JSON cannot be
+    written either."""
     try:
-        if json_file is not None:
-            check_out_file(json_file, "--json")
-        _write_json(text, json_file)
-    except click.ClickException:
-        pass
+        yield
+    except InputError as exc:
+        if json_path:
+            from .result import dumps, error_record
+
+            text = dumps(error_record(low, high, exc.format_message(), "input", config), 2)
+            try:
+                if json_file is not None:
+                    check_out_file(json_file, "--json")
+                _write_json(text + "\n", json_file)
+            except click.ClickException:
+                pass
+        raise
 
 
 def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
@@ -865,7 +864,8 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
     path as given) when ``verbose``; without ``verbose``, where the files went, in one line.
     A slow "no" of a search with views says how to get a quicker one (:func:`slow_no_hint`).
     The verdict comes last."""
-    lines = [slow_no_hint(result)] if slow_no_hint(result) else []
+    hint = slow_no_hint(result)
+    lines = [hint] if hint else []
     if verbose:
         lines.append(scale_table(result))
         lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))

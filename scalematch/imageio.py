@@ -50,6 +50,16 @@ class ImageError(ValueError):
     """An input image cannot be used; the message says what is wrong."""
 
 
+def _level_scale(img: np.ndarray) -> float:
+    """The factor that brings ``img``'s values to 8-bit grey levels: 255/65535 for 16-bit, 255
+    for floats at most ``UNIT_FLOAT_MAX`` (an image in [0, 1]), else 1."""
+    if img.dtype == np.uint16:
+        return 255.0 / 65535.0
+    if img.dtype.kind == "f" and img.size and float(np.nanmax(img)) <= UNIT_FLOAT_MAX:
+        return 255.0
+    return 1.0
+
+
 def to_grey(image: np.ndarray) -> np.ndarray:
     """Any decoded image array (H, W), (H, W, 3) BGR or (H, W, 4) BGRA -> (H, W) float32 grey levels.
 
@@ -58,11 +68,7 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     [[76.24, 255.0]]
     """
     img = np.asarray(image)
-    scale = 1.0
-    if img.dtype == np.uint16:
-        scale = 255.0 / 65535.0
-    elif img.dtype.kind == "f":
-        scale = 255.0 if img.size and float(np.nanmax(img)) <= UNIT_FLOAT_MAX else 1.0
+    scale = _level_scale(img)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[:, :, :3]
     if img.ndim == 3 and img.shape[2] == 3:
@@ -81,10 +87,9 @@ def to_bgr8(image: np.ndarray) -> np.ndarray:
     """Any image array (grey float in grey levels or in [0, 1], as :func:`to_grey` reads it;
     8/16-bit, BGR, BGRA) -> uint8 (H, W, 3) BGR."""
     img = np.asarray(image)
-    if img.dtype == np.uint16:
-        img = (img.astype(np.float32) * np.float32(255.0 / 65535.0))
-    elif img.dtype.kind == "f" and img.size and float(np.nanmax(img)) <= UNIT_FLOAT_MAX:
-        img = img * np.float32(255.0)
+    scale = _level_scale(img)
+    if scale != 1.0:
+        img = img.astype(np.float32) * np.float32(scale)
     img = np.clip(np.nan_to_num(img.astype(np.float32)), 0, 255).astype(np.uint8) \
         if img.dtype != np.uint8 else img
     if img.ndim == 2:

@@ -1058,10 +1058,10 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
 def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config) -> dict:
     """The parallax figures (``Evidence.parallax_points``, ``parallax``) of the answer's own
     map ``t`` (the images' pixels at working size, the finer image's to the coarser one's),
-    over every candidate of its winning scale: the decision counts them against its scale's
-    similarity, and a plane seen in perspective (Oxford graf 1 -> 2, wall 1 -> 3) leaves
+    over every candidate of its winning scale. Counted against the map answered, not the
+    scale's similarity: a plane seen in perspective (Oxford graf 1 -> 2, wall 1 -> 3) leaves
     true matches off a similarity that an epipolar geometry explains (551 and 1598 such
-    points), which its homography, the answer, holds (2 and 3)."""
+    points), which its homography, the answer, holds (8 and 3)."""
     params = config.decision
     src, dst = candidates_in_images(attempt.view, attempt.winning_outcome(),
                                     attempt.coarser_view)

@@ -45,8 +45,7 @@ from .estimator import FitSpec, model_of
 from .guided import GuidedParams, grow
 from .pixelcheck import (Agreement, PixelParams, agreement_of, pixel_check, unique_template,
                          uniqueness_of)
-from .rivals import (mean_transfer_gap, off_plane, same_scale_and_angle, second_transform,
-                     Second)
+from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
 from .threads import thread_map
 
 
@@ -172,8 +171,9 @@ class DecisionParams:
     #: piecewise (a tilted plane fits two similarities a few px apart)
     second_min_shift: float = 0.5
     #: the scene shows parallax (``Evidence.parallax``: a 3-D scene, the answer the map of its
-    #: dominant plane) when an epipolar geometry explains at least this many of the winner's
-    #: outliers among its candidates (``stages.rivals.off_plane``) ...
+    #: dominant plane) when an epipolar geometry explains at least this many of the answer's
+    #: outliers among its scale's candidates (``stages.rivals.off_plane``, counted for the
+    #: answer by ``pipeline.answer_parallax``; recorded, never decisive) ...
     parallax_min_points: int = 10
     #: ... and this share of its inliers: measured 0 to 2 off-plane points on 15 zoom pairs of
     #: real photos, 118 beside 42 inliers on the desk scene of ../shared/data/ef/zoom
@@ -510,7 +510,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     ``coarser_shape``, ``finer_shape``: the (H, W) of the images searched (or their views);
     ``params``: the decision's thresholds; ``context``: the search's model, robust fit (its
     threshold sets the a-contrario test's tolerance), seed
-    (:func:`scalematch.stages.rivals.second_transform`, ``off_plane``), rotation groups and
+    (:func:`scalematch.stages.rivals.second_transform`), rotation groups and
     searches made, which the a-contrario count multiplies, and the scale its reasons are shown
     at (:class:`SearchContext`). ``look(t, outcome)``, when given, takes the second look
     (:func:`look_again`) at a best transform of ``look_min_inliers`` to ``min_inliers - 1``
@@ -679,20 +679,17 @@ def _agreement_test(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape,
 def _rival_test(w: Winner, finer_shape, evidence: Evidence, params: DecisionParams,
                 fit: FitSpec) -> Tuple[Evidence, Refusal]:
     """What the candidates the winner leaves over show: a second transform of the same scale
-    and angle (a repeated structure, refused: :func:`repeats`) and points off the winner's
-    plane (parallax, recorded). (evidence with their figures, refusal)."""
+    and angle (a repeated structure, refused: :func:`repeats`). (evidence with its figures,
+    refusal). The points off the plane (parallax) are counted once, for the answer's own map
+    (``pipeline.answer_parallax``), not for every winner decided."""
     best, k = w.outcome, w.k
     est = best.estimate
     inl = est.inliers
     rival = second_transform(best.src, best.dst, inl, est.transform, finer_shape,
                              fit.ransac, fit.seed)
     rival_nfa = w.nfa_of(rival.inliers)
-    parallax = off_plane(best.src, best.dst, inl, params.parallax_threshold_px, fit.seed,
-                         est.transform, params.parallax_max_offset)
     evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
-                       second_gap_px=rival.gap_px, parallax_points=parallax,
-                       parallax=parallax >= max(params.parallax_min_points,
-                                                params.parallax_share * k))
+                       second_gap_px=rival.gap_px)
     if repeats(rival, rival_nfa, k, evidence.footprint_area_px, est.transform, params):
         return evidence, (f"ambiguous: a second transform of the same scale and angle, "
                           f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
