@@ -880,8 +880,9 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
-#: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 29-31 s
-#: (docs/design/SPEED.md), on 1 MP images a median 2-5 s
+#: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 11.3-11.5 s as a
+#: whole process, 2.1 s with ``--no-views`` (docs/design/SPEED.md), on 1 MP images a median
+#: 2-5 s
 SLOW_NO_HINT_S = 10.0
 
 
@@ -891,7 +892,7 @@ def slow_no_hint(result: MatchResult) -> str:
     if result.matched or not views or result.seconds < SLOW_NO_HINT_S:
         return ""
     return ("most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
-            "about 10 times sooner, and only pairs that a tilted view alone solves are missed "
+            "about 5 times sooner, and only pairs that a tilted view alone solves are missed "
             "(--time-budget S bounds it instead)")
 
 
