@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO_OUT := out/demo
 
-.PHONY: setup bytecode demo test lint bench bench-real repeatability clean
+.PHONY: setup bytecode demo test lint regress bench bench-real repeatability clean
 
 setup: $(STAMP)
 
@@ -34,6 +34,16 @@ test: $(STAMP) bytecode
 ## check the code with ruff (the rules: pyproject.toml, [tool.ruff])
 lint: $(STAMP)
 	$(BIN)/ruff check .
+
+## the regression gate (needs ../shared): every kind of pair, both orders, against the baseline
+## committed in tests/regress/baseline.json; exit 1 on a pair lost or a new wrong claim. About
+## 15 minutes; SLICE=ci runs the zoom pairs only (about 3 minutes, as .ci/run does); UPDATE=1
+## writes this run into the baseline once a change is accepted; TREE=DIR runs the matcher of
+## another checkout (docs/REGRESS.md)
+regress: $(STAMP)
+	$(BIN)/scalematch lab regress $(if $(SLICE),--slice $(SLICE)) \
+	  $(if $(UPDATE),--update --write-doc docs/REGRESS.md) \
+	  $(if $(TREE),--tree $(TREE)) $(if $(IF_SHARED),--if-shared)
 
 ## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
 bench: $(STAMP)

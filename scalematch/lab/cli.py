@@ -20,6 +20,7 @@ LAB_COMMANDS = {
     "descriptor-study": ("scalematch.lab.descriptor_study", "descriptor_study_command"),
     "covariance": ("scalematch.lab.covariance", "covariance_command"),
     "nulls": ("scalematch.lab.nulls", "nulls_command"),
+    "regress": ("scalematch.lab.regress", "regress_command"),
 }
 
 

@@ -787,3 +787,105 @@ def smooth_scene(shape: Tuple[int, int] = (480, 640), seed: int = 0) -> np.ndarr
         cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(30, 90)
         img += rng.uniform(-40, 40) * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * r * r))
     return np.clip(img + rng.normal(0, 1.0, img.shape), 0, 255).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# Crops with large flat or clipped regions (EVALUATION.md step 5): scene the no-data rule must
+# not take for a canvas, and few points to match with
+# --------------------------------------------------------------------------------------------
+
+#: What fills the flat region of a flat pair's photo: ``clipped`` highlights (an overexposed
+#: sky: the exposure rises across a soft edge until everything but the darkest pixels reaches
+#: 255), a ``night`` sky (the scene crushed to a few grey levels), a studio ``backdrop`` (one
+#: grey level, exactly flat, behind the scene's outline) and a plain ``sky`` (a smooth gradient
+#: with sensor noise: flat, but not one level)
+FLAT_KINDS = ("clipped", "night", "backdrop", "sky")
+#: Share of the high crop the flat region covers, drawn in [lo, hi)
+FLAT_SHARE_RANGE = (0.30, 0.50)
+#: Ratios of the flat pairs (EVALUATION.md step 5: "at ratios 8 to 16 where points are scarce")
+FLAT_RATIOS = (8.0, 10.0, 12.0, 16.0)
+#: The region's outline wanders this far (photo px, peak) from a straight line, in
+#: ``FLAT_WAVES`` sinusoids of wavelengths drawn in ``FLAT_WAVELENGTH_PX``: the outline of
+#: rooftops, trees or a subject rather than a ruler's edge
+FLAT_WAVE_PX = (25.0, 70.0)
+FLAT_WAVES = 4
+FLAT_WAVELENGTH_PX = (200.0, 900.0)
+#: Width (photo px) of the soft edge across which a clipped or night exposure sets in
+FLAT_EDGE_PX = 12.0
+#: Exposure gain beyond a clipped region's edge (only pixels under 255 / (1 + gain) stay below
+#: the clip: dark branches against a blown-out sky) and the factor of a night region
+CLIP_GAIN = 8.0
+NIGHT_FACTOR = 0.02
+#: Grey level of a backdrop, drawn in [lo, hi); a sky's gradient runs between these levels
+BACKDROP_LEVEL_RANGE = (200.0, 250.0)
+SKY_LEVELS = (170.0, 225.0)
+#: Sensor noise of a plain sky, grey levels (std)
+SKY_NOISE_STD = 1.0
+
+
+def flat_field(shape: Tuple[int, int], crop: Tuple[int, int, int, int], share: float,
+               rng: np.random.Generator) -> np.ndarray:
+    """(H, W) float32 signed distance, photo px, to a wavy outline: positive on the flat side.
+
+    The outline runs across the photo at a random direction, wanders ``FLAT_WAVE_PX`` about a
+    straight line, and is placed so that ``share`` of the crop ``(x, y, w, h)`` lies on the flat
+    side (which then touches the crop's border). ``rng`` draws the direction, the amplitude,
+    then each wave's wavelength and phase.
+    """
+    h, w = shape
+    theta = float(rng.uniform(0.0, 2.0 * math.pi))
+    amp = float(rng.uniform(*FLAT_WAVE_PX))
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    u = xx * math.cos(theta) + yy * math.sin(theta)
+    v = -xx * math.sin(theta) + yy * math.cos(theta)
+    wave = np.zeros_like(u)
+    for _ in range(FLAT_WAVES):
+        length = float(rng.uniform(*FLAT_WAVELENGTH_PX))
+        phase = float(rng.uniform(0.0, 2.0 * math.pi))
+        wave += np.sin(v * np.float32(2.0 * math.pi / length) + np.float32(phase))
+    d = u + np.float32(amp / math.sqrt(FLAT_WAVES / 2.0)) * wave
+    x, y, cw, ch = crop
+    level = float(np.quantile(d[y:y + ch, x:x + cw], 1.0 - share))
+    return d - np.float32(level)
+
+
+def flatten(photo: np.ndarray, d: np.ndarray, kind: str, rng: np.random.Generator) -> np.ndarray:
+    """``photo`` with the flat side of ``d`` (``flat_field``) made flat as ``kind`` says
+    (``FLAT_KINDS``), rounded to whole grey levels in 0..255, float32. ``rng`` draws a
+    backdrop's level or a sky's noise."""
+    img = np.asarray(photo, np.float32)
+    if kind in ("clipped", "night"):
+        step = 1.0 / (1.0 + np.exp(np.clip(-d / np.float32(FLAT_EDGE_PX / 4.0), -50, 50)))
+        factor = 1.0 + CLIP_GAIN * step if kind == "clipped" else 1.0 - (1.0 - NIGHT_FACTOR) * step
+        out = img * factor
+    elif kind == "backdrop":
+        inside = np.clip(d + 0.5, 0.0, 1.0)  # one pixel of anti-aliasing along the outline
+        out = img * (1.0 - inside) + np.float32(rng.uniform(*BACKDROP_LEVEL_RANGE)) * inside
+    elif kind == "sky":
+        inside = np.clip(d + 0.5, 0.0, 1.0)
+        lo, hi = SKY_LEVELS
+        ramp = np.float32(lo) + np.float32(hi - lo) * np.clip(d / max(float(d.max()), 1.0), 0, 1)
+        sky = ramp + rng.normal(0.0, SKY_NOISE_STD, d.shape).astype(np.float32)
+        out = img * (1.0 - inside) + sky * inside
+    else:
+        raise ValueError(f"kind must be one of {FLAT_KINDS}, got {kind!r}")
+    return np.clip(np.rint(out), 0, 255).astype(np.float32)
+
+
+def make_flat_pair(photo: np.ndarray, ratio: float, kind: str, rng: np.random.Generator,
+                   high_size: Optional[Tuple[int, int]] = None, low_max: Tuple[int, int] = LOW_MAX,
+                   source: str = "") -> ZoomPair:
+    """A zoom pair whose high crop is ``FLAT_SHARE_RANGE`` flat or clipped (EVALUATION.md step
+    5), with exact ground truth.
+
+    The crop is chosen as ``make_zoom_pair`` chooses it (the most textured of 6, so the rest of
+    it holds texture); the photo is then flattened beyond a wavy outline across the crop
+    (``flat_field``, ``flatten``), and the pair is cut from the flattened photo
+    (``zoom_pair_from_crop``): the low image sees the same flat region. ``rng`` draws the crop
+    positions, the share, the outline, the fill, then what ``zoom_pair_from_crop`` draws.
+    """
+    photo = np.asarray(photo, np.float32)
+    crop = choose_crop(photo, ratio, rng, high_size or high_size_for(ratio))
+    share = float(rng.uniform(*FLAT_SHARE_RANGE))
+    flat = flatten(photo, flat_field(photo.shape, crop, share, rng), kind, rng)
+    return zoom_pair_from_crop(flat, crop, ratio, rng, low_max, source)

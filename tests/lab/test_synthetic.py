@@ -189,3 +189,28 @@ def test_an_oblique_pair_says_when_the_photo_holds_no_crop(raccoon):
     with pytest.raises(ValueError, match="holds no"):
         make_oblique_pair(raccoon[:100, :100], 2.0, 8.0, np.random.default_rng(0),
                           high_size=(180, 180))
+
+
+@pytest.mark.parametrize("kind", ["clipped", "night", "backdrop", "sky"])
+def test_a_flat_pair_has_its_flat_region_and_an_exact_truth(raccoon, kind):
+    """The finer image is 30-50 % flat (clipped at 255, crushed dark, one backdrop level, a
+    smooth sky) behind a wavy outline, the coarser image sees the same region, and the truth
+    lines the pixels up as a plain zoom pair's does."""
+    from scalematch.lab.synthetic import FLAT_SHARE_RANGE, make_flat_pair
+
+    photo = cv2.resize(raccoon, (2048, 1536), interpolation=cv2.INTER_CUBIC)
+    pair = make_flat_pair(photo, 2.0, kind, np.random.default_rng(5), high_size=(320, 240))
+    hi = pair.high
+    gx = cv2.Sobel(hi, cv2.CV_32F, 1, 0) / 8
+    gy = cv2.Sobel(hi, cv2.CV_32F, 0, 1) / 8
+    flat = np.hypot(gx, gy) < {"clipped": 0.5, "night": 0.5, "backdrop": 0.5, "sky": 3.0}[kind]
+    lo, hi_share = FLAT_SHARE_RANGE
+    assert lo - 0.1 < flat.mean() < hi_share + 0.1
+    if kind == "clipped":
+        assert (pair.high == 255).mean() > lo - 0.1
+    lh, lw = pair.low.shape
+    blurred = cv2.GaussianBlur(pair.high, (0, 0), 0.5 * math.sqrt(3.0))
+    warped = cv2.warpAffine(blurred, pair.truth, (lw, lh), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(np.ones_like(pair.high), pair.truth, (lw, lh), flags=cv2.INTER_NEAREST)
+    mask = cv2.erode(mask, np.ones((7, 7), np.uint8)) > 0
+    assert _ncc(warped[mask], pair.low[mask]) > 0.95
