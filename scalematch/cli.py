@@ -619,6 +619,15 @@ def matching_options(f: Callable) -> Callable:
                           "sooner, but one only the other order or a tilted view would solve is "
                           "missed, and the answer then depends on the machine's speed. "
                           "[default: no limit]"),
+        click.option("--nodata", default=None, metavar="auto|none|VALUE",
+                     help="Where an image shows no scene: 'auto' finds a canvas left by a "
+                          "rotation or a warp (a region of one grey level at the border, "
+                          "bounded by the picture's straight, slanted edges); VALUE declares a "
+                          "grey level that is no-data wherever it covers a region (as GDAL "
+                          "rasters declare theirs; 0-255 as the image's 8-bit levels); 'none': "
+                          "every pixel is scene. No-data keeps no points and is left out of "
+                          "the pixel tests; a clipped sky or a backdrop is scene. The JSON's "
+                          "low.nodata and high.nodata say what was taken. [default: auto]"),
         click.option("--working-size", type=click.IntRange(min=0), default=None, metavar="PX",
                      help="Match an image whose longer side exceeds PX at that size and give "
                           "the answer in its own pixels (0: always full size; the high image "
@@ -685,6 +694,11 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
             if not budget > 0:
                 raise ValueError(f"--time-budget must be more than 0 seconds, got {budget:g}")
             config = set_path(config, "time_budget_s", float(budget))
+        nodata = kwargs.pop("nodata")
+        if nodata is not None:
+            from .stages.nodata import parse_rule
+
+            config = set_path(config, "nodata.rule", parse_rule(nodata))
         working = kwargs.pop("working_size")
         if working is not None and 0 < working < MIN_WORKING_SIDE_PX:
             raise ValueError(f"--working-size must be 0 (always full size) or at least "

@@ -17,6 +17,7 @@ from .stages.detector import HarrisParams, PAPER_SCALES
 from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.guided import GuidedParams
 from .stages.matcher import MatcherParams
+from .stages.nodata import NoDataParams
 from .stages.pixelcheck import PixelParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
@@ -116,6 +117,9 @@ class Config:
     #: simulated tilted views of the finer image, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)
     model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
+    #: where an image shows no scene (a canvas's corners, a declared no-data value): kept out of
+    #: detection and of the pixel tests (``stages.nodata``; ``--nodata``)
+    nodata: NoDataParams = field(default_factory=NoDataParams)
     #: longest side, px, at which the low image is matched (None: its full size). A larger low
     #: image is shrunk to it (INTER_AREA) and the answer given in its own pixels
     #: (``scalematch.working``). The low detector keeps at most 12,000 points anyway; at 2048 px

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 def internal_error(exc: BaseException) -> str:
     """One line for an unexpected error: "internal error, " and what it was; "out of memory"
-    for a ``MemoryError`` or OpenCV's "Insufficient memory".
+    for a ``MemoryError``, OpenCV's "Insufficient memory" or a C++ ``std::bad_alloc`` that
+    OpenCV passes on.
 
     >>> internal_error(MemoryError())
     'internal error, out of memory (MemoryError)'
+    >>> internal_error(RuntimeError("std::bad_alloc"))
+    'internal error, out of memory (RuntimeError: std::bad_alloc)'
     >>> internal_error(RuntimeError("a bug\\non two lines"))
     'internal error, RuntimeError: a bug on two lines'
     """
@@ -19,6 +22,6 @@ def internal_error(exc: BaseException) -> str:
     kind = f"{type(exc).__module__}.{kind}" if type(exc).__module__ == "cv2" else kind
     text = " ".join(str(exc).split())  # OpenCV's messages span lines
     what = f"{kind}: {text}" if text else kind
-    if isinstance(exc, MemoryError) or "Insufficient memory" in text:
+    if isinstance(exc, MemoryError) or "Insufficient memory" in text or "bad_alloc" in text:
         what = f"out of memory ({what})"
     return f"internal error, {what}"

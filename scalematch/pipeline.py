@@ -26,7 +26,8 @@ import numpy as np
 from .config import Config
 from .geometry import answer_parts, finer_to_coarser
 from .imageio import grey_levels
-from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, StepRecord
+from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
+                     StepRecord)
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
@@ -36,7 +37,7 @@ from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detec
                               gradients, image_contrast)
 from .stages.estimator import Estimate, FitSpec, estimate, model_of, residuals
 from .stages.matcher import distinct_pairs, match_descriptors
-from .stages.nodata import distance_inside, with_nan
+from .stages.nodata import NoData, distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
 from .stages.probe import probe_scores, select_scales
 from .stages.refit import (candidates_in_images, guided_refit, pooled_refit, refit_in_high,
@@ -121,11 +122,17 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     attempts, records, timings, stopped = run_plan(search, plan, t0)
     search.meter.finish()
     timings["total"] = time.perf_counter() - t0
-    result = in_original(build_result(search, attempts, tuple(records), plan, stopped, timings),
-                         work, config)
+    result = replace(in_original(build_result(search, attempts, tuple(records), plan, stopped,
+                                              timings), work, config),
+                     nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
     if result.matched and not model_of(config.model).has_ratio:
         result = anchored(result, low, high, config, decoded_factors)
     return result
+
+
+def nodata_seen(nodata: NoData) -> NoDataSeen:
+    """The record of what an image showed of no-data (the JSON's ``low.nodata``)."""
+    return NoDataSeen(nodata.value, nodata.share)
 
 
 #: The model a fundamental matrix's plane map is searched with (:func:`anchored`): the

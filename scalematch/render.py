@@ -29,7 +29,7 @@ from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
 from .stages.decision import disagrees
 from .stages.estimator import model_of
-from .stages.nodata import valid_mask
+from .stages.nodata import NoDataParams, valid_mask
 from .stages.scalespace import CAMERA_BLUR_PX
 from .working import in_decoded
 
@@ -89,8 +89,8 @@ OUTPUT_FILES = ("overlay.png", "matches.png", "scales.png", "matches.csv")
 
 # --------------------------------------------------------------------------- helpers
 
-def _warp_high(high_grey: np.ndarray, transform: np.ndarray,
-               size: Tuple[int, int]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _warp_high(high_grey: np.ndarray, transform: np.ndarray, size: Tuple[int, int],
+               nodata: NoDataParams = NoDataParams()) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """high warped onto a ``size`` (w, h) canvas by ``transform``: (image, footprint mask 0/255,
     mask 0/255 of where high shows the scene, not a no-data canvas: ``nodata.valid_mask``).
 
@@ -111,7 +111,7 @@ def _warp_high(high_grey: np.ndarray, transform: np.ndarray,
         back = as_matrix3(resize_map(1 / fx, 1 / fy))
         t3 = t3 @ back
     ones = np.full(img.shape[:2], 255, np.uint8)
-    valid = valid_mask(img)
+    valid = valid_mask(img, nodata)
     scene = ones if valid is None else valid.astype(np.uint8) * 255
 
     def warp(a: np.ndarray, flags: int) -> np.ndarray:
@@ -291,7 +291,7 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     lines = [verdict(result), evidence_line(result)]
     outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
     if result.matched and t is not None and model_of(result.model).has_ratio:
-        out, outline, legend = _blended(low_grey, high, t, enlarged_by)
+        out, outline, legend = _blended(low_grey, high, t, enlarged_by, _nodata_rule(result))
         lines.append(legend)
         plan = inset_plan(outline, out.shape[:2]) if outline is not None else None
         if plan is not None:
@@ -309,20 +309,26 @@ def _outline_thickness(hh: int, ww: int) -> int:
     return max(2, int(round(min(hh, ww) * OUTLINE_PER_PX)))
 
 
-def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray, enlarged_by: int = 1):
+def _nodata_rule(result: MatchResult) -> NoDataParams:
+    """The no-data rule the match ran with (the default when its config is not a Config)."""
+    return getattr(result.config, "nodata", None) or NoDataParams()
+
+
+def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray, enlarged_by: int = 1,
+             nodata: NoDataParams = NoDataParams()):
     """(picture, outline, legend): the high image warped by ``t`` onto ``low_grey`` in false
     colour, the low image dimmed outside the footprint; the footprint's outline to draw over
     the caption (None: no footprint), and the caption line that explains the colours."""
     hh, ww = low_grey.shape[:2]
     high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
-    warped, mask, scene = _warp_high(high_grey, t, (ww, hh))
+    warped, mask, scene = _warp_high(high_grey, t, (ww, hh), nodata)
     if enlarged_by > 1:  # the low image's camera blur, in the enlarged grid's px
         warped = cv2.GaussianBlur(warped, (0, 0), CAMERA_BLUR_PX * enlarged_by)
     inside = mask > 0
     # grey where they agree: the levels matched where both show the scene (a canvas's black
     # corners would pull the gain and offset, and the whole overlay would read as one colour)
     both = inside & (scene > 0)
-    low_valid = valid_mask(low_grey)
+    low_valid = valid_mask(low_grey, nodata)
     if low_valid is not None:
         both &= low_valid
     warped = match_grey_levels(warped, low_grey, both if both.any() else inside)

@@ -42,6 +42,15 @@ class Direction(str, enum.Enum):
 
 
 @dataclass(frozen=True)
+class NoDataSeen:
+    """What one image showed of no-data (:mod:`scalematch.stages.nodata`): JSON ``low.nodata``
+    and ``high.nodata``."""
+
+    value: float = math.nan  #: the grey level taken as no-data (NaN, null in the JSON: none)
+    share: float = 0.0  #: share of the image taken as no-data, 0..1
+
+
+@dataclass(frozen=True)
 class Evidence:
     """The figures behind the decision (JSON ``evidence``); NaN where a figure was not reached.
 
@@ -212,6 +221,8 @@ class MatchResult:
     #: a "no": its best candidate and the test that refused it (None when matched, or when no
     #: transform was found)
     rejected: Optional[Rejected] = field(default=None, repr=False)
+    #: what the first and the second image given showed of no-data
+    nodata: Tuple[NoDataSeen, NoDataSeen] = (NoDataSeen(), NoDataSeen())
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "order", Direction(self.order))
@@ -255,15 +266,17 @@ class MatchResult:
         ...                 best_scale=2.0, inliers=np.zeros((0, 4)), scales=(),
         ...                 timings={"total": 0.5}, config={})
         >>> d = r.to_dict("a.png", "b.png", (120, 160), (480, 640))
-        >>> d["matched"], d["reason"], d["resolution_ratio"], d["high"]
-        (False, 'too few inliers', None, {'path': 'b.png', 'width': 640, 'height': 480})
-        >>> r.to_dict()["low"]  # arrays matched in Python: nothing to record
-        {'path': None, 'width': None, 'height': None}
+        >>> d["matched"], d["reason"], d["resolution_ratio"], d["high"]["width"]
+        (False, 'too few inliers', None, 640)
+        >>> r.to_dict()["low"]  # arrays matched in Python: no path or size to record
+        {'path': None, 'width': None, 'height': None, 'nodata': {'value': None, 'share': 0.0}}
         """
         from . import __version__
 
+        nd_low, nd_high = self.nodata
         if self.order == Direction.SWAPPED:
             low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
+            nd_low, nd_high = nd_high, nd_low
         t = self.transform
         return {
             "matched": bool(self.matched),
@@ -287,8 +300,8 @@ class MatchResult:
             "covariance_used": self.covariance_used or None,
             "rejected": None if self.rejected is None else self.rejected.to_dict(),
             "version": __version__,
-            "low": _image_record(low_path, low_shape),
-            "high": _image_record(high_path, high_shape),
+            "low": _image_record(low_path, low_shape, nd_low),
+            "high": _image_record(high_path, high_shape, nd_high),
         }
 
     def to_json(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
@@ -299,11 +312,15 @@ class MatchResult:
         return dumps(self.to_dict(low_path, high_path, low_shape, high_shape), indent) + "\n"
 
 
-def _image_record(path: Optional[str], shape: Optional[Sequence[int]]) -> Dict[str, Any]:
-    """An image's "low"/"high" object: its path and size, null where not known."""
+def _image_record(path: Optional[str], shape: Optional[Sequence[int]],
+                  nodata: NoDataSeen = NoDataSeen()) -> Dict[str, Any]:
+    """An image's "low"/"high" object: its path and size, null where not known, and what it
+    showed of no-data."""
     return {"path": None if path is None else str(path),
             "width": None if shape is None else int(shape[1]),
-            "height": None if shape is None else int(shape[0])}
+            "height": None if shape is None else int(shape[0]),
+            "nodata": {"value": to_jsonable(float(nodata.value)),
+                       "share": round(float(nodata.share), 4)}}
 
 
 def error_record(low_path: str, high_path: str, error: str, kind: str, config: Any,

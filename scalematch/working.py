@@ -33,7 +33,7 @@ from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarse
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, read_reduced
 from .result import Direction, MatchResult
 from .stages.estimator import model_of
-from .stages.nodata import valid_mask, with_nan
+from .stages.nodata import NoData, find_nodata, with_nan
 
 
 def working_factor(shape: Tuple[int, ...], max_side: Optional[int]) -> float:
@@ -59,10 +59,20 @@ class WorkImages:
     f_low: float
     f_high: float  #: ``high`` is the second image shrunk by this (the same)
     scales: Dict[Direction, Tuple[float, ...]] = field(repr=False)  #: each direction's scales
-    #: where each image shows the scene (:func:`scalematch.stages.nodata.valid_mask` at working
-    #: size; None: everywhere)
-    low_valid: Optional[np.ndarray] = field(default=None, repr=False)
-    high_valid: Optional[np.ndarray] = field(default=None, repr=False)
+    #: what each image shows of no-data at working size (:func:`scalematch.stages.nodata.
+    #: find_nodata`): where it shows the scene, the no-data level and share
+    low_nodata: NoData = field(default_factory=NoData.none, repr=False)
+    high_nodata: NoData = field(default_factory=NoData.none, repr=False)
+
+    @property
+    def low_valid(self) -> Optional[np.ndarray]:
+        """Where the first image shows the scene (None: everywhere)."""
+        return self.low_nodata.valid
+
+    @property
+    def high_valid(self) -> Optional[np.ndarray]:
+        """Where the second image shows the scene (None: everywhere)."""
+        return self.high_nodata.valid
 
     def coarser_finer(self, direction: Direction) -> Tuple[np.ndarray, np.ndarray]:
         """(coarser, finer) images of ``direction``."""
@@ -112,7 +122,7 @@ def at_working_size(low: np.ndarray, high: np.ndarray, config,
     low = shrink(low, f_low) if f_low > 1.0 else low
     high = shrink(high, f_high) if f_high > 1.0 else high
     return WorkImages(low, high, t_low, t_high, direction_scales(config.scales, t_low, t_high),
-                      valid_mask(low), valid_mask(high))
+                      find_nodata(low, config.nodata), find_nodata(high, config.nodata))
 
 
 def direction_scales(scales: Sequence[float], f_low: float,

@@ -146,6 +146,22 @@ def test_set_on_a_group_is_a_usage_error_naming_its_parameters(item, needle):
         build_config("default", None, None, None, {}, [item])
 
 
+def test_nodata_takes_auto_none_or_a_grey_level_and_the_json_records_it(tmp_path):
+    """``--nodata`` as GDAL declares no-data: a level, or "none"; a word is a usage error."""
+    bad = run(DEMO_LOW, DEMO_HIGH, "--nodata", "black")
+    assert bad.exit_code == 2
+    assert_one_line_error(bad, "--nodata must be auto, none or a grey level")
+    data = json.loads(run(DEMO_LOW, DEMO_HIGH, "--nodata", "none", "--json", "-", "-q").stdout)
+    assert data["config"]["nodata"]["rule"] == "none" and data["matched"]
+    assert data["low"]["nodata"] == data["high"]["nodata"] == {"value": None, "share": 0.0}
+    auto = json.loads(run(DEMO_LOW, DEMO_HIGH, "--json", "-", "-q").stdout)
+    # the demo's low image is the shrunk photo turned 25 degrees on a black canvas
+    assert auto["low"]["nodata"]["value"] == 0.0 and 0.3 < auto["low"]["nodata"]["share"] < 0.5
+    level = json.loads(run(DEMO_LOW, DEMO_HIGH, "--set", "nodata.rule=0", "--json", "-",
+                           "-q").stdout)
+    assert level["config"]["nodata"]["rule"] == 0.0 and level["matched"]
+
+
 def test_version():
     result = run("--version")
     assert result.exit_code == 0 and result.output.strip() == f"scalematch {__version__}"
@@ -359,7 +375,8 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     assert data["matched"] is False and data["reason"] and data["transform"] is None
     assert data["n_inliers"] == data["inliers"] == 0 and data["matches"] == []
     assert data["best_scale"] is None and data["resolution_ratio"] is None  # as GUIDE says
-    assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120}
+    assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120,
+                           "nodata": {"value": None, "share": 0.0}}
     assert data["high"]["width"] == 240 and data["version"] == __version__
     assert data["config"]["model"] == "similarity"
     for name in ("overlay.png", "scales.png", "matches.csv"):

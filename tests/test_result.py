@@ -53,7 +53,8 @@ def test_the_json_of_a_hand_built_result_has_plain_types_and_no_nan():
     assert d["order"] == "given" and d["matched"] is True and d["reason"] is None
     assert d["transform"] == [[0.5, 0.0, 5.0], [0.0, 0.5, -3.0]]
     assert d["scales"][0]["ratio"] is None  # nan -> null
-    assert d["low"] == {"path": "low.png", "width": 200, "height": 100}
+    assert d["low"] == {"path": "low.png", "width": 200, "height": 100,
+                        "nodata": {"value": None, "share": 0.0}}
     text = hand_result().to_json("low.png", "high.png", (100, 200), (400, 800))
     assert text.endswith("}\n") and json.loads(text) == d
     assert "\n" not in hand_result().to_json("a", "b", (1, 1), (1, 1), indent=None).rstrip("\n")
@@ -77,5 +78,6 @@ def test_to_dict_without_paths_or_sizes_writes_null_there():
     """Arrays matched in Python have no file to name: the record still comes, null there."""
     r = MatchResult(matched=False, model="similarity", reason="too few inliers")
     d = r.to_dict()
-    assert d["low"] == d["high"] == {"path": None, "width": None, "height": None}
+    assert d["low"] == d["high"] == {"path": None, "width": None, "height": None,
+                                     "nodata": {"value": None, "share": 0.0}}
     assert json.loads(r.to_json())["matched"] is False
