@@ -249,10 +249,21 @@ class Titles:
     ylabel: str = ""
 
 
+@dataclass(frozen=True)
+class Marks:
+    """Which bars of a bar chart stand out: one highlighted (the winning scale), some muted."""
+
+    #: index (into the labels) of the bar drawn in the highlight colour; None or out of range
+    #: highlights nothing
+    highlight: Optional[int] = None
+    #: indices of the bars drawn in a light grey (shown, but not in the running)
+    muted: Sequence[int] = ()
+
+
 def bar_chart(labels: Sequence[object], values: Sequence[float],
               path: Optional[PathLike] = None, titles: Titles = Titles(),
-              highlight: Optional[int] = None, size: Tuple[int, int] = DEFAULT_SIZE,
-              annotate: bool = True, muted: Sequence[int] = ()) -> np.ndarray:
+              marks: Marks = Marks(), size: Tuple[int, int] = DEFAULT_SIZE,
+              annotate: bool = True) -> np.ndarray:
     """A bar chart over categories (e.g. inliers against scale), one bar optionally highlighted.
 
     Parameters
@@ -265,21 +276,19 @@ def bar_chart(labels: Sequence[object], values: Sequence[float],
         Where to write the image; None writes nothing.
     titles : Titles
         The chart's title and its axes' titles.
-    highlight : int, optional
-        Index (into ``labels``) of the bar drawn in the highlight colour, e.g. the winning scale;
-        None or out of range highlights nothing.
+    marks : Marks
+        The bar highlighted (e.g. the winning scale) and the bars muted.
     size : (int, int)
         Canvas (width, height), px.
     annotate : bool
         Write each bar's value above it.
-    muted : sequence of int
-        Indices of the bars drawn in a light grey (shown, but not in the running).
 
     Returns
     -------
     (H, W, 3) uint8 array
         The chart, BGR.
     """
+    highlight, muted = marks.highlight, marks.muted
     vals = np.asarray(values, dtype=np.float64).ravel()
     labs = [f"{v:g}" if isinstance(v, (float, np.floating)) else str(v) for v in labels]
     if len(labs) != vals.size:

@@ -69,65 +69,52 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
           decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
     """Match a low-resolution image against a high-resolution one of the same scene.
 
-    The search runs progressively and stops at the first reliable match (MODS, Mishkin et al.
-    2015): the given order (``low`` coarser than ``high``) on the image itself; then, with
-    ``config.order == "auto"``, the other order; then each pass of simulated tilted views of
-    the finer image (``config.views``), in both orders (:func:`scalematch.search.search_plan`).
-    The a-contrario test counts every search made, so trying more cannot make a chance
-    transform look reliable. With ``config.time_budget_s`` no step starts once it is spent
-    (the first always runs; ``evidence.stopped`` is then "time budget").
+    ``low``, ``high``: (H, W) grey images (8-bit levels, 16-bit integers or floats in [0, 1];
+    ``ValueError`` for what cannot match). ``config``: every parameter, recorded in the result.
+    ``progress(done, total)`` follows the search plan. ``decoded_factors``: each image is its
+    file's shrunk by this factor (a JPEG decoded reduced); the answer is in the files' pixels.
 
-    An image longer than its working size (``config.low_max_side``, ``config.high_max_side``)
-    is matched shrunk and the answer given in its own pixels (:mod:`scalematch.working`).
-    Independent pieces of work run on as many threads as OpenCV uses
-    (:mod:`scalematch.stages.threads`); the answer does not depend on them.
-
-    Parameters
-    ----------
-    low, high : (H, W) arrays
-        Grey images in 8-bit grey levels (see :func:`scalematch.read_grey`), 16-bit integers
-        (scaled by 255/65535), or floats in [0, 1] (scaled by 255); ``ValueError`` for bool,
-        NaN or constant arrays, more than two dimensions, a side under 24 px.
-    config : Config
-        Every parameter; recorded in the result (``TypeError`` for anything else).
-    progress : callable, optional
-        ``progress(done, total)`` as the search goes; ``total`` is the plan's length, and
-        ``done`` reaches it when the search ends (early or not).
-    decoded_factors : (float, float)
-        Each image given is its file's image shrunk by this factor, centre-aligned: a JPEG
-        decoded at a reduced size (:func:`scalematch.imageio.read_reduced`, within the limits
-        of :func:`scalematch.working.decode_sides`). The answer is then in the files' pixels.
-
-    Returns
-    -------
-    MatchResult
-        ``matched`` False with a ``reason`` when the evidence is too weak: a wrong transform
-        reported as a match is the worst outcome, so the decision errs on the side of no.
-        ``order`` says whether the images were found in the order given; ``transform`` always
-        maps the finer image's pixels to the coarser image's; ``search`` lists the steps run.
+    Returns a :class:`MatchResult`: ``matched`` False with a ``reason`` when the evidence is too
+    weak (a wrong transform reported as a match is the worst outcome); ``transform`` maps the
+    finer image's pixels to the coarser one's, ``order`` says which image is the finer.
     """
+    check_config(config)
+    t0 = time.perf_counter()
+    # 1. The images at their working size, checked at the door; their no-data found
+    #    (working.py, stages/nodata.py)
+    work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
+                           decoded_factors)
+    # 2. The plan (search.py, MODS): the given order, the other, then passes of tilted views
+    plan = search_plan(config, work.scales, finer_sides(work))
+    # 3. What every step shares: the mode's strategy (modes.py), the caches, the progress meter
+    search = Search(work, config, mode_of(config), Memo(),
+                    Meter(progress, sum(step.cost for step in plan)))
+    # 4. Each step until one decides: the scale-space of the finer image and Harris points at
+    #    every scale, descriptors, the probe, then matching, constraints and RANSAC at the
+    #    scales it chose, and the decision (run_step, stages/decision.py)
+    run = run_plan(search, plan, t0)
+    # 5. The answer: the winner refit, judged by its pixels and grown; or a "no" and why
+    result = build_result(search, run)
+    # 6. In the images' own pixels, with what each showed of no-data
+    result = replace(in_original(result, work, config),
+                     nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
+    # 7. A fundamental matrix is claimed only with a plane map that lies on it
+    if result.matched and not model_of(config.model).has_ratio:
+        result = anchored(result, low, high, config, decoded_factors)
+    return result
+
+
+def check_config(config: Config) -> None:
+    """``TypeError`` unless ``config`` is a :class:`Config`; the process's BLAS warmed up."""
     if not isinstance(config, Config):
         raise TypeError(f"config must be a scalematch.Config, not {type(config).__name__}: "
                         f"Config(model=\"affine\") or Config.preset(\"no-views\"), say")
     warm_up_blas()
-    t0 = time.perf_counter()
-    # the one check at the door, before anything is shrunk: ValueError for what cannot match
-    work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
-                           decoded_factors)
-    plan = search_plan(config, work.scales, {d: max(d.coarser_finer(work.low, work.high)[1].shape)
-                                             for d in Direction})
-    # the mode's strategy chosen once (the paper's reads Lambda)
-    search = Search(work, config, mode_of(config), Memo(),
-                    Meter(progress, sum(step.cost for step in plan)))
-    attempts, records, timings, stopped = run_plan(search, plan, t0)
-    search.meter.finish()
-    timings["total"] = time.perf_counter() - t0
-    result = replace(in_original(build_result(search, attempts, tuple(records), plan, stopped,
-                                              timings), work, config),
-                     nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
-    if result.matched and not model_of(config.model).has_ratio:
-        result = anchored(result, low, high, config, decoded_factors)
-    return result
+
+
+def finer_sides(work: WorkImages) -> Dict[Direction, int]:
+    """Each direction's finer image's longer side at working size, px (its reach)."""
+    return {d: max(d.coarser_finer(work.low, work.high)[1].shape) for d in Direction}
 
 
 def nodata_seen(nodata: NoData) -> NoDataSeen:
@@ -185,12 +172,22 @@ def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Con
                    order=Direction.GIVEN, rejected=rejected)
 
 
-def run_plan(search: "Search", plan: Sequence[Step], t0: float
-             ) -> Tuple[List[Attempt], List[StepRecord], Dict[str, float], Optional[str]]:
+@dataclass(frozen=True)
+class SearchRun:
+    """What running a search plan gave (:func:`run_plan`): every attempt, the steps' records,
+    the plan, why it stopped, and seconds per step by name (and "total")."""
+
+    attempts: Tuple["Attempt", ...]
+    records: Tuple[StepRecord, ...]
+    plan: Tuple[Step, ...]
+    stopped: str
+    timings: Dict[str, float]
+
+
+def run_plan(search: "Search", plan: Sequence[Step], t0: float) -> SearchRun:
     """Run the steps of ``plan`` in order, each unless an earlier attempt makes it needless
     (:func:`scalematch.search.skips`), until one stops the search or the time budget (counted
-    from ``t0``, ``time.perf_counter``) is spent: (attempts, the steps' records, seconds per
-    step by name, why the search stopped)."""
+    from ``t0``, ``time.perf_counter``) is spent."""
     config = search.config
     attempts: List[Attempt] = []
     records: List[StepRecord] = []
@@ -211,7 +208,9 @@ def run_plan(search: "Search", plan: Sequence[Step], t0: float
         if stopped:
             break
     search.memo.forget_views()
-    return attempts, records, timings, stopped
+    search.meter.finish()
+    timings["total"] = time.perf_counter() - t0
+    return SearchRun(tuple(attempts), tuple(records), tuple(plan), stopped, timings)
 
 
 @functools.cache
@@ -498,29 +497,37 @@ class Detected(NamedTuple):
     pending: bool = False
 
 
+class Reuse(NamedTuple):
+    """What the detection of a view takes from the rest of the search, or gives it: none of it
+    changes the points found (:func:`detect_view`).
+
+    ``known``: the same image described as the coarser one (the other direction), whose points
+    give this view's s = 1 points when it is the image itself (:func:`shares_first_level`).
+    ``measured``: the finer image's contrast (:func:`scalematch.stages.detector.image_contrast`),
+    when the detector adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used
+    when the view is the image itself. ``every``: with the probe, only every ``every``-th scale
+    is detected (the others are ``pending`` until :func:`complete_probe`). ``share``: given the
+    view's s = 1 points as the coarser image's detector finds them (:class:`FirstLevel`), when
+    the same view is searched as the coarser image later in the pass.
+    """
+
+    known: Optional[LowFeatures] = None
+    measured: Measured = Measured(None)
+    every: int = 1
+    share: Optional[Callable[[FirstLevel], None]] = None
+
+
 def detect_view(view: View, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None,
-                known: Optional[LowFeatures] = None,
-                measured: Measured = Measured(None),
-                every: int = 1,
-                share: Optional[Callable[[FirstLevel], None]] = None
-                ) -> Tuple[Tuple[Detected, ...], bool]:
+                reuse: Reuse = Reuse()) -> Tuple[Tuple[Detected, ...], bool]:
     """Detect every scale of one view and describe the probe's points: (detected, probing).
 
     ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale
     detected. The levels of a view of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the
-    full pass. ``known``: the same image described as the coarser one (the other direction),
-    whose points give this view's s = 1 points when it is the image itself
-    (:func:`shares_first_level`). ``measured``: the finer
-    image's contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector
-    adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used when ``view`` is the
-    image itself. ``every``: with the probe, only every ``every``-th scale is detected (the
-    others are ``pending`` until :func:`complete_probe`). ``share``: given the view's s = 1
-    points as the coarser image's detector finds them (:class:`FirstLevel`), when the same view
-    is searched as the coarser image later in the pass.
+    full pass. ``reuse``: what other steps found on the same images (:class:`Reuse`).
     """
     config = search.config
-    contrast, grads = measured
+    known, (contrast, grads), every, share = reuse
     scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
     every = every if probing else 1
@@ -732,14 +739,13 @@ def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
 
     def probe(key) -> Probed:
         view = view_of(key)
-        return score_view(view, *detect_view(view, search, step.scales, tick, known,
-                                             Measured(memo.contrast(hi_img, cfg.harris)), every,
-                                             shared(key)),
+        reuse = Reuse(known, Measured(memo.contrast(hi_img, cfg.harris)), every, shared(key))
+        return score_view(view, *detect_view(view, search, step.scales, tick, reuse),
                           coarser[step.direction], search)
 
     def first_view(view: View):  # the gradients: for the image itself
-        return detect_view(view, search, step.scales, tick, known,
-                           memo.measured(hi_img, cfg.harris), every, shared(keys[0]))
+        reuse = Reuse(known, memo.measured(hi_img, cfg.harris), every, shared(keys[0]))
+        return detect_view(view, search, step.scales, tick, reuse)
 
     keys = list(step.views)
     leaders = Leaders(step.full_searches)
@@ -791,8 +797,9 @@ def plain_probed(search: Search, step: Step) -> Probed:
     if direction not in memo.plain:
         hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
         view = identity_view(hi_img, search.work.valid(direction)[1])
-        detected, probing = detect_view(view, search, step.scales, measured=Measured(
-            memo.contrast(hi_img, search.config.harris)), known=memo.coarser.get(direction.other))
+        detected, probing = detect_view(view, search, step.scales, reuse=Reuse(
+            memo.coarser.get(direction.other), Measured(memo.contrast(hi_img,
+                                                                     search.config.harris))))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
@@ -888,11 +895,13 @@ def grown_answer(attempt: Attempt, fit, search: Search):
     config = search.config
     if search.mode.orientation is None or len(fit[1]) >= GROW_BELOW_INLIERS:
         return fit
+    if not attempt.view.is_identity or attempt.coarser_view is not None:
+        return fit  # a view's points and orientations are in the view's frame
     spec = fit_spec(config)
     asked = config.model_check if spec.model == "similarity" else None  # as richer_model
-    return guided_refit(fit, attempt.view, attempt.outcomes,
+    return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
                         search.memo.coarser[attempt.step.direction].described,
-                        search.mode.guided, spec.ransac, attempt.coarser_view, asked, spec.seed)
+                        search.mode.guided, spec, asked)
 
 
 def best_fitting(search: Search, attempts: Sequence[Attempt]):
@@ -947,15 +956,17 @@ def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction
                     Direction.SWAPPED if swapped else Direction.GIVEN)
 
 
-def evidence_of(shown: Attempt, records: Sequence[StepRecord], plan: Sequence[Step],
-                stopped: str, final: Optional[FinalFigures], work: WorkImages) -> Evidence:
+def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
+                work: WorkImages, seen: Optional[dict] = None) -> Evidence:
     """The one :class:`Evidence` of a search's answer, assembled here from its parts: the
     decision's figures for the search ``shown`` (:func:`stages.decision.decide`), the pixel
     tests of the final transform when it faced them (``final``,
     :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
     the probe, the steps), and the working size's: its factors, and the implied ratio and the
-    footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``).
+    footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``),
+    and the answer's parallax figures (``seen``, :func:`answer_parallax`).
     """
+    records, plan, stopped = run.records, run.plan, run.stopped
     decided = shown.verdict.evidence
     direction = shown.step.direction
     g = shown_scale(work, direction)
@@ -969,7 +980,8 @@ def evidence_of(shown: Attempt, records: Sequence[StepRecord], plan: Sequence[St
                    steps_run=len(records), steps_planned=len(plan), stopped=stopped,
                    low_working_factor=work.f_low, high_working_factor=work.f_high,
                    implied_ratio=decided.implied_ratio * g,
-                   footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
+                   footprint_area_px=decided.footprint_area_px * f_coarser ** 2,
+                   **(seen or {}))
 
 
 def out_of_reach(config: Config, work: WorkImages) -> str:
@@ -986,8 +998,7 @@ def out_of_reach(config: Config, work: WorkImages) -> str:
             f"(--scales)")
 
 
-def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[StepRecord, ...],
-                 plan: Sequence[Step], stopped: str, timings: Dict[str, float]) -> MatchResult:
+def build_result(search: Search, run: SearchRun) -> MatchResult:
     """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next),
     its evidence assembled once (:func:`evidence_of`).
 
@@ -996,69 +1007,104 @@ def build_result(search: Search, attempts: Sequence[Attempt], records: Tuple[Ste
     The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
     repeated structure is refused there.
     """
-    config, work = search.config, search.work
-    if not attempts:  # an empty plan: no scale asked for is within reach of these images
-        return MatchResult(
-            matched=False, model=config.model, reason=out_of_reach(config, work),
-            timings=timings, config=config, search=records,
-            covariance_used=search.mode.covariance_used,
-            evidence=Evidence(steps_planned=len(plan), stopped=stopped,
-                              low_working_factor=work.f_low, high_working_factor=work.f_high))
-    winner, fit, near = best_fitting(search, attempts)
-    refused = best_refused(attempts)
-    shown = winner or refused or attempts[0]
-    verdict = shown.verdict
-    # a "no" has no best scale (NaN, null in the JSON), as it has no ratio: its refused
-    # candidate is told in ``rejected``
-    common = dict(model=config.model, best_scale=math.nan,
-                  scales=tuple(o.row for o in shown.outcomes), timings=timings,
-                  config=config, search=records, covariance_used=search.mode.covariance_used)
+    if not run.attempts:  # an empty plan: no scale asked for is within reach of these images
+        return unreachable(search, run)
+    winner, fit, near = best_fitting(search, run.attempts)
+    shown = winner or best_refused(run.attempts) or run.attempts[0]
     if winner is None:
-        searches = sum(r.views for r in records)
-        more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
-        if stopped == "time budget":
-            more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
-                     f"{len(records)} of {len(plan)} steps")
-        rejected = None if refused is None else rejected_candidate(
-            verdict.candidate, verdict.candidate_inliers, config.model, refused.step.direction,
-            verdict.test, verdict.evidence.log10_nfa,
-            figures(verdict.test, verdict.evidence, config.decision))
-        return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
-                           evidence=evidence_of(shown, records, plan, stopped, None, work),
-                           **common)
+        return refused(search, run, shown)
+    final = None
+    if model_of(fit[2]).has_ratio:
+        final, refusal = judged_by_pixels(search, run, winner, fit, near)
+        if refusal is not None:
+            return refusal
+        fit = grown_answer(winner, fit, search)
+    return answered(search, run, winner, fit, final)
+
+
+def _common(search: Search, run: SearchRun, shown: Attempt) -> dict:
+    """What every result of a search holds: a "no" has no best scale (NaN, null in the JSON),
+    as it has no ratio; its refused candidate is told in ``rejected``."""
+    return dict(model=search.config.model, best_scale=math.nan,
+                scales=tuple(o.row for o in shown.outcomes), timings=run.timings,
+                config=search.config, search=run.records,
+                covariance_used=search.mode.covariance_used)
+
+
+def unreachable(search: Search, run: SearchRun) -> MatchResult:
+    """The "no" of an empty plan: no scale asked for is within reach of these images."""
+    config, work = search.config, search.work
+    return MatchResult(
+        matched=False, model=config.model, reason=out_of_reach(config, work),
+        timings=run.timings, config=config, search=run.records,
+        covariance_used=search.mode.covariance_used,
+        evidence=Evidence(steps_planned=len(run.plan), stopped=run.stopped,
+                          low_working_factor=work.f_low, high_working_factor=work.f_high))
+
+
+def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
+    """The "no" of a search whose every attempt was refused: the reason of the one ``shown``
+    and, when it had a transform on the images themselves, that transform as ``rejected``."""
+    config, records, verdict = search.config, run.records, shown.verdict
+    searches = sum(r.views for r in records)
+    more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
+    if run.stopped == "time budget":
+        more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
+                 f"{len(records)} of {len(run.plan)} steps")
+    has_candidate = shown.verdict.candidate is not None and shown.view.is_identity and \
+        shown.coarser_view is None and not shown.matched
+    rejected = None if not has_candidate else rejected_candidate(
+        verdict.candidate, verdict.candidate_inliers, config.model, shown.step.direction,
+        verdict.test, verdict.evidence.log10_nfa,
+        figures(verdict.test, verdict.evidence, config.decision))
+    return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
+                       evidence=evidence_of(shown, run, None, search.work),
+                       **_common(search, run, shown))
+
+
+def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit,
+                     near) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
+    """(the pixel tests' figures, None) for a winner's refit ``fit`` that passes them
+    (:func:`stages.decision.final_checks`), or (figures, the "no" that refuses it)."""
+    config, verdict = search.config, winner.verdict
+    t, inliers, model = fit
+    coarse, fine = search.work.shown(winner.step.direction)
+    # a plain match of few inliers is confirmed by the first pass of views
+    # (search.stop_reason); without one (no views, or the time budget spent), the
+    # pixels must show it more clearly unique
+    unconfirmed = winner.step.view_pass == 0 and \
+        verdict.evidence.inliers < config.views.confirm_below_inliers and \
+        not any(r.view_pass > 0 for r in run.records)
+    claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2], unconfirmed=unconfirmed)
+    final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
+                                       pixel=config.pixel)
+    if not reason:
+        return final, None
+    applied = replace(config.decision,  # the uniqueness ratio it faced
+                      min_unique_ratio=unique_threshold(config.decision, unconfirmed))
+    return final, MatchResult(
+        matched=False, reason=reason, rejected=rejected_candidate(
+            t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
+            figures(test, verdict.evidence, applied, final)),
+        evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
+
+
+def answered(search: Search, run: SearchRun, winner: Attempt, fit,
+             final: Optional[FinalFigures]) -> MatchResult:
+    """The match: the winner's final ``fit`` turned to map the finer image to the coarser one,
+    its ratio, angle and translation, and its evidence with the answer's parallax."""
     t, inliers, model = fit
     has_ratio = model_of(model).has_ratio
-    final = None
-    if has_ratio:
-        coarse, fine = work.shown(winner.step.direction)
-        # a plain match of few inliers is confirmed by the first pass of views
-        # (search.stop_reason); without one (no views, or the time budget spent), the
-        # pixels must show it more clearly unique
-        unconfirmed = winner.step.view_pass == 0 and \
-            verdict.evidence.inliers < config.views.confirm_below_inliers and \
-            not any(r.view_pass > 0 for r in records)
-        claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2],
-                      unconfirmed=unconfirmed)
-        final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
-                                           pixel=config.pixel)
-        if reason:
-            applied = replace(config.decision,  # the uniqueness ratio it faced
-                              min_unique_ratio=unique_threshold(config.decision, unconfirmed))
-            return MatchResult(matched=False, reason=reason, rejected=rejected_candidate(
-                t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
-                figures(test, verdict.evidence, applied, final)),
-                evidence=evidence_of(shown, records, plan, stopped, final, work), **common)
-        t, inliers, model = grown_answer(winner, fit, search)
-    seen = answer_parallax(winner, t, model, config) if has_ratio else {}
+    seen = answer_parallax(winner, t, model, search.config) if has_ratio else {}
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
         math.nan, math.nan, (math.nan, math.nan))
-    return MatchResult(**dict(common, model=model, best_scale=verdict.best_scale), matched=True,
-                       transform=t, resolution_ratio=ratio, rotation_deg=angle, translation=tr,
-                       inliers=inliers, evidence=replace(evidence_of(shown, records, plan,
-                                                                     stopped, final, work),
-                                                         **seen),
+    return MatchResult(**dict(_common(search, run, winner), model=model,
+                              best_scale=winner.verdict.best_scale),
+                       matched=True, transform=t, resolution_ratio=ratio, rotation_deg=angle,
+                       translation=tr, inliers=inliers,
+                       evidence=evidence_of(winner, run, final, search.work, seen),
                        order=Direction.SWAPPED if swapped else Direction.GIVEN)
 
 

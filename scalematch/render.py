@@ -23,7 +23,7 @@ from typing import Dict, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from .chart import Titles, bar_chart
+from .chart import Marks, Titles, bar_chart
 from .geometry import apply, as_matrix3, footprint, resize_map, similarity_parts
 from .imageio import to_bgr8
 from .result import MatchResult, ScaleRow
@@ -685,8 +685,8 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
         notes.append("grey: fit's ratio far from s, not counted")
     if notes:
         xlabel += "   (" + "; ".join(notes) + ")"
-    return bar_chart(labels, values, titles=Titles(title, xlabel, "inliers"), highlight=best,
-                     size=size, muted=muted)
+    return bar_chart(labels, values, titles=Titles(title, xlabel, "inliers"),
+                     marks=Marks(highlight=best, muted=muted), size=size)
 
 
 def disagreeing_rows(result: MatchResult) -> list:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from scalematch.chart import HIGHLIGHT_COLOUR, Titles, bar_chart, format_tick, nice_ticks
+from scalematch.chart import HIGHLIGHT_COLOUR, Marks, Titles, bar_chart, format_tick, nice_ticks
 
 
 def _has_colour(img: np.ndarray, bgr, tol: int = 12, min_pixels: int = 20) -> bool:
@@ -18,7 +18,7 @@ def test_bar_chart_highlight_and_file(tmp_path):
     path = tmp_path / "bar.png"
     labels = [1.0, 1.19, 1.41, 1.68, 2.0, 2.38]
     img = bar_chart(labels, [3, 8, 40, 120, 35, np.nan], path,
-                    Titles("inliers per scale", "scale s", "inliers"), highlight=3)
+                    Titles("inliers per scale", "scale s", "inliers"), Marks(highlight=3))
     assert img.shape == (600, 900, 3) and img.dtype == np.uint8
     assert cv2.imread(str(path)) is not None
     assert _has_colour(img, HIGHLIGHT_COLOUR, tol=2, min_pixels=1000)
@@ -29,7 +29,7 @@ def test_bar_chart_highlight_and_file(tmp_path):
 @pytest.mark.parametrize("values", [[], [np.nan, np.nan], [0, 0, 0], [-3, 2, 5]])
 def test_bar_chart_degenerate_data_does_not_crash(values):
     img = bar_chart([str(i) for i in range(len(values))], values, None, Titles("t", "x", "y"),
-                    highlight=0 if values else None)
+                    Marks(highlight=0 if values else None))
     assert img.shape == (600, 900, 3)
 
 

@@ -597,11 +597,11 @@ def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_
     contrast = pipeline.image_contrast(pair.high, config.harris.sigma)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
     measured = pipeline.Measured(contrast)
-    every = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
-                                                            measured=measured), low, search)
-    sampled = pipeline.score_view(view, *pipeline.detect_view(view, search, config.scales,
-                                                              measured=measured, every=2),
-                                  low, search)
+    every = pipeline.score_view(view, *pipeline.detect_view(
+        view, search, config.scales, reuse=pipeline.Reuse(measured=measured)), low, search)
+    sampled = pipeline.score_view(view, *pipeline.detect_view(
+        view, search, config.scales, reuse=pipeline.Reuse(measured=measured, every=2)),
+        low, search)
     assert [d.pending for d in sampled.detected][:4] == [False, True, False, True]
     done = pipeline.complete_probe(sampled, low, search, config.scales, contrast)
     assert done.run == every.run and done.score == every.score
@@ -644,9 +644,10 @@ def test_a_view_found_as_the_finer_image_is_described_as_the_coarser_one_found_a
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
     measured = pipeline.Measured(pipeline.image_contrast(pair.high, config.harris.sigma))
     kept = []
-    shared, _ = pipeline.detect_view(view, search, config.scales, measured=measured, every=2,
-                                     share=kept.append)
-    alone, _ = pipeline.detect_view(view, search, config.scales, measured=measured, every=2)
+    shared, _ = pipeline.detect_view(view, search, config.scales, reuse=pipeline.Reuse(
+        measured=measured, every=2, share=kept.append))
+    alone, _ = pipeline.detect_view(view, search, config.scales,
+                                    reuse=pipeline.Reuse(measured=measured, every=2))
     assert len(kept) == 1 and kept[0].described == config.probe.points
     for a, b in zip(shared, alone):
         assert np.array_equal(a.keypoints.xy, b.keypoints.xy)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -242,7 +242,7 @@ def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarit
         raise ValueError(f"guided growth needs a point-to-point model, not {model!r}")
     t = np.asarray(t, np.float64)
     chance = chance_matches(t, high, low, params)
-    best_t, best_in, counts = grow_rounds(t, model, [high], low, params, ransac)
+    best_t, best_in, counts = grow_rounds(t, model, Points([high], low), params, ransac)
     return Growth(model=model, transform=best_t, inliers=best_in, rounds=len(counts),
                   counts=tuple(counts), chance=float(chance))
 
@@ -260,16 +260,25 @@ def guided_pool(t: np.ndarray, highs: Sequence[Described], low: Described,
     return distinct_pairs(np.vstack(src), np.vstack(dst))
 
 
-def grow_rounds(t: np.ndarray, model: str, highs: Sequence[Described], low: Described,
+class Points(NamedTuple):
+    """What guided matching draws from: the finer image's points described at each scale
+    matched, and the coarser image's (s = 1, its px)."""
+
+    highs: Sequence[Described]
+    low: Described
+
+
+def grow_rounds(t: np.ndarray, model: str, points: Points,
                 params: GuidedParams = GuidedParams(), ransac: RansacParams = RansacParams(),
                 inliers: Optional[np.ndarray] = None,
                 allowed: Optional[Callable[[np.ndarray], bool]] = None
                 ) -> Tuple[np.ndarray, np.ndarray, List[int]]:
-    """``t`` refit on its guided matches at every scale of ``highs`` (:func:`guided_pool`),
+    """``t`` refit on its guided matches at every scale of ``points`` (:func:`guided_pool`),
     round after round while they explain more pairs than ``inliers`` ((N, 4), none by
     default), at most ``params.max_rounds`` rounds: (transform, its inliers (N, 4) float64,
     the distinct inliers after each round). ``allowed(t)``, when given, must hold for a refit
     to be taken (the final answer's: not folded over)."""
+    highs, low = points
     best_t = np.asarray(t, np.float64)
     best_in = np.zeros((0, 4)) if inliers is None else inliers
     counts: List[int] = []

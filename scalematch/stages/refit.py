@@ -38,7 +38,7 @@ from .decision import Decision, folded
 from .descriptors import Described
 from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, model_of, refine,
                         residuals)
-from .guided import GuidedParams, grow_rounds, guided_pool
+from .guided import GuidedParams, Points, grow_rounds, guided_pool
 from .matcher import distinct_pairs
 from .views import View, to_high
 
@@ -222,10 +222,9 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelChe
     return fit
 
 
-def guided_refit(fit: Refit, view: View, outcomes: Sequence, low: Described,
-                 guided: GuidedParams, ransac: RansacParams,
-                 coarser: Optional[View] = None, check: Optional[ModelCheckParams] = None,
-                 seed: int = 0) -> Refit:
+def guided_refit(fit: Refit, source_shape: Tuple[int, int], outcomes: Sequence,
+                 low: Described, guided: GuidedParams, spec: FitSpec,
+                 check: Optional[ModelCheckParams] = None) -> Refit:
     """``fit`` grown by guided matching at every scale matched in full
     (:func:`scalematch.stages.guided.grow_rounds`, as the decision's second look grows one): kept
     unless its guided matches explain more pairs than its own inliers, and the inliers
@@ -238,28 +237,30 @@ def guided_refit(fit: Refit, view: View, outcomes: Sequence, low: Described,
     scene does reaches the far corners. A similarity that stays one is returned as it was:
     four parameters are pinned by its own inliers, and the guided matches, looser, moved the
     zoom pairs' answers by hundredths of a px either way (median 0.157 -> 0.19 px on 220
-    answers of under 30 inliers, docs/BENCHMARKS.md). ``low``: the coarser image's points
-    (s = 1, its px). Only on a search made on the images themselves (``view`` the identity, ``coarser`` None):
-    a view's points and orientations are in the view's frame.
+    answers of under 30 inliers, docs/BENCHMARKS.md). ``source_shape``: the finer image's
+    (H, W), which no answer may fold over; ``low``: the coarser image's points (s = 1, its
+    px); ``spec``: the RANSAC parameters and seed of the refits. Only for a search made on the
+    images themselves: a view's points and orientations are in the view's frame.
     """
     t, inliers, model = fit
     highs = [o.described for o in outcomes
              if o.estimate is not None and o.described is not None and len(o.described)]
-    if not view.is_identity or coarser is not None or not model_of(model).has_ratio \
-            or not highs:
+    if not model_of(model).has_ratio or not highs:
         return fit
-    def unfolded(m: np.ndarray) -> bool:
-        return not folded(m, view.source_shape)
+    points, ransac = Points(highs, low), spec.ransac
 
-    best_t, best_in, _ = grow_rounds(t, model, highs, low, guided, ransac, inliers, unfolded)
+    def unfolded(m: np.ndarray) -> bool:
+        return not folded(m, source_shape)
+
+    best_t, best_in, _ = grow_rounds(t, model, points, guided, ransac, inliers, unfolded)
     richer = [m for m in check.models if MIN_SAMPLE[m] > MIN_SAMPLE[model]] \
         if check is not None and check.enabled else []
     for m in richer:
         src, dst = guided_pool(best_t, highs, low, guided)
-        alt = estimate(m, src, dst, ransac, seed=seed)
+        alt = estimate(m, src, dst, ransac, seed=spec.seed)
         if alt.transform is None or not unfolded(alt.transform):
             continue
-        alt_t, alt_in, _ = grow_rounds(alt.transform, m, highs, low, guided, ransac,
+        alt_t, alt_in, _ = grow_rounds(alt.transform, m, points, guided, ransac,
                                        allowed=unfolded)
         if check.clearly_more(len(alt_in), len(best_in)):
             model, best_t, best_in = m, alt_t, alt_in

@@ -155,8 +155,8 @@ def test_guided_refit_pins_a_loose_homography_over_the_whole_footprint():
     loose = estimate("homography", src, dst, Config().ransac, seed=0).transform
     assert _grid_error(loose, PERSPECTIVE) > 2
     fit = (loose, np.hstack([src, dst]), "homography")
-    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
-                                     low, GuidedParams(), Config().ransac)
+    t, inliers, model = guided_refit(fit, (480, 640), [_scale(high)], low, GuidedParams(),
+                                     FitSpec("homography", Config().ransac))
     assert model == "homography" and len(inliers) >= 290
     assert _grid_error(t, PERSPECTIVE) < 0.05
 
@@ -174,8 +174,8 @@ def test_guided_refit_turns_a_similarity_into_the_homography_its_matches_show():
     est = estimate("similarity", src, dst, Config().ransac, seed=0)
     fit = (est.transform, np.hstack([src[est.inliers], dst[est.inliers]]), "similarity")
     config = Config()
-    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
-                                     low, GuidedParams(), config.ransac,
+    t, inliers, model = guided_refit(fit, (480, 640), [_scale(high)], low, GuidedParams(),
+                                     FitSpec("similarity", config.ransac),
                                      check=config.model_check)
     assert model == "homography"
     assert _grid_error(t, MILD) < 0.05
@@ -186,6 +186,6 @@ def test_guided_refit_keeps_a_fit_that_nothing_grows():
     high, _ = _scene(PERSPECTIVE)
     _, low = _scene(PERSPECTIVE, seed=5)  # other descriptors everywhere
     fit = (PERSPECTIVE, np.zeros((0, 4)), "homography")
-    t, inliers, model = guided_refit(fit, identity_view(np.zeros((480, 640))), [_scale(high)],
-                                     low, GuidedParams(), Config().ransac)
+    t, inliers, model = guided_refit(fit, (480, 640), [_scale(high)], low, GuidedParams(),
+                                     FitSpec("homography", Config().ransac))
     assert t is PERSPECTIVE and model == "homography" and len(inliers) == 0
