@@ -37,7 +37,7 @@ import numpy as np
 from . import __version__
 from .errors import internal_error
 from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, to_grey
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
 from .result import MatchResult, dumps
 
 if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
@@ -641,7 +641,9 @@ def matching_options(f: Callable) -> Callable:
         click.option("--seed", type=int, default=None,
                      help="Seed of all randomness (RANSAC); same input, same output. [default: 0]"),
         click.option("--max-pixels", type=click.IntRange(min=1), default=DEFAULT_MAX_PIXELS,
-                     show_default=True, help="Refuse images with more pixels than this."),
+                     show_default=True,
+                     help="Refuse images with more pixels than this, from their header, before "
+                          "decoding them (OpenCV itself decodes at most 1073741824)."),
     ]
     for opt in reversed(opts):
         f = opt(f)
@@ -758,11 +760,11 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     _check_not_inputs(out_dir, json_file, (low, high))
     with _json_of_input_error(json_path, json_file, low, high, config):
         low_read, high_read = _load(low, high, config, max_pixels)
+        grey = _greys(low, high, low_read, high_read)  # a constant image: named, nothing made
     factors = (float(low_read.factor), float(high_read.factor))
-    _check_writable(out_dir, json_file)
-    with _json_of_input_error(json_path, json_file, low, high, config):  # constant, too small
-        result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config,
-                               factors, quiet)
+    with _removed_if_empty(_check_writable(out_dir, json_file)), \
+            _json_of_input_error(json_path, json_file, low, high, config):
+        result = _match_images(*grey, config, factors, quiet)
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
         _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
     written: Dict[str, Path] = {}
@@ -811,12 +813,44 @@ def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
         check_not_an_input(json_file, inputs, "--json")
 
 
-def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> None:
-    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2)."""
+def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> List[Path]:
+    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2);
+    the folders of ``-o`` that this created, deepest first."""
+    made = []
     if out_dir is not None:
+        missing = out_dir.absolute()
+        while not missing.exists():
+            made.append(missing)
+            missing = missing.parent
         check_out_dir(out_dir)
     if json_file is not None:
         check_out_file(json_file, "--json")
+    return made
+
+
+@contextlib.contextmanager
+def _removed_if_empty(folders: Sequence[Path]) -> Iterator[None]:
+    """Remove ``folders`` (deepest first) again when the block inside fails and they are still
+    empty: a match refused (exit 2) or failed leaves no empty ``-o`` folder behind."""
+    try:
+        yield
+    except BaseException:
+        for folder in folders:
+            try:
+                folder.rmdir()  # only an empty folder
+            except OSError:
+                break
+        raise
+
+
+def _greys(low: str, high: str, low_read: Decoded, high_read: Decoded
+           ) -> Tuple[np.ndarray, np.ndarray]:
+    """The grey levels of the two images read; exit 2 naming the file of one that leaves
+    nothing to match (constant)."""
+    try:
+        return grey_of_file(low_read.image, low), grey_of_file(high_read.image, high)
+    except ImageError as exc:
+        raise InputError(str(exc))
 
 
 def _match_images(low: np.ndarray, high: np.ndarray, config: Config,

@@ -297,6 +297,29 @@ def test_meaningless_option_values_are_usage_errors(tmp_path, flat_pair, command
     assert_one_line_error(run(*args, option, value), needle)
 
 
+def test_a_constant_image_is_named_and_leaves_no_out_dir(tmp_path):
+    args, _ = _bad_input(tmp_path, "constant")
+    out = tmp_path / "out" / "demo"
+    last = assert_one_line_error(run(*args, "-o", out))
+    assert last == (f"Error: {args[0]}: image is constant (every pixel 128): there is nothing "
+                    f"to match in it")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_refused_match_removes_the_out_dir_it_made(tmp_path, monkeypatch, flat_pair):
+    """An input the match itself refuses (after the folders of -o are made) leaves none of
+    them behind; a folder that was there stays."""
+    def refused(*args, **kwargs):
+        raise ValueError("refused by the pipeline")
+
+    monkeypatch.setattr("scalematch.cli._run_match", refused)
+    assert_one_line_error(run(*flat_pair, "-o", tmp_path / "a" / "b"), "refused")
+    assert not (tmp_path / "a").exists()
+    (tmp_path / "kept").mkdir()
+    assert_one_line_error(run(*flat_pair, "-o", tmp_path / "kept" / "b"), "refused")
+    assert (tmp_path / "kept").is_dir() and not (tmp_path / "kept" / "b").exists()
+
+
 def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
