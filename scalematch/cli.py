@@ -36,7 +36,7 @@ import numpy as np
 
 from . import __version__
 from .errors import internal_error
-from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
+from .config import MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
 from .result import MatchResult, dumps
 
@@ -638,8 +638,9 @@ def matching_options(f: Callable) -> Callable:
     opts += [
         click.option("--set", "settings", multiple=True, metavar="PATH=VALUE",
                      help="Set any Config field, e.g. --set harris.sigma_tilde=2.5 (repeatable)."),
-        click.option("--seed", type=int, default=None,
-                     help="Seed of all randomness (RANSAC); same input, same output. [default: 0]"),
+        click.option("--seed", type=click.IntRange(0, MAX_SEED), default=None,
+                     help="Seed of all randomness (RANSAC); same input, same output. "
+                          "[default: 0]"),
         click.option("--max-pixels", type=click.IntRange(min=1), default=DEFAULT_MAX_PIXELS,
                      show_default=True,
                      help="Refuse images with more pixels than this, from their header, before "
@@ -753,6 +754,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
+    if quiet and verbose:
+        raise click.UsageError("-q (--quiet) and -v (--verbose) exclude each other; give one.")
     config = _config_from(kwargs)
     json_file = Path(json_path) if json_path and json_path != "-" else None
     # the outputs are checked before the match, not after a minute's work, and before the
@@ -1133,6 +1136,31 @@ def _batch_exit_code(plan: Plan, counts: Counts) -> int:
     if counts.errors or plan.errors_before:
         return EXIT_PAIR_ERRORS
     return EXIT_MATCHED
+
+
+# --------------------------------------------------------------------------- help
+
+@cli.command("help", context_settings=CONTEXT)
+@click.argument("command", required=False)
+def help_command(command: Optional[str]) -> None:
+    """Show the help of scalematch or of one command.
+
+    \b
+    Examples:
+      scalematch help
+      scalematch help batch
+    """
+    ctx = click.get_current_context()
+    group_ctx = ctx.parent
+    if command is None:
+        click.echo(group_ctx.get_help())
+        return
+    cmd = group_ctx.command.get_command(group_ctx, command)
+    if cmd is None:
+        raise click.UsageError(f"no command {command!r}; the commands: "
+                               f"{', '.join(group_ctx.command.list_commands(group_ctx))}.")
+    with click.Context(cmd, info_name=command, parent=group_ctx) as sub:
+        click.echo(cmd.get_help(sub))
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
