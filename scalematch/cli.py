@@ -981,7 +981,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the row's other columns come back on its line as "csv" (name: text), an id or the ratio
     expected, say. A repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
-    is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
+    is done, in the order pairs finish. Its "low" and "high" are the coarser and the finer image
+    as found: with "order": "swapped", "low" is the file of the CSV's high column. A pair that cannot be matched (missing file, bad image)
     gets a line with "error" and the batch goes on; the line's "error_kind" is "input" (the
     pair's files or values) or "internal" (an unexpected error: out of memory, a bug). When a
     worker process is killed by the system (out of memory), the workers are started again and

@@ -141,3 +141,22 @@ def test_marks_are_known_and_needs_are_marked():
             assert "shared" in b.marks, f"{b.id} needs ../shared: mark it ```{b.lang} shared"
         if "--scheduler" in b.text or "distributed" in b.text:
             assert "dask" in b.marks, f"{b.id} needs Dask: mark it ```{b.lang} dask"
+
+
+def test_each_line_of_the_readme_quick_start_runs_alone(tmp_path):
+    """A new user copies one line of the command-line quick start, not the whole block: each
+    runs alone in a fresh folder, after activating the environment (the third wrote into
+    out/ with a shell redirection, and failed until the second had made out/)."""
+    heading = (ROOT / "README.md").read_text().splitlines().index(
+        "## Quick start: command line") + 1
+    block = next(b for b in BLOCKS if b.page == "README.md" and b.lang in SHELLS
+                 and b.line > heading)
+    lines = [s for s in block.text.splitlines() if s.strip() and not s.startswith("source ")]
+    assert len(lines) >= 3
+    for k, line in enumerate(lines):
+        (tmp_path / str(k)).mkdir()
+        cwd = _workdir(tmp_path / str(k))
+        run = subprocess.run(["bash", "-e", "-c", f"source .venv/bin/activate\n{line}\n"],
+                             cwd=cwd, env=_env(), capture_output=True, text=True,
+                             timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+        assert run.returncode == 0, (line, run.stderr[-2000:])
