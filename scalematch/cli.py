@@ -69,6 +69,11 @@ EXIT_CODES = (
 EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 
 
+#: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':
+#: medians, the two searches alternately on one 2-core machine): said in these words in
+#: --help, the slow "no"'s hint, README.md and docs/GUIDE.md (tests/test_docs.py)
+NO_VIEWS_SPEEDUP = "about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP photos"
+
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
 #: 78 columns less the help's indent of 2
 EXIT_TEXT_WIDTH = 76
@@ -609,10 +614,11 @@ def matching_options(f: Callable) -> Callable:
                           "then of the coarser one (oblique shots; the coarser one's views solve "
                           "a finer image seen more obliquely than its zoom): tilts 2, then 4, "
                           "then 6 and 8, each pass only when the earlier ones found nothing. "
-                          "They are most of the time of a \"no\": --no-views answers it about "
-                          "20x sooner (for archives of mostly unrelated pairs) but misses pairs "
-                          "only a tilted view solves; --set \"views.passes=2;4\" leaves out "
-                          "the steepest pass (2.3x sooner)."),
+                          "They are most of the time of a \"no\": with --no-views a \"no\" "
+                          f"comes {NO_VIEWS_SPEEDUP} (docs/design/SPEED.md; for archives of "
+                          "mostly unrelated pairs), but pairs only a tilted view solves are "
+                          "missed; --set \"views.passes=2;4\" leaves out the steepest pass "
+                          "(2.3x sooner)."),
         click.option("--time-budget", type=float, default=None, metavar="SECONDS",
                      help="Start no further step of the search after SECONDS (the given "
                           "order's plain search always runs): a pair with no match is answered "
@@ -918,8 +924,8 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
 #: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 11.3-11.5 s as a
-#: whole process, 2.1 s with ``--no-views`` (docs/design/SPEED.md), on 1 MP images a median
-#: 2-5 s
+#: whole process on a quiet 2-core machine, twice that when other jobs share it
+#: (docs/design/SPEED.md), on 1 MP images a median 2-5 s
 SLOW_NO_HINT_S = 10.0
 
 
@@ -928,9 +934,9 @@ def slow_no_hint(result: MatchResult) -> str:
     views = any(step.view_pass > 0 for step in result.search)
     if result.matched or not views or result.seconds < SLOW_NO_HINT_S:
         return ""
-    return ("most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
-            "about 5 times sooner, and only pairs that a tilted view alone solves are missed "
-            "(--time-budget S bounds it instead)")
+    return (f"most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
+            f"{NO_VIEWS_SPEEDUP}, and only pairs that a tilted view alone solves are missed "
+            f"(--time-budget S bounds it instead)")
 
 
 # --------------------------------------------------------------------------- batch
@@ -996,9 +1002,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the same: a file holding results made with other options is refused (exit 2), never mixed.
 
     An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
-    --no-views a "no" takes about half of SIFT's time instead of 9.6 times it (1 MP images;
-    docs/NULLS.md, "Mode no-views" and "Mode default"), but oblique pairs that only a tilted
-    view solves are missed.
+    --no-views a "no" comes about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP
+    photos (docs/design/SPEED.md), but oblique pairs that only a tilted view solves are missed.
 
     \b
     Examples:

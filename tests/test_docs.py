@@ -160,3 +160,27 @@ def test_each_line_of_the_readme_quick_start_runs_alone(tmp_path):
                              cwd=cwd, env=_env(), capture_output=True, text=True,
                              timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
         assert run.returncode == 0, (line, run.stderr[-2000:])
+
+
+def test_the_no_views_figure_is_said_the_same_everywhere():
+    """What --no-views saves is one measured figure, in the same words in the README, the
+    guide, the design notes, both commands' --help and the slow "no"'s hint."""
+    from dataclasses import replace
+
+    from click.testing import CliRunner
+
+    from scalematch.cli import NO_VIEWS_SPEEDUP, SLOW_NO_HINT_S, cli, slow_no_hint
+    from scalematch.result import Direction, MatchResult, StepRecord
+
+    def flat(text: str) -> str:
+        return " ".join(text.split())
+
+    for page in ("README.md", "docs/GUIDE.md", "docs/DESIGN.md"):
+        assert NO_VIEWS_SPEEDUP in flat((ROOT / page).read_text()), page
+    for command in ("match", "batch"):
+        assert NO_VIEWS_SPEEDUP in flat(CliRunner().invoke(cli, [command, "--help"]).output)
+    step = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
+    slow = MatchResult(matched=False, model="similarity", reason="too few inliers",
+                       timings={"total": SLOW_NO_HINT_S + 1},
+                       search=(step, replace(step, view_pass=1, views=5)))
+    assert NO_VIEWS_SPEEDUP in slow_no_hint(slow)
