@@ -6,7 +6,7 @@ checks the size against its limits, and only then lets OpenCV decode the pixels.
 most headers (``Image.open`` is lazy: no pixel is decoded); PNG files are read here directly,
 every chunk of them, because OpenCV's PNG reader allocates each chunk at the length its
 length field states before it finds the file too short: a 2 KB file whose chunk length
-reads 0xFFFFFFF0 took 4.2 GB and 3 to 9 s in ``cv2.imread``. The formats Pillow cannot
+reads 0xFFFFFFF0 took 4.2 GB and 3 to 13 s in ``cv2.imread``. The formats Pillow cannot
 read that OpenCV decodes (PAM, PFM, Radiance HDR, and TIFF and JPEG layouts Pillow refuses:
 float samples, 12-bit) have their size read here too, so that every file decoded has had its
 size checked first.
@@ -66,7 +66,8 @@ def header(data: bytes) -> Header:
     decompression-bomb guard lifted (the reader checks the size against its own limit right
     after: ``--max-pixels``); when Pillow does not know the file, by the readers of this module
     for TIFF, JPEG, PAM, PFM and Radiance HDR. ``size=None``: no header in ``data``.
-    ``BadHeader`` for a PNG header the specification does not allow.
+    ``BadHeader`` for a header no decoder should be given: a PNG header the specification does
+    not allow (:func:`png_header`), a JPEG frame header without a size (:func:`jpeg_header`).
 
     >>> import cv2, numpy as np
     >>> png = cv2.imencode(".png", np.zeros((30, 40), np.uint8))[1].tobytes()
