@@ -42,7 +42,7 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
 
 from .config import Config
 from .errors import internal_error
-from .imageio import to_grey
+from .imageio import grey_of_file
 from .pipeline import match, warm_up_blas
 from .result import dumps, error_record, to_jsonable
 from .working import read_pair
@@ -487,7 +487,8 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
     t0 = time.perf_counter()
     try:
         low, high = read_pair(pair.low_file, pair.high_file, config, max_pixels)
-        result = match(to_grey(low.image), to_grey(high.image), config,
+        result = match(grey_of_file(low.image, pair.low_file),
+                       grey_of_file(high.image, pair.high_file), config,
                        decoded_factors=(low.factor, high.factor))
         return with_columns(result.to_dict(pair.low, pair.high, low.shape, high.shape), pair)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant

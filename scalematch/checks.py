@@ -45,6 +45,8 @@ class Bounds:
 
     >>> Bounds(lo=0, hi=1, lo_open=True).rule(), Bounds(lo=1).rule(), Bounds().rule()
     ('in (0, 1]', '>= 1', 'a finite number')
+    >>> Bounds(lo=0, hi=2**31 - 1).rule()  # whole numbers in full
+    'in [0, 2147483647]'
     """
 
     lo: Optional[float] = None
@@ -54,20 +56,28 @@ class Bounds:
 
     def rule(self) -> str:
         """The range in words, as the error message says it."""
-        lo, hi = self.lo, self.hi
-        if lo is not None and hi is not None:
-            return (f"in {'(' if self.lo_open else '['}{lo:g}, {hi:g}"
+        lo, hi = _number(self.lo), _number(self.hi)
+        if lo and hi:
+            return (f"in {'(' if self.lo_open else '['}{lo}, {hi}"
                     f"{')' if self.hi_open else ']'}")
-        if lo is not None:
-            return f"{'>' if self.lo_open else '>='} {lo:g}"
-        if hi is not None:
-            return f"{'<' if self.hi_open else '<='} {hi:g}"
+        if lo:
+            return f"{'>' if self.lo_open else '>='} {lo}"
+        if hi:
+            return f"{'<' if self.hi_open else '<='} {hi}"
         return "a finite number"
 
     def holds(self, v: float) -> bool:
         """Whether the number ``v`` lies in the range."""
         return ((self.lo is None or (v > self.lo if self.lo_open else v >= self.lo))
                 and (self.hi is None or (v < self.hi if self.hi_open else v <= self.hi)))
+
+
+def _number(v: Optional[float]) -> str:
+    """``v`` as a message writes it: a whole number in full, others as ``:g`` does; "" for
+    None."""
+    if v is None:
+        return ""
+    return str(int(v)) if float(v).is_integer() else f"{v:g}"
 
 
 def in_range(owner: str, name: str, value: Any, bounds: Bounds = Bounds(), *,

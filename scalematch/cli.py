@@ -36,8 +36,8 @@ import numpy as np
 
 from . import __version__
 from .errors import internal_error
-from .config import MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, to_grey
+from .config import MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
 from .result import MatchResult, dumps
 
 if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
@@ -68,6 +68,11 @@ EXIT_CODES = (
 #: the shutdown would flush stdout into it again.
 EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 
+
+#: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':
+#: medians, the two searches alternately on one 2-core machine): said in these words in
+#: --help, the slow "no"'s hint, README.md and docs/GUIDE.md (tests/test_docs.py)
+NO_VIEWS_SPEEDUP = "about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP photos"
 
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
 #: 78 columns less the help's indent of 2
@@ -609,10 +614,11 @@ def matching_options(f: Callable) -> Callable:
                           "then of the coarser one (oblique shots; the coarser one's views solve "
                           "a finer image seen more obliquely than its zoom): tilts 2, then 4, "
                           "then 6 and 8, each pass only when the earlier ones found nothing. "
-                          "They are most of the time of a \"no\": --no-views answers it about "
-                          "20x sooner (for archives of mostly unrelated pairs) but misses pairs "
-                          "only a tilted view solves; --set \"views.passes=2;4\" leaves out "
-                          "the steepest pass (2.3x sooner)."),
+                          "They are most of the time of a \"no\": with --no-views a \"no\" "
+                          f"comes {NO_VIEWS_SPEEDUP} (docs/design/SPEED.md; for archives of "
+                          "mostly unrelated pairs), but pairs only a tilted view solves are "
+                          "missed; --set \"views.passes=2;4\" leaves out the steepest pass "
+                          "(2.3x sooner)."),
         click.option("--time-budget", type=float, default=None, metavar="SECONDS",
                      help="Start no further step of the search after SECONDS (the given "
                           "order's plain search always runs): a pair with no match is answered "
@@ -647,10 +653,13 @@ def matching_options(f: Callable) -> Callable:
     opts += [
         click.option("--set", "settings", multiple=True, metavar="PATH=VALUE",
                      help="Set any Config field, e.g. --set harris.sigma_tilde=2.5 (repeatable)."),
-        click.option("--seed", type=int, default=None,
-                     help="Seed of all randomness (RANSAC); same input, same output. [default: 0]"),
+        click.option("--seed", type=click.IntRange(0, MAX_SEED), default=None,
+                     help="Seed of all randomness (RANSAC); same input, same output. "
+                          "[default: 0]"),
         click.option("--max-pixels", type=click.IntRange(min=1), default=DEFAULT_MAX_PIXELS,
-                     show_default=True, help="Refuse images with more pixels than this."),
+                     show_default=True,
+                     help="Refuse images with more pixels than this, from their header, before "
+                          "decoding them (OpenCV itself decodes at most 1073741824)."),
     ]
     for opt in reversed(opts):
         f = opt(f)
@@ -765,6 +774,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
+    if quiet and verbose:
+        raise click.UsageError("-q (--quiet) and -v (--verbose) exclude each other; give one.")
     config = _config_from(kwargs)
     json_file = Path(json_path) if json_path and json_path != "-" else None
     # the outputs are checked before the match, not after a minute's work, and before the
@@ -772,11 +783,11 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     _check_not_inputs(out_dir, json_file, (low, high))
     with _json_of_input_error(json_path, json_file, low, high, config):
         low_read, high_read = _load(low, high, config, max_pixels)
+        grey = _greys(low, high, low_read, high_read)  # a constant image: named, nothing made
     factors = (float(low_read.factor), float(high_read.factor))
-    _check_writable(out_dir, json_file)
-    with _json_of_input_error(json_path, json_file, low, high, config):  # constant, too small
-        result = _match_images(to_grey(low_read.image), to_grey(high_read.image), config,
-                               factors, quiet)
+    with _removed_if_empty(_check_writable(out_dir, json_file)), \
+            _json_of_input_error(json_path, json_file, low, high, config):
+        result = _match_images(*grey, config, factors, quiet)
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
         _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
     written: Dict[str, Path] = {}
@@ -825,12 +836,44 @@ def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
         check_not_an_input(json_file, inputs, "--json")
 
 
-def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> None:
-    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2)."""
+def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> List[Path]:
+    """Create the folders of ``-o`` and ``--json`` and make sure they can be written (exit 2);
+    the folders of ``-o`` that this created, deepest first."""
+    made = []
     if out_dir is not None:
+        missing = out_dir.absolute()
+        while not missing.exists():
+            made.append(missing)
+            missing = missing.parent
         check_out_dir(out_dir)
     if json_file is not None:
         check_out_file(json_file, "--json")
+    return made
+
+
+@contextlib.contextmanager
+def _removed_if_empty(folders: Sequence[Path]) -> Iterator[None]:
+    """Remove ``folders`` (deepest first) again when the block inside fails and they are still
+    empty: a match refused (exit 2) or failed leaves no empty ``-o`` folder behind."""
+    try:
+        yield
+    except BaseException:
+        for folder in folders:
+            try:
+                folder.rmdir()  # only an empty folder
+            except OSError:
+                break
+        raise
+
+
+def _greys(low: str, high: str, low_read: Decoded, high_read: Decoded
+           ) -> Tuple[np.ndarray, np.ndarray]:
+    """The grey levels of the two images read; exit 2 naming the file of one that leaves
+    nothing to match (constant)."""
+    try:
+        return grey_of_file(low_read.image, low), grey_of_file(high_read.image, high)
+    except ImageError as exc:
+        raise InputError(str(exc))
 
 
 def _match_images(low: np.ndarray, high: np.ndarray, config: Config,
@@ -895,8 +938,8 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
 #: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 11.3-11.5 s as a
-#: whole process, 2.1 s with ``--no-views`` (docs/design/SPEED.md), on 1 MP images a median
-#: 2-5 s
+#: whole process on a quiet 2-core machine, twice that when other jobs share it
+#: (docs/design/SPEED.md), on 1 MP images a median 2-5 s
 SLOW_NO_HINT_S = 10.0
 
 
@@ -905,9 +948,9 @@ def slow_no_hint(result: MatchResult) -> str:
     views = any(step.view_pass > 0 for step in result.search)
     if result.matched or not views or result.seconds < SLOW_NO_HINT_S:
         return ""
-    return ("most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
-            "about 5 times sooner, and only pairs that a tilted view alone solves are missed "
-            "(--time-budget S bounds it instead)")
+    return (f"most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
+            f"{NO_VIEWS_SPEEDUP}, and only pairs that a tilted view alone solves are missed "
+            f"(--time-budget S bounds it instead)")
 
 
 # --------------------------------------------------------------------------- batch
@@ -958,7 +1001,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the row's other columns come back on its line as "csv" (name: text), an id or the ratio
     expected, say. A repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
-    is done, in the order pairs finish; a pair that cannot be matched (missing file, bad image)
+    is done, in the order pairs finish. Its "low" and "high" are the coarser and the finer image
+    as found: with "order": "swapped", "low" is the file of the CSV's high column. A pair that cannot be matched (missing file, bad image)
     gets a line with "error" and the batch goes on; the line's "error_kind" is "input" (the
     pair's files or values) or "internal" (an unexpected error: out of memory, a bug). When a
     worker process is killed by the system (out of memory), the workers are started again and
@@ -972,9 +1016,8 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the same: a file holding results made with other options is refused (exit 2), never mixed.
 
     An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
-    --no-views a "no" takes about half of SIFT's time instead of 9.6 times it (1 MP images;
-    docs/NULLS.md, "Mode no-views" and "Mode default"), but oblique pairs that only a tilted
-    view solves are missed.
+    --no-views a "no" comes about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP
+    photos (docs/design/SPEED.md), but oblique pairs that only a tilted view solves are missed.
 
     \b
     Examples:
@@ -1113,6 +1156,31 @@ def _batch_exit_code(plan: Plan, counts: Counts) -> int:
     if counts.errors or plan.errors_before:
         return EXIT_PAIR_ERRORS
     return EXIT_MATCHED
+
+
+# --------------------------------------------------------------------------- help
+
+@cli.command("help", context_settings=CONTEXT)
+@click.argument("command", required=False)
+def help_command(command: Optional[str]) -> None:
+    """Show the help of scalematch or of one command.
+
+    \b
+    Examples:
+      scalematch help
+      scalematch help batch
+    """
+    ctx = click.get_current_context()
+    group_ctx = ctx.parent
+    if command is None:
+        click.echo(group_ctx.get_help())
+        return
+    cmd = group_ctx.command.get_command(group_ctx, command)
+    if cmd is None:
+        raise click.UsageError(f"no command {command!r}; the commands: "
+                               f"{', '.join(group_ctx.command.list_commands(group_ctx))}.")
+    with click.Context(cmd, info_name=command, parent=group_ctx) as sub:
+        click.echo(cmd.get_help(sub))
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:

@@ -6,8 +6,8 @@ gathers them and is recorded with every result (``MatchResult.config``, the JSON
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from typing import Callable, Dict, Optional, Tuple
+from dataclasses import MISSING, dataclass, field, fields, replace
+from typing import Any, Callable, Dict, Optional, Tuple
 
 from .checks import Bounds, in_range, one_of
 from .stages.constraints import OrientationParams, SemiLocalParams
@@ -49,6 +49,9 @@ def geometric_scales(lo: float, hi: float, steps_per_octave: int) -> Tuple[float
     return tuple(out)
 
 
+#: Largest seed: OpenCV's random generator takes a C int (``cv2.setRNGSeed``), 2^31 - 1.
+MAX_SEED = 2**31 - 1
+
 #: Smallest working size, px: below it the 24 px minimum side of a level (detector.MIN_SIDE_PX)
 #: leaves a shrunk image only its first scales.
 MIN_WORKING_SIDE_PX = 64
@@ -59,9 +62,13 @@ class Config:
     """Everything a match depends on. ``Config()`` is the default; ``Config.paper()`` the paper.
 
     Frozen: change a copy with :func:`dataclasses.replace` or ``Config.preset(name, **changes)``.
+    Its ``repr`` shows the fields that differ from the default (``Config()`` is the default);
+    ``dataclasses.asdict(config)`` and a result's JSON ``config`` hold every value.
 
     >>> from dataclasses import replace
     >>> config = Config(seed=1)
+    >>> config
+    Config(seed=1)
     >>> len(config.scales), config.scales[:4], config.scales[-1], config.harris.sigma_tilde
     (13, (1.0, 1.26, 1.587, 2.0), 16.0, 2.0)
     >>> replace(config, harris=replace(config.harris, threshold=50.0)).harris.threshold
@@ -70,6 +77,10 @@ class Config:
     Traceback (most recent call last):
     ...
     ValueError: model must be one of ('similarity', 'affine', 'homography', 'fundamental'), got 'shear'
+    >>> Config(ransac=3)
+    Traceback (most recent call last):
+    ...
+    TypeError: ransac must be a RansacParams, not int: change one of its values with replace(Config().ransac, NAME=VALUE) (--set ransac.NAME=VALUE)
     """
 
     mode: str = "default"  #: "default" or "paper" (see MODES)
@@ -86,7 +97,7 @@ class Config:
     #: is searched when that side / s is at least this: the largest ratio is the one whose
     #: footprint is still about 32 coarser pixels wide (the descriptor window is 16 px)
     min_footprint_px: float = 32.0
-    seed: int = 0  #: the one seed for all randomness (RANSAC)
+    seed: int = 0  #: the one seed for all randomness (RANSAC), 0 to MAX_SEED
     #: the finer image, every scale. The threshold follows the image's contrast (a 12-bit
     #: image stored as 0-4095 in 16 bits, or 32 grey levels, found no point at the absolute
     #: threshold; docs/design/DECISION.md, "Adaptive detection"); capped at 1, so it is only
@@ -140,10 +151,19 @@ class Config:
     time_budget_s: Optional[float] = None
 
     def __post_init__(self) -> None:
+        for name, kind in _groups().items():  # Config(ransac=3) would fail only in match
+            value = getattr(self, name)
+            if not isinstance(value, kind):
+                raise TypeError(f"{name} must be a {kind.__name__}, not {type(value).__name__}: "
+                                f"change one of its values with replace(Config().{name}, "
+                                f"NAME=VALUE) (--set {name}.NAME=VALUE)")
+        if not isinstance(self.scales, (tuple, list)):
+            raise TypeError(f"scales must be a tuple of scales >= 1, e.g. (1.0, 2.0, 4.0), not "
+                            f"{type(self.scales).__name__}")
         one_of("", "order", self.order, ORDERS)
         one_of("", "mode", self.mode, MODES)
         one_of("", "model", self.model, MODELS)
-        in_range("", "seed", self.seed, Bounds(lo=0), integer=True)
+        in_range("", "seed", self.seed, Bounds(lo=0, hi=MAX_SEED), integer=True)
         for name in ("low_max_side", "high_max_side"):
             side = getattr(self, name)
             if side is not None:  # None: always full size
@@ -155,6 +175,12 @@ class Config:
         in_range("", "min_footprint_px", self.min_footprint_px, Bounds(lo=0))
         if self.time_budget_s is not None:
             in_range("", "time_budget_s", self.time_budget_s, Bounds(lo=0, lo_open=True))
+
+    def __repr__(self) -> str:
+        defaults = _defaults()
+        changed = (f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+                   if getattr(self, f.name) != defaults[f.name])
+        return f"Config({', '.join(changed)})"
 
     @staticmethod
     def paper(**changes) -> "Config":
@@ -175,6 +201,26 @@ class Config:
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; one of {', '.join(PRESETS)}")
         return replace(PRESETS[name](), **changes)
+
+
+def _default_of(f: Any) -> Any:
+    return f.default_factory() if f.default_factory is not MISSING else f.default
+
+
+_DEFAULTS: Dict[str, Any] = {}
+
+
+def _defaults() -> Dict[str, Any]:
+    """Each field of ``Config`` and its default value (made once)."""
+    if not _DEFAULTS:
+        _DEFAULTS.update((f.name, _default_of(f)) for f in fields(Config))
+    return _DEFAULTS
+
+
+def _groups() -> Dict[str, type]:
+    """The fields of ``Config`` that hold a group of parameters (a dataclass) and its class."""
+    return {name: type(value) for name, value in _defaults().items()
+            if hasattr(type(value), "__dataclass_fields__")}
 
 
 def _paper() -> Config:
@@ -208,7 +254,8 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # appears)
     "budget-1s": lambda: Config(time_budget_s=1.0),
     # the default without tilted views (``--no-views``): the plain search in both orders only.
-    # A "no" at SIFT's speed for batches over archives of mostly unrelated pairs, at the cost
+    # A "no" about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP photos
+    # (docs/design/SPEED.md), for batches over archives of mostly unrelated pairs, at the cost
     # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),

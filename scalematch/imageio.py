@@ -8,30 +8,31 @@ that says what is wrong and what to do.
 Safety: image files are untrusted input, read within bounds (:func:`read_bytes`): only a regular
 file is opened (a device such as /dev/zero, a named pipe, a socket is refused before a byte is
 read), a file larger than an image within ``max_pixels`` can be (:func:`max_file_bytes`) is
-refused from its size, and the header comes from the first ``HEADER_BYTES``. Their header is
-read by Pillow (``Image.open`` reads
-the header only) and the pixel count checked against ``max_pixels`` *before* the image is
-decoded, so a decompression bomb is refused without allocating it; formats Pillow does not know
-are checked right after OpenCV decodes them. OpenCV decodes the pixels.
+refused from its size, and the header comes from the first ``HEADER_BYTES``. The header
+(:mod:`scalematch.headers`) says the image's size *before* the image is decoded, and the size is
+checked against ``max_pixels``, the decoder's own limits and ``min_side`` (:func:`check_size`),
+so a decompression bomb is refused without allocating it; a file whose header cannot be read
+is not decoded at all, and a PNG file only once its chunks are known to lie within it. OpenCV
+decodes the pixels.
 
-The EXIF orientation (JPEG, WebP, PNG ``eXIf`` before the pixels, TIFF) is read from the header by
-Pillow and applied here (the file is decoded with ``IMREAD_IGNORE_ORIENTATION``), so the result
-does not depend on whether the installed OpenCV applies it itself.
+The EXIF orientation (JPEG, WebP, PNG ``eXIf`` before the pixels, TIFF) is read from the header
+and applied here (the file is decoded with ``IMREAD_IGNORE_ORIENTATION``), so the result does
+not depend on whether the installed OpenCV applies it itself.
 """
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import stat
-import warnings
 from pathlib import Path
 from typing import Any, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
 
+from .headers import (IMAGE_SIGNATURES, PNG_SIGNATURE, BadHeader, Header, header,
+                      header_may_follow, png_chunk_problem)
 from .stages.detector import MIN_SIDE_PX
 
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
@@ -115,9 +116,12 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     if img.dtype == np.bool_:
         raise ImageError(f"the {name} image is a bool array (a mask?); give grey levels, "
                          f"e.g. image.astype(np.uint8) * 255")
+    if isinstance(image, (str, os.PathLike)) or img.dtype.kind in "USO" and img.ndim == 0:
+        raise ImageError(f"the {name} image is a path ({str(image)!r}), not an array; read it "
+                         f"first: scalematch.read_grey({str(image)!r})")
     if img.dtype.kind not in "uif":
         raise ImageError(f"the {name} image has dtype {img.dtype}; give grey levels as an "
-                         f"integer or float array")
+                         f"integer or float array (scalematch.read_grey reads an image file)")
     if img.ndim == 3 and img.shape[2] == 1:  # one channel, as some readers give grey images
         img = img[:, :, 0]
     if img.ndim != 2:
@@ -126,109 +130,38 @@ def grey_levels(image: np.ndarray, name: str = "image") -> np.ndarray:
     if min(img.shape) < MIN_SIDE_PX:
         raise ImageError(f"the {name} image is {img.shape[1]}x{img.shape[0]} px; at least "
                          f"{MIN_SIDE_PX} px on each side is needed")
-    lo, hi = float(img.min()), float(img.max())  # nan when any value is nan
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ImageError(f"the {name} image holds NaN or infinite values; replace them "
-                         f"(e.g. np.nan_to_num) or crop them out")
-    if lo == hi:
-        raise ImageError(f"the {name} image is constant (every pixel {lo:g}): there is nothing "
-                         f"to match in it")
+    problem = _levels_problem(img)
+    if problem:
+        raise ImageError(f"the {name} image {problem}")
     return to_grey(img)
 
 
-# --------------------------------------------------------------------------- the header
-
-class Header(NamedTuple):
-    """What Pillow reads from a file's header without decoding its pixels."""
-
-    size: Optional[Tuple[int, int]]  #: (width, height) px as stored, None when not recognised
-    orientation: int  #: EXIF orientation 1..8 (1: as stored)
-    scan: int  #: JPEG: offset of the first scan (its pixel data); MPO: 0; else -1
-
-
-#: Pillow's default decompression-bomb guard, ``PIL.Image.MAX_IMAGE_PIXELS``: larger PNG files
-#: are left to Pillow, whose own limits then apply as for every other format
-_PILLOW_MAX_IMAGE_PIXELS = 89_478_485
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+def _levels_problem(img: np.ndarray) -> str:
+    """What leaves nothing to match in the grey levels of ``img``, or "": NaN or infinite
+    values, or a constant image."""
+    lo, hi = float(img.min()), float(img.max())  # nan when any value is nan
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return "holds NaN or infinite values; replace them (e.g. np.nan_to_num) or crop them out"
+    if lo == hi:
+        return f"is constant (every pixel {lo:g}): there is nothing to match in it"
+    return ""
 
 
-def _png_header(data: bytes) -> Optional[Header]:
-    """What Pillow would read from a PNG file's header, without importing Pillow (40 ms of a
-    whole process, measured with ``python -X importtime``); None when it should judge.
+def grey_of_file(image: np.ndarray, path: str | Path) -> np.ndarray:
+    """The grey levels (:func:`to_grey`) of ``image``, decoded from the file ``path``;
+    ``ImageError`` naming the file when they leave nothing to match (a constant image, NaN
+    or infinite values), as :func:`grey_levels` would without its name.
 
-    The size is in the IHDR chunk, which comes first; an orientation can only come from an
-    eXIf chunk before the image data (IDAT), so a PNG without one shows as stored.
+    >>> grey_of_file(np.full((30, 40), 7, np.uint8), "flat.png")
+    Traceback (most recent call last):
+    ...
+    scalematch.imageio.ImageError: flat.png: image is constant (every pixel 7): there is nothing to match in it
     """
-    if not data.startswith(_PNG_SIGNATURE) or len(data) < 33 or data[12:16] != b"IHDR":
-        return None
-    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
-    if not 0 < width * height <= _PILLOW_MAX_IMAGE_PIXELS:
-        return None
-    pos = len(_PNG_SIGNATURE)
-    while pos + 8 <= len(data):
-        kind = data[pos + 4:pos + 8]
-        if kind == b"IDAT":
-            return Header((width, height), 1, -1)
-        if kind == b"eXIf":
-            return None
-        pos += 12 + int.from_bytes(data[pos:pos + 4], "big")  # length, type, data, CRC
-    return None  # no image data: not a PNG to trust
-
-
-def header(data: bytes) -> Header:
-    """The header of an image file, read by Pillow (``Image.open`` is lazy: no pixel is decoded).
-
-    A PNG file without an orientation is read directly (:func:`_png_header`): the same answer.
-
-    A file Pillow does not recognise gives ``size=None``: OpenCV may still decode it, and its
-    size is then checked after decoding. Pillow's own decompression-bomb limit
-    (``PIL.Image.MAX_IMAGE_PIXELS``, twice it refused outright) raises ``ImageError``.
-
-    >>> import cv2, numpy as np
-    >>> png = cv2.imencode(".png", np.zeros((30, 40), np.uint8))[1].tobytes()
-    >>> header(png)
-    Header(size=(40, 30), orientation=1, scan=-1)
-    """
-    png = _png_header(data)
-    if png is not None:
-        return png
-    from PIL import Image  # imported when a file is read (40-46 ms), not with scalematch
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # Pillow warns about corrupt EXIF and large images
-        try:
-            with Image.open(io.BytesIO(data)) as im:
-                size = (int(im.size[0]), int(im.size[1]))
-                orientation = _orientation(im)
-                scan = int(im.tile[0][2]) if im.format == "JPEG" and im.tile else -1
-                if im.format == "MPO":  # JPEG images in a row (drones, some cameras): OpenCV
-                    scan = 0            # decodes the first; where its scan starts is not kept
-        except Image.DecompressionBombError:
-            limit = 2 * (Image.MAX_IMAGE_PIXELS or 0)
-            raise ImageError(f"image is above Pillow's decompression-bomb limit of "
-                             f"{limit / 1e6:.0f} MP (2 x PIL.Image.MAX_IMAGE_PIXELS); shrink it"
-                             ) from None
-        except Exception:  # noqa: BLE001 (untrusted bytes: any failure means "not recognised")
-            return Header(None, 1, -1)
-    return Header(size, orientation, scan)
-
-
-def _orientation(im) -> int:
-    """The EXIF Orientation tag (0x0112) of an opened ``PIL.Image``, from the header only
-    (``im.getexif()`` may decode a PNG to find it)."""
-    from PIL import Image
-
-    try:
-        if "exif" in im.info:
-            exif = Image.Exif()
-            exif.load(im.info["exif"])
-            value = exif.get(0x0112, 1)
-        else:
-            value = getattr(im, "tag_v2", {}).get(0x0112, 1)  # TIFF: a tag of its own IFD
-        value = int(value)
-    except Exception:  # noqa: BLE001 (a corrupt EXIF block: shown as stored)
-        return 1
-    return value if 1 <= value <= 8 else 1
+    grey = to_grey(image)
+    problem = _levels_problem(grey)
+    if problem:
+        raise ImageError(f"{path}: image {problem}")
+    return grey
 
 
 def _orient(img: np.ndarray, orientation: int) -> np.ndarray:
@@ -339,8 +272,8 @@ def _read_into(fh: Any, view: memoryview) -> int:
 def _head(p: Path, data: Any) -> Header:
     try:
         return header(data)
-    except ImageError as exc:
-        raise ImageError(f"{p}: {exc}") from None
+    except BadHeader as exc:
+        raise ImageError(f"{p}: {exc}; the file is corrupt, copy or download it again") from None
 
 
 def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[bytearray, Header]:
@@ -349,9 +282,9 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
     In this order, each step refusing (``ImageError``) before the next reads more: a regular
     file (not a directory, device, pipe or socket: :func:`_open_regular`); not empty; not
     larger than :func:`max_file_bytes` of ``max_pixels``; the header, read from the first
-    ``HEADER_BYTES``, within ``max_pixels``; a file whose header Pillow does not know there is
-    read on only when OpenCV knows its signature (``cv2.haveImageReader``). Memory: the prefix,
-    then the file once.
+    ``HEADER_BYTES``, within ``max_pixels``; a file whose header is not there is read on only
+    when OpenCV knows its signature (``cv2.haveImageReader``) and the header may follow
+    (:func:`scalematch.headers.header_may_follow`). Memory: the prefix, then the file once.
     """
     p = Path(path)
     fd, size = _open_regular(p)
@@ -369,8 +302,8 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
             prefix = bytearray(min(size, HEADER_BYTES))
             del prefix[_read_into(fh, memoryview(prefix)):]
             head = _head(p, prefix)
-            if head.size is not None and not _size_ok(head, max_pixels):
-                raise _too_many(p, head.size[0], head.size[1], max_pixels)
+            if head.size is not None:
+                check_size(p, head.size, max_pixels)
             if len(prefix) == size:
                 return prefix, head
             if head.size is None:  # no more bytes read unless they may hold the header
@@ -391,55 +324,6 @@ def read_bytes(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS) -> Tuple[
     return raw, (head if head.size is not None else _head(p, raw))
 
 
-#: Signatures of formats whose header stands at the start of the file (PNG: the IHDR chunk; GIF:
-#: the logical screen; BMP: the info header; WebP: the first chunk): one Pillow cannot read from
-#: the first ``HEADER_BYTES`` is not in the file.
-_HEADER_FIRST = (b"GIF87a", b"GIF89a", b"BM", b"RIFF")
-_JPEG_SOI = b"\xff\xd8"
-#: The first bytes of the image files OpenCV decodes (PNG, JPEG, TIFF both byte orders, GIF,
-#: BMP, WebP): a file that starts so and does not decode is broken, not of another kind
-_IMAGE_SIGNATURES = (_PNG_SIGNATURE, _JPEG_SOI, b"II*\x00", b"MM\x00*") + _HEADER_FIRST
-#: JPEG markers of a frame header (SOF0..SOF15 but DHT 0xC4, JPG 0xC8, DAC 0xCC): the size.
-_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-
-
-def header_may_follow(prefix: bytes) -> bool:
-    """Whether a file whose header Pillow could not read from ``prefix`` (its first bytes) may
-    hold one further on, so that reading on is worth it.
-
-    No for a PNG without its IHDR chunk first, for GIF, BMP and WebP (their header comes first),
-    and for a JPEG whose segments before the frame header break off or end inside ``prefix``;
-    yes for a JPEG whose segments run on past ``prefix`` (large EXIF, ICC, XMP blocks) and for
-    any other format (a TIFF's directory may stand anywhere; formats Pillow does not know).
-
-    >>> header_may_follow(b"\\x89PNG\\r\\n\\x1a\\n" + bytes(100))
-    False
-    >>> header_may_follow(b"\\xff\\xd8\\xff\\xe1\\xff\\xfe" + bytes(100))  # APP1 of 65534 bytes
-    True
-    """
-    if prefix.startswith(_PNG_SIGNATURE):
-        return prefix[12:16] == b"IHDR"  # its size is there; a long text chunk may delay Pillow
-    if prefix.startswith(_HEADER_FIRST):
-        return False
-    if prefix.startswith(_JPEG_SOI):
-        pos = 2
-        while pos + 4 <= len(prefix):
-            if prefix[pos] != 0xFF:
-                return False  # not a marker: broken
-            marker = prefix[pos + 1]
-            if marker == 0xFF:  # a fill byte
-                pos += 1
-                continue
-            if marker in _JPEG_SOF or marker in (0xD9, 0xDA):
-                return False  # the frame header (or the end) is here, yet Pillow failed
-            length = int.from_bytes(prefix[pos + 2:pos + 4], "big")
-            if length < 2:
-                return False
-            pos += 2 + length
-        return True
-    return True
-
-
 def _corrupt(p: Path) -> ImageError:
     return ImageError(f"{p}: cannot decode the image (the file looks truncated or corrupt); "
                       "copy or download it again")
@@ -450,9 +334,52 @@ def _not_decodable(p: Path) -> ImageError:
                       "WebP file")
 
 
-def _size_ok(head: Header, max_pixels: int) -> bool:
-    size = head.size
-    return size is None or not max_pixels or size[0] * size[1] <= max_pixels
+def _limit(name: str, default: int) -> int:
+    try:
+        return int(os.environ.get(name, default))
+    except ValueError:
+        return default
+
+
+#: The largest image OpenCV decodes, px, and its longest side (its defaults; the environment
+#: variables of the same names change them): a larger one is refused by OpenCV whatever
+#: ``max_pixels`` allows, so it is refused from its header with these words.
+OPENCV_MAX_PIXELS = _limit("OPENCV_IO_MAX_IMAGE_PIXELS", 1 << 30)
+OPENCV_MAX_SIDE = min(_limit("OPENCV_IO_MAX_IMAGE_WIDTH", 1 << 20),
+                      _limit("OPENCV_IO_MAX_IMAGE_HEIGHT", 1 << 20))
+
+
+def check_size(p: Path, size: Tuple[int, int], max_pixels: int, min_side: int = 0) -> None:
+    """``ImageError`` unless an image of ``size`` (width, height) px, read from the header of
+    the file ``p``, may be decoded: not empty, within ``max_pixels`` (0: no limit) and what
+    OpenCV decodes (``OPENCV_MAX_PIXELS``, ``OPENCV_MAX_SIDE``), each side at least
+    ``min_side`` px.
+
+    >>> check_size(Path("pano.jpg"), (2_000_000, 30), 0)
+    Traceback (most recent call last):
+    ...
+    scalematch.imageio.ImageError: pano.jpg: image is 2000000x30 px, longer than the 1048576 px a side OpenCV decodes; shrink it
+    """
+    w, h = size
+    if w <= 0 or h <= 0:
+        raise ImageError(f"{p}: the header says the image is {w}x{h} px; the file is corrupt, "
+                         "copy or download it again")
+    if max_pixels and w * h > max_pixels:
+        raise _too_many(p, w, h, max_pixels)
+    if w * h > OPENCV_MAX_PIXELS:
+        raise ImageError(f"{p}: image is {w}x{h} = {_megapixels(w * h)}, above the "
+                         f"{_megapixels(OPENCV_MAX_PIXELS)} OpenCV decodes "
+                         f"(OPENCV_IO_MAX_IMAGE_PIXELS); shrink it")
+    if max(w, h) > OPENCV_MAX_SIDE:
+        raise ImageError(f"{p}: image is {w}x{h} px, longer than the {OPENCV_MAX_SIDE} px a side "
+                         f"OpenCV decodes; shrink it")
+    if min(w, h) < min_side:
+        raise _too_small(p, w, h, min_side)
+
+
+def _too_small(p: Path, w: int, h: int, min_side: int) -> ImageError:
+    return ImageError(f"{p}: image is {w}x{h}, too small to match (each side needs at least "
+                      f"{min_side} px); give a larger image")
 
 
 def _room_for(p: Path, size: Tuple[int, int]) -> None:
@@ -496,11 +423,11 @@ class Decoded(NamedTuple):
         return self.size[1], self.size[0]
 
 
-def reduction(head: Header, at_least: Optional[int]) -> int:
+def reduction(head: Header, at_least: Optional[int], min_side: int = MIN_SIDE_PX) -> int:
     """The factor (1, 2, 4 or 8) at which a file of header ``head`` is decoded so that its longer
-    side stays at least ``at_least`` px (less ``REDUCED_SLACK``): the largest in
-    ``REDUCED_FLAGS`` that does, for a JPEG (``head.scan`` known) only; 1 for other formats, or
-    when ``at_least`` is None.
+    side stays at least ``at_least`` px (less ``REDUCED_SLACK``) and its shorter side at least
+    ``min_side``: the largest in ``REDUCED_FLAGS`` that does, for a JPEG (``head.scan`` known)
+    only; 1 for other formats, or when ``at_least`` is None.
 
     >>> jpeg = Header((4608, 3456), 1, 600)
     >>> reduction(jpeg, 2048), reduction(jpeg, 1024), reduction(jpeg, 4000), reduction(jpeg, None)
@@ -509,11 +436,14 @@ def reduction(head: Header, at_least: Optional[int]) -> int:
     (2, 1)
     >>> reduction(Header((4608, 3456), 1, -1), 1024)   # not a JPEG
     1
+    >>> reduction(Header((44160, 160), 1, 600), 2048)   # 20 px high at 1/8: too thin
+    4
     """
     if at_least is None or head.size is None or head.scan < 0:
         return 1
-    side = max(head.size)
-    return next((f for f in REDUCED_FLAGS if side / f >= at_least * (1.0 - REDUCED_SLACK)), 1)
+    side, short = max(head.size), min(head.size)
+    return next((f for f in REDUCED_FLAGS if side / f >= at_least * (1.0 - REDUCED_SLACK)
+                 and short / f >= min_side), 1)
 
 
 def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: int,
@@ -521,13 +451,17 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
     """The pixels of ``raw`` (the bytes of ``p``, header ``head``) decoded, EXIF orientation
     applied; at ``1 / factor`` of each side for a JPEG (:func:`reduction`)."""
     size = head.size
-    if not _size_ok(head, max_pixels):
-        raise _too_many(p, size[0], size[1], max_pixels)
+    if size is not None:
+        check_size(p, size, max_pixels, min_side)
+    if raw.startswith(PNG_SIGNATURE):  # before OpenCV reads each chunk at its stated length
+        problem = png_chunk_problem(raw)
+        if problem:
+            raise ImageError(f"{p}: {problem}; copy or download it again")
+    if size is None:  # nothing is decoded whose size is not known first
+        raise _corrupt(p) if raw.startswith(IMAGE_SIGNATURES) else _not_decodable(p)
     if head.scan >= 0 and raw.rfind(b"\xff\xd9") < head.scan:
         raise ImageError(f"{p}: JPEG file is truncated (no end-of-image marker); "
                          "copy or download it again")
-    if raw.startswith(_PNG_SIGNATURE) and raw.rfind(b"IEND") < 0:  # libpng would say it first
-        raise ImageError(f"{p}: PNG file is truncated (no IEND chunk); copy or download it again")
     # orientation is applied below from the header, the same way for every format and build
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
     if factor > 1:
@@ -544,18 +478,14 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
     finally:
         cv2.utils.logging.setLogLevel(level)
     if img is None:
-        if size is None and not raw.startswith(_IMAGE_SIGNATURES):
-            raise _not_decodable(p)
-        if size is not None:
-            _room_for(p, size)  # out of memory is not a corrupt file
+        _room_for(p, size)  # out of memory is not a corrupt file
         raise _corrupt(p)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h * factor * factor > max_pixels:
         raise _too_many(p, w, h, max_pixels)
     if min(w, h) * factor < min_side:
-        raise ImageError(f"{p}: image is {w}x{h}, too small to match (each side needs at least "
-                         f"{min_side} px); give a larger image")
+        raise _too_small(p, w, h, min_side)
     return img
 
 
@@ -596,7 +526,7 @@ def read_reduced(path: str | Path, at_least: Optional[int],
     """
     p = Path(path)
     raw, head = read_bytes(p, max_pixels)
-    factor = reduction(head, at_least)
+    factor = reduction(head, at_least, min_side)
     img = _decode(p, raw, head, max_pixels, min_side, factor)
     h, w = img.shape[:2]
     if factor == 1:

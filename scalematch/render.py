@@ -75,10 +75,8 @@ CORNER_DOT_PER_THICKNESS = 3
 #: Below this ratio the verdict does not call either image the finer one (5 %: a ratio found at
 #: 1.000 either way round, EXIF-turned crops of one photo, was reported swapped by chance)
 NEAR_ONE_RATIO = 1.05
-#: Caption strips that would cover more than this share of the overlay's height go in bands
-#: above and below the picture instead: on a 296x222 low image (an oblique pair's coarser crop)
-#: the strips covered 70 % of it, on the 1024x768 benchmark images they cover 39 %
-MAX_CAPTION_SHARE = 0.5
+#: Grey level of the caption bands above and below a picture.
+BAND = 14
 #: A coarser image whose longer side is under this is drawn enlarged by a whole factor in the
 #: overlay (the finer image warped onto the enlarged grid, so its detail shows): at its own
 #: 185 x 171 px, the verdict wrapped into six lines of minimal text over a thumbnail
@@ -142,25 +140,6 @@ def _layout(lines: Sequence[str], width: int) -> Tuple[list, int, int]:
     return lines, step, (step * len(lines) + margin) if lines else 0
 
 
-def caption(image: np.ndarray, lines: Sequence[str], where: str = "top") -> np.ndarray:
-    """Draw ``lines`` of white text on a translucent dark strip inside ``image`` (in place),
-    the text scaled with the picture (:func:`text_style`), wrapped at its width."""
-    h, w = image.shape[:2]
-    lines, step, strip = _layout(lines, w)
-    if not lines:
-        return image
-    scale, thick, margin = text_style(w)
-    (_, th), _ = cv2.getTextSize("Ag", FONT, scale, thick)
-    strip = min(strip, h)
-    y0 = 0 if where == "top" else h - strip
-    region = image[y0:y0 + strip]
-    region[:] = (region * 0.35).astype(np.uint8)
-    for i, s in enumerate(lines):
-        cv2.putText(image, s, (margin, y0 + margin // 2 + th + i * step), FONT, scale,
-                    (255, 255, 255), thick, cv2.LINE_AA)
-    return image
-
-
 def _wrap(text: str, scale: float, thick: int, width: int) -> list:
     """``text`` broken at spaces into lines no wider than ``width`` px (a long word stays whole)."""
     out, line = [], ""
@@ -179,8 +158,12 @@ def verdict(result: MatchResult) -> str:
 
     Matched: the model, ratio, rotation, inliers and best scale (to the per-scale table's three
     significant digits), a tilted view and a swapped order when so; the fundamental matrix has
-    no ratio. Not matched: the reason, and the best scale when there is one and the reason
-    does not name the scale it is about already.
+    no ratio. The best scale is the finer image's: a step whose images were shrunk to their
+    working sizes (or a JPEG decoded reduced) can have searched the image that is the coarser
+    one in the files as the finer, and its scale in the files' pixels is then below 1
+    (``best_scale``, the table's ``s``): the verdict gives 1 / s, the scale at which the finer
+    image was found. Not matched: the reason, and the best scale when there is one and the
+    reason does not name the scale it is about already.
 
     >>> from scalematch.result import MatchResult
     >>> no = MatchResult(matched=False, model="similarity", best_scale=2.0,
@@ -189,8 +172,15 @@ def verdict(result: MatchResult) -> str:
     'no reliable match: too few inliers: 3 at scale 2'
     >>> verdict(MatchResult(matched=False, model="similarity", best_scale=2.0, reason="ambiguous"))
     'no reliable match: ambiguous, best scale 2'
+    >>> verdict(MatchResult(matched=True, model="similarity", best_scale=0.63,
+    ...                     inliers=np.zeros((760, 4)), resolution_ratio=2.0, rotation_deg=0.0,
+    ...                     order="swapped"))  # a 16 MP JPEG decoded at half size, found finer
+    'matched (similarity): ratio 2.000, rotation 0.0 deg, 760 inliers, best scale 1.59, order swapped (the first image is the finer one)'
     """
-    best = f"best scale {result.best_scale:.3g}" if np.isfinite(result.best_scale) else ""
+    s = result.best_scale
+    if result.matched and 0 < s < 1:  # found at 1/s, the finer image's scale
+        s = 1.0 / s
+    best = f"best scale {s:.3g}" if np.isfinite(s) else ""
     if not result.matched:
         reason = result.reason or "the evidence is too weak"
         named = "scale" in reason  # "... at scale 2", "(the best, at scale 1, ...)"
@@ -281,8 +271,8 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
 
     Returns
     -------
-    (H, W, 3) uint8 array, BGR; (H + bands, W, 3) when the captions would cover more than
-    ``MAX_CAPTION_SHARE`` of the picture: they are then drawn in bands above and below it
+    (H + bands, W, 3) uint8 array, BGR: the picture (H, W) between the caption bands, the
+    verdict's above it and ``footer``'s below (none without a footer)
     """
     low_bgr = to_bgr8(low)
     low_grey = cv2.cvtColor(low_bgr, cv2.COLOR_BGR2GRAY)
@@ -389,24 +379,17 @@ def _draw_inlier_dots(out: np.ndarray, result: MatchResult) -> str:
 
 def _captioned(out: np.ndarray, lines: Sequence[str], footer: Sequence[str],
                outline, inset=None) -> np.ndarray:
-    """``out`` with its caption ``lines`` at the top, ``footer`` at the bottom and the
-    footprint ``outline`` over both; the captions go in bands above and below the picture when
-    they would cover more than ``MAX_CAPTION_SHARE`` of it. ``inset``: the
-    :func:`inset_plan` of a small footprint, its region drawn enlarged in a free corner."""
-    hh, ww = out.shape[:2]
-    top, bottom = _layout(lines, ww)[2], _layout(footer, ww)[2]
-    inside = top + bottom <= MAX_CAPTION_SHARE * hh
+    """``out`` with the footprint ``outline`` drawn on it, between its caption ``lines`` in a
+    band above and ``footer`` in a band below: the captions never cover the picture (drawn
+    over it, they took 30-40 % of a 3:2 picture's height at any size, and hid a footprint's
+    corner and its dot). ``inset``: the :func:`inset_plan` of a small footprint, its region
+    drawn enlarged in a free corner."""
+    ww = out.shape[1]
     detail = out.copy() if inset is not None else None  # the picture the inset enlarges
-    if inside:
-        caption(out, lines)
-        caption(out, footer, where="bottom")
-    if outline is not None:  # after the caption: its dark strip must not hide the outline
+    if outline is not None:
         _draw_outline(out, outline)
     if detail is not None:
-        _place_inset(out, detail, inset[0], inset[1], top if inside else 0,
-                     bottom if inside else 0, outline)
-    if inside:
-        return out
+        _place_inset(out, detail, inset[0], inset[1], 0, 0, outline)
     return np.vstack([_band(lines, ww), out] + ([_band(footer, ww)] if any(footer) else []))
 
 
@@ -638,10 +621,16 @@ def matches_image(low: np.ndarray, high: np.ndarray, result: MatchResult,
 
 
 def _band(lines: Sequence[str], width: int) -> np.ndarray:
-    """A dark strip ``width`` px wide holding ``lines`` of caption (to stack above a picture)."""
+    """A dark band ``width`` px wide holding ``lines`` of white caption text, scaled with the
+    width (:func:`text_style`) and wrapped at it: stacked above or below a picture."""
     lines, step, strip = _layout(lines, width)
-    band = np.full((strip + text_style(width)[2], width, 3), 40, np.uint8)
-    return caption(band, lines)
+    scale, thick, margin = text_style(width)
+    band = np.full((strip + margin, width, 3), BAND, np.uint8)
+    (_, th), _ = cv2.getTextSize("Ag", FONT, scale, thick)
+    for i, s in enumerate(lines):
+        cv2.putText(band, s, (margin, margin // 2 + th + i * step), FONT, scale,
+                    (255, 255, 255), thick, cv2.LINE_AA)
+    return band
 
 
 def scale_labels(rows: Sequence[ScaleRow]) -> list:

@@ -18,14 +18,17 @@ preset and the SIFT reference (``scalematch.lab.baselines``, EVALUATION.md), or 
   pairs solved (grid error under 3 px), wrong claims, median time; SIFT fits each set's model
   (a homography on tilted pairs), as in ``lab real-pairs``;
 
-then, as whole processes, a 12-16 MP unrelated pair (``scalematch A B -q`` with
-and without ``--no-views``, ``--big-rounds`` rounds alternately; seconds and peak memory from
-``/usr/bin/time`` when it exists). Prints Markdown tables.
+then, as whole processes, 12-16 MP unrelated pairs (the first ``--big-pairs`` of
+``BIG_PAIRS``; ``scalematch A B -q`` with and without ``--no-views``, ``--big-rounds`` rounds
+alternately; seconds and peak memory from ``/usr/bin/time`` when it exists), with what the
+time of a "no" follows: the views the search probed and matched in full, and the points of
+the first scale. Prints Markdown tables.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -48,17 +51,25 @@ from scalematch.lab.realpairs import PHOTO_STEP, canonical, pair_error, syntheti
 from scalematch.lab.evaluation import is_success  # noqa: E402
 
 METHODS = ("default", "no-views", "sift")  #: the methods run unless ``--methods`` says
-BIG_PAIR = ("snowpeak_IMG_2168.JPG", "monstree_IMG_1042.JPG")  # 4608 and 4032 px, unrelated
+#: unrelated photos of 16 and 12 MP (4608x3456 and 4032x3024 px); the first is the pair the
+#: design notes quote
+BIG_PAIRS = (("snowpeak_IMG_2168.JPG", "monstree_IMG_1042.JPG"),
+             ("snowpeak_IMG_2280.JPG", "jpegtest_012mp-bus.jpg"),
+             ("monstree_IMG_1029.JPG", "snowpeak_IMG_2186.JPG"),
+             ("snowpeak_IMG_2282.JPG", "monstree_IMG_1046.JPG"))
 
 
 def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity"):
-    """(transform high -> low or None, maps high to low, seconds); SIFT fits ``model``."""
-    t0 = time.perf_counter()
+    """(transform high -> low or None, maps high to low, seconds, CPU seconds of every
+    thread); SIFT fits ``model``. The CPU time depends less than the wall time on what else
+    the machine runs."""
+    t0, c0 = time.perf_counter(), time.process_time()
     if method == "sift":
-        t = match_baseline(low, high, "sift", model=model).transform
-        return t, True, time.perf_counter() - t0
-    r = match(low, high, Config.preset(method))
-    return (r.transform if r.matched else None), r.order == "given", time.perf_counter() - t0
+        t, fwd = match_baseline(low, high, "sift", model=model).transform, True
+    else:
+        r = match(low, high, Config.preset(method))
+        t, fwd = (r.transform if r.matched else None), r.order == "given"
+    return t, fwd, time.perf_counter() - t0, time.process_time() - c0
 
 
 def alternate(items, judge, methods=METHODS):
@@ -67,8 +78,8 @@ def alternate(items, judge, methods=METHODS):
     for n, item in enumerate(items):
         order = methods[n % len(methods):] + methods[:n % len(methods)]
         for m in order:
-            t, fwd, sec = run(m, item.low, item.high, getattr(item, "model", "similarity"))
-            rows[m].append((judge(item, t, fwd), sec))
+            t, fwd, sec, cpu = run(m, item.low, item.high, getattr(item, "model", "similarity"))
+            rows[m].append((judge(item, t, fwd), sec, cpu))
     return rows
 
 
@@ -77,19 +88,20 @@ def nulls_table(folder: Path, every: int, methods=METHODS) -> str:
     runs = pairs + [_Stored(p.high, p.low) for p in pairs]  # both orders
     rows = alternate(runs, lambda item, t, fwd: t is not None, methods)
     out = [f"Null runs: every {every}th stored pair of {folder}, both orders ({len(runs)} runs)",
-           "", "| method | runs | claims (all false) | median s | 90th percentile s |",
-           "|---|---:|---:|---:|---:|"]
+           "", "| method | runs | claims (all false) | median s | 90th percentile s | "
+           "median CPU s |", "|---|---:|---:|---:|---:|---:|"]
     for m in methods:
-        secs = [s for _, s in rows[m]]
-        out.append(f"| {m} | {len(secs)} | {sum(c for c, _ in rows[m])} | "
-                   f"{np.median(secs):.3f} | {np.percentile(secs, 90):.3f} |")
+        secs = [r[1] for r in rows[m]]
+        out.append(f"| {m} | {len(secs)} | {sum(r[0] for r in rows[m])} | "
+                   f"{np.median(secs):.3f} | {np.percentile(secs, 90):.3f} | "
+                   f"{np.median([r[2] for r in rows[m]]):.3f} |")
     return "\n".join(out)
 
 
 def sets_table(shared: Path, names, methods=METHODS) -> str:
     sets = synthetic_sets(list_photos(shared)[::PHOTO_STEP], 0, wanted=names)
-    out = ["| set | method | pairs | solved | wrong claims | median s |",
-           "|---|---|---:|---:|---:|---:|"]
+    out = ["| set | method | pairs | solved | wrong claims | median s | median CPU s |",
+           "|---|---|---:|---:|---:|---:|---:|"]
     for name in names:
         def judge(pair, t, fwd):
             if pair.truth is None:
@@ -101,32 +113,62 @@ def sets_table(shared: Path, names, methods=METHODS) -> str:
         for m in methods:
             rs = rows[m]
             out.append(f"| {name} | {m} | {len(rs)} | {sum(r[0][0] for r in rs)} | "
-                       f"{sum(r[0][1] for r in rs)} | {np.median([s for _, s in rs]):.3f} |")
+                       f"{sum(r[0][1] for r in rs)} | {np.median([r[1] for r in rs]):.3f} | "
+                       f"{np.median([r[2] for r in rs]):.3f} |")
+        if {"default", "no-views"} <= set(methods):
+            out.append(f"| {name} | default / no-views, median of the pairs' ratios | | | | "
+                       f"{speedup(rows, 1):.1f}x | {speedup(rows, 2):.1f}x |")
     return "\n".join(out)
 
 
-def big_table(shared: Path, rounds: int) -> str:
-    a, b = (str(shared / "data" / "photos" / n) for n in BIG_PAIR)
+def speedup(rows, k: int) -> float:
+    """The median over the items of the default's time over ``no-views``'s on the same item
+    (``k``: 1 wall seconds, 2 CPU seconds), the two run one after the other."""
+    return float(np.median([a[k] / b[k] for a, b in zip(rows["default"], rows["no-views"])]))
+
+
+def big_run(exe: str, a: str, b: str, no_views: bool) -> dict:
+    """``scalematch A B -q`` as a whole process: seconds, peak MB, exit code, CPU seconds, and
+    from its JSON the views probed and matched in full, and the points at the first scale."""
+    timer = ["/usr/bin/time", "-f", "%e %M %U %S"] if Path("/usr/bin/time").exists() else []
+    with tempfile.TemporaryDirectory() as out_dir:
+        result = Path(out_dir) / "result.json"
+        cmd = timer + [exe, a, b, "-q", "--out-dir", out_dir, "--json", str(result)]
+        cmd += ["--no-views"] if no_views else []
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        r = json.loads(result.read_text()) if result.is_file() else {}
+    measured = p.stderr.strip().splitlines()[-1].split() if timer else ["nan"] * 4
+    steps = r.get("search", [])
+    return {"s": wall, "mb": float(measured[1]) / 1024, "exit": p.returncode,
+            "cpu": float(measured[2]) + float(measured[3]),
+            "probed": sum(x["views"] for x in steps), "full": sum(x["full"] for x in steps),
+            "points": r["scales"][0]["points"] if r.get("scales") else 0}
+
+
+def big_table(shared: Path, rounds: int, pairs: int = 1) -> str:
     exe = shutil.which("scalematch") or str(Path(sys.executable).parent / "scalematch")
-    timer = ["/usr/bin/time", "-f", "%e %M"] if Path("/usr/bin/time").exists() else []
-    res = {"default": [], "no-views": []}
-    for k in range(rounds):
-        for opt in (("default", "no-views") if k % 2 == 0 else ("no-views", "default")):
-            with tempfile.TemporaryDirectory() as out_dir:
-                cmd = timer + [exe, a, b, "-q", "--out-dir", out_dir]
-                cmd += ["--no-views"] if opt == "no-views" else []
-                t0 = time.perf_counter()
-                p = subprocess.run(cmd, capture_output=True, text=True)
-            wall = time.perf_counter() - t0
-            mem = p.stderr.strip().splitlines()[-1].split()[-1] if timer else "nan"
-            res[opt].append((wall, float(mem) / 1024, p.returncode))
-    out = [f"The unrelated pair {BIG_PAIR[0]} / {BIG_PAIR[1]}, `scalematch A B -q` as a whole "
-           f"process, {rounds} rounds alternately", "",
-           "| search | seconds | peak MB | exit |", "|---|---|---|---|"]
-    for opt, rs in res.items():
-        out.append(f"| {opt} | {', '.join(f'{w:.2f}' for w, _, _ in rs)} | "
-                   f"{', '.join(f'{m:.0f}' for _, m, _ in rs)} | "
-                   f"{', '.join(str(c) for _, _, c in rs)} |")
+    out = [f"Unrelated 12-16 MP pairs, `scalematch A B -q` as a whole process, {rounds} rounds "
+           f"alternately; views probed / matched in full, points at the first scale", "",
+           "| pair | search | seconds | CPU s | peak MB | views probed / in full | points | exit |",
+           "|---|---|---|---|---|---|---:|---|"]
+    for names in BIG_PAIRS[:pairs]:
+        a, b = (str(shared / "data" / "photos" / n) for n in names)
+        res = {"default": [], "no-views": []}
+        for k in range(rounds):
+            for opt in (("default", "no-views") if k % 2 == 0 else ("no-views", "default")):
+                res[opt].append(big_run(exe, a, b, opt == "no-views"))
+        for opt, rs in res.items():
+            secs = ", ".join(f"{r['s']:.2f}" for r in rs)
+            cpus = ", ".join(f"{r['cpu']:.2f}" for r in rs)
+            mbs = ", ".join(f"{r['mb']:.0f}" for r in rs)
+            out.append(f"| {names[0]} / {names[1]} | {opt} | {secs} | {cpus} | {mbs} | "
+                       f"{rs[0]['probed']} / {rs[0]['full']} | {rs[0]['points']} | "
+                       f"{', '.join(str(r['exit']) for r in rs)} |")
+        ratio = {k: np.median([r[k] for r in res["default"]]) / np.median(
+            [r[k] for r in res["no-views"]]) for k in ("s", "cpu")}
+        out.append(f"| | default / no-views | {ratio['s']:.1f}x | {ratio['cpu']:.1f}x | | | | |")
     return "\n".join(out)
 
 
@@ -137,6 +179,8 @@ def main() -> None:
                     help="a pairs folder of `scalematch lab nulls` (its manifest.json and PNGs)")
     ap.add_argument("--sets", default="zoom,tilted,unrelated")
     ap.add_argument("--big-rounds", type=int, default=3)
+    ap.add_argument("--big-pairs", type=int, default=1, help=f"how many of the "
+                    f"{len(BIG_PAIRS)} 12-16 MP unrelated pairs (BIG_PAIRS)")
     ap.add_argument("--methods", default=",".join(METHODS),
                     help="sift and Config presets, comma-separated (the big pair: always "
                          "default and no-views)")
@@ -150,7 +194,7 @@ def main() -> None:
         sys.exit("../shared is absent")
     print(f"load average at the start {os.getloadavg()[0]:.2f}\n")
     if a.big_rounds:
-        print(big_table(shared, a.big_rounds) + "\n")
+        print(big_table(shared, a.big_rounds, a.big_pairs) + "\n")
     if a.every and not (Path(a.nulls) / "manifest.json").is_file():
         print(f"No stored null pairs in {a.nulls}: `scalematch lab nulls --limit 40` makes 40 "
               "(and runs them); the null table is skipped.\n")

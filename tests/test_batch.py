@@ -550,6 +550,28 @@ def test_a_bad_set_stops_the_batch_before_any_pair_runs(images):
     assert result.stdout == ""  # no line for any pair
 
 
+@pytest.mark.parametrize("option", [["--seed", "9223372036854775808"],
+                                    ["--set", "seed=2147483648"]])
+def test_a_seed_out_of_range_stops_the_batch_before_any_pair_runs(images, tmp_path, option):
+    """A seed OpenCV cannot take (a C int) wrote an error line for every pair into the
+    resumable output; it is one usage error now, before the output is made."""
+    pairs = write(images / "p13.csv", "low.png,high.png\n")
+    out = tmp_path / "results.jsonl"
+    result = run("batch", pairs, "--output", out, *option)
+    assert_one_line_error(result, "seed")
+    assert "2147483647" in result.stderr and not out.exists()
+
+
+def test_a_constant_image_s_error_line_names_its_file(images):
+    cv2.imwrite(str(images / "flat.png"), np.full((100, 120), 9, np.uint8))
+    pairs = write(images / "p14.csv", "low.png,flat.png\n")
+    result = run("batch", pairs, "-q")
+    line = json.loads(result.stdout)
+    assert result.exit_code == 3 and line["error_kind"] == "input"
+    assert line["error"] == (f"{images / 'flat.png'}: image is constant (every pixel 9): "
+                             f"there is nothing to match in it")
+
+
 def test_an_image_given_as_the_csv_is_named_not_a_text_file(images):
     assert_one_line_error(run("batch", images / "low.png"), "is not a text file (an image?)")
 

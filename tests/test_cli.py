@@ -300,7 +300,16 @@ MEANINGLESS = [("--ransac-threshold", "-1", "ransac.threshold_px must be > 0"),
                ("--set", "ransac.threshold_px=-1", "ransac.threshold_px"),
                ("--set", "matcher.ratio=2", "matcher.ratio"),
                ("--time-budget", "0", "--time-budget must be more than 0 seconds"),
-               ("--set", "time_budget_s=-2", "time_budget_s must be > 0")]
+               ("--set", "time_budget_s=-2", "time_budget_s must be > 0"),
+               # OpenCV's random generator takes a C int: 2^31 and 2^63 (a seed from
+               # `date +%s%N`) were exit 4 or "integer won't fit into a C int"
+               ("--seed", "9223372036854775808",
+                "'--seed': 9223372036854775808 is not in the range 0<=x<=2147483647"),
+               ("--seed", "2147483648", "'--seed': 2147483648 is not in the range"),
+               ("--seed", "-1", "'--seed': -1 is not in the range"),
+               ("--set", "seed=9223372036854775808",
+                "seed must be an integer in [0, 2147483647], got 9223372036854775808"),
+               ("--set", "seed=2147483648", "seed must be an integer in [0, 2147483647]")]
 
 
 @pytest.mark.parametrize("command", ["match", "batch"])
@@ -311,6 +320,59 @@ def test_meaningless_option_values_are_usage_errors(tmp_path, flat_pair, command
     pairs.write_text(f"{flat_pair[0]},{flat_pair[1]}\n")
     args = [command, *flat_pair] if command == "match" else [command, pairs]
     assert_one_line_error(run(*args, option, value), needle)
+
+
+def test_quiet_and_verbose_together_are_a_usage_error(flat_pair):
+    assert_one_line_error(run(*flat_pair, "-q", "-v"), "-q (--quiet) and -v (--verbose) "
+                                                       "exclude each other")
+
+
+def test_help_is_a_command_not_a_file_to_match():
+    result = run("help")
+    assert result.exit_code == 0 and result.output == run("--help").output
+    result = run("help", "batch")
+    assert result.exit_code == 0 and result.output == run("batch", "--help").output
+    assert_one_line_error(run("help", "bach"), "no command 'bach'; the commands: match, batch")
+
+
+def test_a_constant_image_is_named_and_leaves_no_out_dir(tmp_path):
+    args, _ = _bad_input(tmp_path, "constant")
+    out = tmp_path / "out" / "demo"
+    last = assert_one_line_error(run(*args, "-o", out))
+    assert last == (f"Error: {args[0]}: image is constant (every pixel 128): there is nothing "
+                    f"to match in it")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_refused_match_removes_the_out_dir_it_made(tmp_path, monkeypatch, flat_pair):
+    """An input the match itself refuses (after the folders of -o are made) leaves none of
+    them behind; a folder that was there stays."""
+    def refused(*args, **kwargs):
+        raise ValueError("refused by the pipeline")
+
+    monkeypatch.setattr("scalematch.cli._run_match", refused)
+    assert_one_line_error(run(*flat_pair, "-o", tmp_path / "a" / "b"), "refused")
+    assert not (tmp_path / "a").exists()
+    (tmp_path / "kept").mkdir()
+    assert_one_line_error(run(*flat_pair, "-o", tmp_path / "kept" / "b"), "refused")
+    assert (tmp_path / "kept").is_dir() and not (tmp_path / "kept" / "b").exists()
+
+
+def test_ctrl_c_while_the_command_line_loads_is_one_line_and_exit_130(tmp_path):
+    """Ctrl-C in the first 0.1 s, while numpy, OpenCV and click load, printed a 20-line
+    traceback of the imports. The interrupt is raised here where the command line's module
+    is imported, as a signal would raise it there."""
+    probe = ("import sys\n"
+             "class Interrupt:\n"
+             "    def find_spec(self, name, path=None, target=None):\n"
+             "        if name == 'scalematch.cli':\n"
+             "            raise KeyboardInterrupt\n"
+             "sys.meta_path.insert(0, Interrupt())\n"
+             "from scalematch.__main__ import main\n"
+             "main()\n")
+    done = subprocess.run([sys.executable, "-c", probe, str(DEMO_LOW), str(DEMO_HIGH)],
+                          capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert (done.returncode, done.stderr) == (130, "interrupted\n")
 
 
 def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
@@ -420,8 +482,9 @@ def test_demo_pair_matches_with_full_json_and_pictures(tmp_path):
     with open(out / "matches.csv") as fh:
         rows = list(csv.reader(fh))
     assert rows[0] == ["x_high", "y_high", "x_low", "y_low"] and len(rows) == data["inliers"] + 1
-    low = cv2.imread(str(DEMO_LOW))  # 419 px wide: drawn twice as large
-    assert cv2.imread(str(out / "overlay.png")).shape == (2 * low.shape[0], 2 * low.shape[1], 3)
+    low = cv2.imread(str(DEMO_LOW))  # 419 px wide: drawn twice as large, between captions
+    drawn = cv2.imread(str(out / "overlay.png")).shape
+    assert drawn[1:] == (2 * low.shape[1], 3) and drawn[0] > 2 * low.shape[0] + 50
     assert (out / "matches.png").is_file() and (out / "scales.png").is_file()
 
 

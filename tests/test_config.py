@@ -100,3 +100,35 @@ def test_guided_growth_and_the_pixel_tests_are_set_and_recorded_as_the_rest():
     assert recorded["guided"]["radius_px"] == 5.0 and recorded["pixel"]["min_overlap_px"] == 300
     with pytest.raises(ValueError, match="pixel.vouch_radius must be > 0"):
         build_config("default", None, None, None, {}, ["pixel.vouch_radius=0"])
+
+
+@pytest.mark.parametrize("make,kind,message", [
+    (lambda: Config(ransac=3), TypeError,
+     "ransac must be a RansacParams, not int: change one of its values with "
+     "replace(Config().ransac, NAME=VALUE)"),
+    (lambda: Config(harris={"sigma": 1.0}), TypeError, "harris must be a HarrisParams, not dict"),
+    (lambda: Config(scales=4), TypeError, "scales must be a tuple of scales >= 1"),
+    (lambda: Config(seed=2**31), ValueError,
+     "seed must be an integer in [0, 2147483647], got 2147483648"),
+    (lambda: Config(seed=-1), ValueError, "seed must be an integer in [0, 2147483647], got -1"),
+])
+def test_a_config_that_cannot_be_matched_is_refused_when_it_is_made(make, kind, message):
+    """Not later, inside match ("replace() should be called on dataclass instances") or inside
+    OpenCV ("integer won't fit into a C int")."""
+    with pytest.raises(kind) as exc:
+        make()
+    assert message in str(exc.value)
+    assert Config(seed=2**31 - 1).seed == 2**31 - 1  # the largest seed OpenCV takes
+
+
+def test_a_config_shows_only_what_differs_from_the_default():
+    """help(scalematch.match) shows its default config as Config(), not 2.5 KB of values."""
+    import inspect
+
+    import scalematch
+
+    assert repr(Config()) == "Config()"
+    assert repr(Config(seed=3, model="affine")) == "Config(model='affine', seed=3)"
+    assert "probe=ProbeParams(enabled=False" in repr(Config.paper())
+    signature = str(inspect.signature(scalematch.match))
+    assert "config: 'Config' = Config()," in signature and len(signature) < 300

@@ -141,3 +141,46 @@ def test_marks_are_known_and_needs_are_marked():
             assert "shared" in b.marks, f"{b.id} needs ../shared: mark it ```{b.lang} shared"
         if "--scheduler" in b.text or "distributed" in b.text:
             assert "dask" in b.marks, f"{b.id} needs Dask: mark it ```{b.lang} dask"
+
+
+def test_each_line_of_the_readme_quick_start_runs_alone(tmp_path):
+    """A new user copies one line of the command-line quick start, not the whole block: each
+    runs alone in a fresh folder, after activating the environment (the third wrote into
+    out/ with a shell redirection, and failed until the second had made out/)."""
+    heading = (ROOT / "README.md").read_text().splitlines().index(
+        "## Quick start: command line") + 1
+    block = next(b for b in BLOCKS if b.page == "README.md" and b.lang in SHELLS
+                 and b.line > heading)
+    lines = [s for s in block.text.splitlines() if s.strip() and not s.startswith("source ")]
+    assert len(lines) >= 3
+    for k, line in enumerate(lines):
+        (tmp_path / str(k)).mkdir()
+        cwd = _workdir(tmp_path / str(k))
+        run = subprocess.run(["bash", "-e", "-c", f"source .venv/bin/activate\n{line}\n"],
+                             cwd=cwd, env=_env(), capture_output=True, text=True,
+                             timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+        assert run.returncode == 0, (line, run.stderr[-2000:])
+
+
+def test_the_no_views_figure_is_said_the_same_everywhere():
+    """What --no-views saves is one measured figure, in the same words in the README, the
+    guide, the design notes, both commands' --help and the slow "no"'s hint."""
+    from dataclasses import replace
+
+    from click.testing import CliRunner
+
+    from scalematch.cli import NO_VIEWS_SPEEDUP, SLOW_NO_HINT_S, cli, slow_no_hint
+    from scalematch.result import Direction, MatchResult, StepRecord
+
+    def flat(text: str) -> str:
+        return " ".join(text.split())
+
+    for page in ("README.md", "docs/GUIDE.md", "docs/DESIGN.md"):
+        assert NO_VIEWS_SPEEDUP in flat((ROOT / page).read_text()), page
+    for command in ("match", "batch"):
+        assert NO_VIEWS_SPEEDUP in flat(CliRunner().invoke(cli, [command, "--help"]).output)
+    step = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
+    slow = MatchResult(matched=False, model="similarity", reason="too few inliers",
+                       timings={"total": SLOW_NO_HINT_S + 1},
+                       search=(step, replace(step, view_pass=1, views=5)))
+    assert NO_VIEWS_SPEEDUP in slow_no_hint(slow)

@@ -128,10 +128,130 @@ def test_pixel_limit_checked_from_header_without_decoding(tmp_path):
     limit = r"12000x12000 = 144.0 MP, above the limit of 100.0 MP \(100000000 px\)"
     with pytest.raises(ImageError, match=limit):
         read_grey(write(tmp_path / "bomb.png", png_header_only(12000, 12000)))
-    # past Pillow's own guard (2 x PIL.Image.MAX_IMAGE_PIXELS): refused by it, one line too
-    with pytest.raises(ImageError, match="decompression-bomb limit") as err:
+    # far past it too: the size and the option named, one line
+    with pytest.raises(ImageError, match="50000x50000 = 2500.0 MP, above the limit") as err:
         read_grey(write(tmp_path / "bomb.png", png_header_only(50000, 50000)))
-    assert "bomb.png" in str(err.value) and "\n" not in str(err.value)
+    assert "bomb.png" in str(err.value) and "--max-pixels" in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def jpeg_claiming(width: int, height: int) -> bytes:
+    """A small JPEG whose frame header claims width x height px."""
+    data = bytearray(cv2.imencode(".jpg", np.zeros((48, 64), np.uint8))[1].tobytes())
+    sof = data.find(b"\xff\xc0")
+    data[sof + 5:sof + 9] = struct.pack(">HH", height, width)
+    return bytes(data)
+
+
+def test_max_pixels_above_pillows_guard_takes_effect(tmp_path):
+    """Pillow refuses headers above twice PIL.Image.MAX_IMAGE_PIXELS (179 MP) on its own: that
+    guard is lifted while a header is read, so --max-pixels decides, above 179 MP too, and an
+    image above the limit is told its size, not "shrink it" past a limit it did not set."""
+    data = jpeg_claiming(20000, 10000)  # 200 MP
+    assert header(data).size == (20000, 10000)
+    assert Image.MAX_IMAGE_PIXELS == 89_478_485  # set back
+    path = write(tmp_path / "pano.jpg", data)
+    with pytest.raises(ImageError, match="20000x10000 = 200.0 MP, above the limit of 100.0 MP"):
+        read_grey(path)
+    with pytest.raises(ImageError, match="above the limit of 150.0 MP"):
+        read_grey(path, max_pixels=150_000_000)
+
+
+@pytest.fixture
+def no_decoding(monkeypatch):
+    """OpenCV's decoder replaced by one that fails the test: a file refused from its header
+    is never handed to it."""
+    def decode(*args):
+        raise AssertionError("the decoder was called")
+
+    monkeypatch.setattr(cv2, "imdecode", decode)
+
+
+def png_with(data: bytes, width=None, height=None, depth=None, colour=None) -> bytes:
+    """``data`` (a PNG file) with fields of its IHDR chunk replaced, its CRC made right."""
+    out = bytearray(data)
+    for pos, fmt, value in ((16, ">I", width), (20, ">I", height), (24, ">B", depth),
+                            (25, ">B", colour)):
+        if value is not None:
+            out[pos:pos + struct.calcsize(fmt)] = struct.pack(fmt, value)
+    out[29:33] = struct.pack(">I", zlib.crc32(bytes(out[12:29])))
+    return bytes(out)
+
+
+def test_the_two_png_headers_that_took_4_gb_are_refused_before_decoding(tmp_path, no_decoding):
+    """Two 2 KB PNG files made OpenCV allocate 4.2 GB for 10 s before it refused them: a header
+    saying 419x256 px at bit depth 0 and colour type 255, and one saying 8388352 x 1 px at bit
+    depth 0. Both are refused from their IHDR chunk, and a chunk whose length field runs past
+    the file's end (what OpenCV allocates) is refused before OpenCV reads it."""
+    demo = (ROOT / "data" / "demo_low.png").read_bytes()
+    cases = {
+        "depth0-colour255.png": (png_with(demo[:2048], height=256, depth=0, colour=255),
+                                 "bit depth 0 with colour type 255"),
+        "wide.png": (png_with(demo[:2048], width=8388352, height=1, depth=0),
+                     "width 8388352 px, above the 1000000 px libpng decodes"),
+    }
+    chunk = bytearray(demo)
+    chunk[33:37] = struct.pack(">I", 0xFFFFFFF0)  # the first chunk after IHDR
+    cases["chunk.png"] = (bytes(chunk), "a chunk at byte 33 says it holds 4294967280 bytes")
+    chunk[33:37] = struct.pack(">I", 0x7FFFFFF0)
+    cases["chunk2.png"] = (bytes(chunk), "past the end of the file")
+    for name, (data, needle) in cases.items():
+        path = write(tmp_path / name, data)
+        with pytest.raises(ImageError, match=needle) as err:
+            read_grey(path)
+        assert str(err.value).startswith(f"{path}: ") and "\n" not in str(err.value), name
+
+
+def test_png_bit_depths_and_colour_types_as_the_standard_allows():
+    from scalematch.headers import PNG_DEPTHS, BadHeader
+
+    base = png_header_only(64, 48)
+    for colour in range(256):
+        for depth in range(33):
+            data = png_with(base, depth=depth, colour=colour)
+            if depth in PNG_DEPTHS.get(colour, ()):
+                assert header(data).size == (64, 48)
+            else:
+                with pytest.raises(BadHeader, match=f"bit depth {depth} with colour type "
+                                                    f"{colour}"):
+                    header(data)
+
+
+def test_sizes_refused_from_the_header_before_decoding(tmp_path, no_decoding):
+    """A side under the minimum, a side longer than the decoder takes, a size of 0: refused
+    from the header of each format, not after OpenCV has decoded it."""
+    thin = png_with(png_header_only(64, 48), width=100_000, height=3)
+    cases = [("thin.png", thin, "100000x3, too small to match"),
+             ("zero.jpg", jpeg_claiming(0, 48), "JPEG header is invalid: it says 0x48 px"),
+             ("long.jpg", jpeg_claiming(65000, 20), "65000x20, too small"),
+             ("huge.png", png_with(thin, width=1_000_001, height=24), "1000000 px libpng")]
+    for name, data, needle in cases:
+        with pytest.raises(ImageError, match=needle):
+            read_grey(write(tmp_path / name, data))
+
+
+def test_formats_pillow_cannot_read_have_their_size_read_here(tmp_path, bgr):
+    """Float and 4-channel TIFF, PFM, PAM and Radiance HDR: Pillow does not read their headers,
+    OpenCV decodes them. Their size comes from their header, so they are read as before; a
+    header claiming more than the limit is refused without decoding."""
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    unit = bgr.astype(np.float32) / 255
+    cases = {".tif": unit, ".pfm": unit, ".hdr": unit, ".pam": bgr}
+    for ext, img in cases.items():
+        data = cv2.imencode(ext, img)[1].tobytes()
+        assert header(data).size == (160, 120), ext
+        got = read_grey(write(tmp_path / f"img{ext}", data))
+        assert got.shape == (120, 160), ext
+        np.testing.assert_allclose(got, grey, atol=2.0, err_msg=ext)
+    big = b"P7\nWIDTH 20000\nHEIGHT 20000\nDEPTH 3\nMAXVAL 255\nTUPLTYPE RGB\nENDHDR\n"
+    with pytest.raises(ImageError, match="20000x20000 = 400.0 MP, above the limit"):
+        read_grey(write(tmp_path / "big.pam", big + bytes(1000)))
+
+
+def test_a_jpeg_pillow_refuses_has_its_size_read_from_its_frame_header():
+    data = bytearray(jpeg_claiming(64, 48))
+    data[data.find(b"\xff\xc0") + 4] = 12  # 12-bit samples: Pillow reads 8-bit JPEG only
+    assert header(bytes(data)).size == (64, 48)
 
 
 @pytest.mark.parametrize("case, needle", [
@@ -264,7 +384,7 @@ def test_the_png_header_is_read_as_pillow_reads_it(tmp_path, bgr):
     header must be Pillow's, whatever the layout (grey, colour, alpha, 16-bit, text chunks)."""
     from PIL import PngImagePlugin
 
-    from scalematch.imageio import _png_header
+    from scalematch.headers import png_header as _png_header
 
     grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
     images = {"grey": grey, "bgr": bgr, "bgra": cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA),
@@ -282,8 +402,8 @@ def test_the_png_header_is_read_as_pillow_reads_it(tmp_path, bgr):
     exif = Image.Exif()
     exif[0x0112] = 6
     Image.fromarray(grey).save(path, exif=exif.tobytes())
-    assert _png_header(path.read_bytes()) is None  # Pillow reads the orientation
-    assert _png_header(png_header_only(12000, 12000)) is None  # past Pillow's guard: Pillow
+    assert _png_header(path.read_bytes()) == ((160, 120), 6, -1)  # as Pillow reads it
+    assert _png_header(png_header_only(12000, 12000)) == ((12000, 12000), 1, -1)
     assert _png_header(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40) is None  # no IHDR
 
 
@@ -463,3 +583,54 @@ def test_a_float_image_a_little_past_1_is_drawn_as_the_matcher_reads_it():
     img = np.linspace(0.0, 1.03, 64, dtype=np.float32).reshape(8, 8)
     drawn = to_bgr8(img)
     assert drawn[..., 0].max() == 255 and abs(float(drawn[0, 1, 0]) - 255 * img[0, 1]) <= 1
+
+
+# --------------------------------------------------------------------------- the seeded corpus
+
+@pytest.fixture(scope="module")
+def corpus_dir(tmp_path_factory) -> Path:
+    """The fuzz corpus of ``scalematch.lab.fuzz`` (250 files, seed 0), written once."""
+    from scalematch.lab.fuzz import write_corpus
+
+    folder = tmp_path_factory.mktemp("corpus")
+    write_corpus(folder, seed=0)
+    return folder
+
+
+def test_every_file_of_the_fuzz_corpus_is_read_or_refused_in_one_line(corpus_dir):
+    """The demo image in five formats with byte flips, header flips, truncation, repeated
+    chunks and huge size fields: each file is decoded or refused with one line naming it,
+    never another exception. (scripts/fuzz_inputs.py measures the time and memory of each.)"""
+    from scalematch.working import read_pair
+    from scalematch import Config
+
+    outcomes = {"read": 0, "refused": 0}
+    paths = sorted(corpus_dir.iterdir())
+    assert len(paths) == 250
+    for path in paths:
+        try:
+            read_pair(path, path, Config())
+            outcomes["read"] += 1
+        except ImageError as exc:
+            assert str(exc).startswith(f"{path}: ") and "\n" not in str(exc), path.name
+            outcomes["refused"] += 1
+    assert outcomes["read"] > 20 and outcomes["refused"] > 100, outcomes
+
+
+def test_the_fuzz_corpus_through_the_command_line_exits_0_1_or_2(corpus_dir):
+    """Every file of the corpus as LOW against the demo's finer image: 0 or 1 for a file that
+    decodes, 2 with one "Error:" line for one that does not; never 4 (an internal error)."""
+    from click.testing import CliRunner
+
+    from scalematch.cli import cli
+
+    high = ROOT / "data" / "demo_high.png"
+    codes = {}
+    for path in sorted(corpus_dir.iterdir()):
+        run = CliRunner().invoke(cli, [str(path), str(high), "--no-views", "-q"])
+        codes[run.exit_code] = codes.get(run.exit_code, 0) + 1
+        assert run.exit_code in (0, 1, 2), (path.name, run.exit_code, run.output)
+        if run.exit_code == 2:
+            lines = run.stderr.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith(f"Error: {path}: "), run.stderr
+    assert codes.get(2, 0) > 100 and codes.get(0, 0) + codes.get(1, 0) > 20, codes

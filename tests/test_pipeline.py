@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -722,3 +723,12 @@ def test_views_made_once_and_shared_give_the_answer_of_views_made_each_time(racc
     assert shared.matched and shared.evidence.view_of == "coarser"
     assert np.array_equal(shared.transform, alone.transform)
     assert shared.evidence == alone.evidence
+
+
+@pytest.mark.parametrize("path", ["data/demo_low.png", Path("data/demo_low.png")])
+def test_a_path_given_for_an_image_points_to_read_grey(path):
+    """match takes arrays; a file name there said "dtype <U25"."""
+    with pytest.raises(ValueError, match=r"the low image is a path \('data/demo_low.png'\), not "
+                                         r"an array; read it first: "
+                                         r"scalematch.read_grey\('data/demo_low.png'\)"):
+        match(path, "data/demo_high.png")
