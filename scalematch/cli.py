@@ -224,12 +224,8 @@ def _coerce(text: str, current: Any, path: str) -> Any:
             return int(text)
         if isinstance(current, float):
             return float(text)
-        if isinstance(current, tuple) and current and isinstance(current[0], tuple):
-            # a tuple of tuples (views.passes): groups split by ";", e.g. "2;4;6,8"
-            return tuple(tuple(float(v) for v in group.split(",") if v.strip())
-                         for group in text.split(";") if group.strip())
         if isinstance(current, tuple):
-            return tuple(float(v) for v in text.split(",") if v.strip())
+            return _coerce_tuple(text, current)
         if current is None:
             try:
                 return float(text) if "." in text or "e" in text.lower() else int(text)
@@ -244,6 +240,15 @@ def _coerce(text: str, current: Any, path: str) -> Any:
                 else f"a {type(current).__name__} value")
         raise ValueError(f"{path} needs {kind}, got {text!r}") from None
     return text
+
+
+def _coerce_tuple(text: str, current: tuple) -> tuple:
+    """Comma-separated numbers; for a tuple of tuples (views.passes), groups split by ";",
+    e.g. "2;4;6,8". ``ValueError`` for anything else."""
+    if current and isinstance(current[0], tuple):
+        return tuple(tuple(float(v) for v in group.split(",") if v.strip())
+                     for group in text.split(";") if group.strip())
+    return tuple(float(v) for v in text.split(",") if v.strip())
 
 
 def set_path(config: Any, path: str, value: Any, whole: Optional[str] = None) -> Any:
@@ -597,7 +602,14 @@ def cli() -> None:
 
 def matching_options(f: Callable) -> Callable:
     """The options shared by ``match`` and ``batch``: what is matched and how."""
-    opts = [
+    for opt in reversed(_search_options() + _threshold_options() + _value_options()):
+        f = opt(f)
+    return f
+
+
+def _search_options() -> List[Callable]:
+    """The options of the search: the model, the mode, the order, views, time, no-data, size."""
+    return [
         click.option("--model", type=click.Choice(MODELS), default=None,
                      help="Transform fitted from high-res px to low-res px: homography for a "
                           "planar scene seen from another viewpoint or in perspective (Oxford "
@@ -642,7 +654,11 @@ def matching_options(f: Callable) -> Callable:
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-16 in third octaves; paper mode 1-8]'),
     ]
-    base = Config()
+
+
+def _threshold_options() -> List[Callable]:
+    """The decision's thresholds as options (``THRESHOLD_OPTIONS``), their defaults shown."""
+    base, opts = Config(), []
     for name, paths, typ, text in THRESHOLD_OPTIONS:
         paths = [p for p in paths if _has_path(base, p)]
         if paths:
@@ -650,7 +666,12 @@ def matching_options(f: Callable) -> Callable:
             opts.append(click.option(name, dest, type=typ, default=None,
                                      help=f"{_with_defaults(text, base)} (Config "
                                           f"{', '.join(paths)}) [default: {_get(base, paths[0])}]"))
-    opts += [
+    return opts
+
+
+def _value_options() -> List[Callable]:
+    """Any parameter by its path, the seed, and the largest image read."""
+    return [
         click.option("--set", "settings", multiple=True, metavar="PATH=VALUE",
                      help="Set any Config field, e.g. --set harris.sigma_tilde=2.5 (repeatable)."),
         click.option("--seed", type=click.IntRange(0, MAX_SEED), default=None,
@@ -661,9 +682,6 @@ def matching_options(f: Callable) -> Callable:
                      help="Refuse images with more pixels than this, from their header, before "
                           "decoding them (OpenCV itself decodes at most 1073741824)."),
     ]
-    for opt in reversed(opts):
-        f = opt(f)
-    return f
 
 
 def _get(obj: Any, path: str) -> Any:
@@ -991,8 +1009,7 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
 @exit_codes_in_help(EXIT_MATCHED, EXIT_BAD_INPUT, EXIT_PAIR_ERRORS, EXIT_INTERNAL_ERROR,
                     EXIT_INTERRUPTED, EXIT_BROKEN_PIPE, texts=BATCH_EXIT_TEXT)
 def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, jobs: int,
-                  scheduler: Optional[str], quiet: bool, verbose: bool, max_pixels: int,
-                  **kwargs: Any) -> None:
+                  scheduler: Optional[str], quiet: bool, **kwargs: Any) -> None:
     """Match every pair of PAIRS.csv, one JSON line per pair.
 
     PAIRS.csv has two columns low,high (no header), or a header row naming the columns low and
@@ -1038,6 +1055,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     if retry_errors and output is None:
         raise click.UsageError("--retry-errors matches again the pairs whose line in the output "
                                "file is an error; give that file with --output.")
+    max_pixels, _ = kwargs.pop("max_pixels"), kwargs.pop("verbose")  # -v: the group reads it
     config = _config_from(kwargs)
     plan, client = _batch_plan(pairs_csv, output, retry_errors, scheduler, config)
     if not quiet:

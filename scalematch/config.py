@@ -175,6 +175,10 @@ class Config:
         in_range("", "min_footprint_px", self.min_footprint_px, Bounds(lo=0))
         if self.time_budget_s is not None:
             in_range("", "time_budget_s", self.time_budget_s, Bounds(lo=0, lo_open=True))
+        if self.mode == "paper" and self.guided.use_orientation:
+            # the jets carry no orientation: guided growth compares descriptors alone, and the
+            # configuration says so (it is recorded with every result)
+            object.__setattr__(self, "guided", replace(self.guided, use_orientation=False))
 
     def __repr__(self) -> str:
         defaults = _defaults()
@@ -228,7 +232,9 @@ def _paper() -> Config:
                   # the paper: Mahalanobis nearest neighbours, then the constraints decide
                   matcher=MatcherParams(selection="knn", k=3),
                   # "In practice we run the latter algorithm at all scales" (section 5)
-                  probe=ProbeParams(enabled=False))
+                  probe=ProbeParams(enabled=False),
+                  # the jets carry no orientation to compare
+                  guided=GuidedParams(use_orientation=False))
 
 
 #: Named configurations: the two modes, and the steps between them that the lab's ablation

@@ -10,7 +10,7 @@ orientation, ``guided``: the second look's growth) instead of comparing the mode
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional, Union
 
 import numpy as np
@@ -60,7 +60,8 @@ class JetMode:
     semi_local: SemiLocalParams
     whitening: np.ndarray = field(repr=False)  #: Lambda^-1/2 (``stages.mahalanobis``)
     covariance_used: str  #: where Lambda was read from (``MatchResult.covariance_used``)
-    guided: GuidedParams  #: the second look's guided growth, without orientation
+    #: the second look's guided growth (without orientation: ``Config`` sets it so)
+    guided: GuidedParams
     #: the jets carry no orientation: no rotation groups, none in the a-contrario count
     orientation: Optional[OrientationParams] = None
 
@@ -68,7 +69,7 @@ class JetMode:
     def of(config: Config) -> "JetMode":
         cov = load_covariance(config.covariance_path)
         return JetMode(config.harris.sigma_tilde, config.jets, config.semi_local,
-                       cov.whitening(), cov.source, replace(config.guided, use_orientation=False))
+                       cov.whitening(), cov.source, config.guided)
 
     def describe(self, level: Level, kp: Keypoints) -> Described:
         desc = describe_jets(level, kp.xy, self.sigma_tilde, self.jets)

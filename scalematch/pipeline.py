@@ -27,7 +27,7 @@ from .config import Config
 from .geometry import answer_parts, finer_to_coarser
 from .imageio import grey_levels
 from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
-                     StepRecord)
+                     StepRecord, build_evidence)
 from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
@@ -122,12 +122,6 @@ def nodata_seen(nodata: NoData) -> NoDataSeen:
     return NoDataSeen(nodata.value, nodata.share)
 
 
-#: The model a fundamental matrix's plane map is searched with (:func:`anchored`): the
-#: default's, which the model check turns into an affine map or a homography where the scene
-#: asks for one
-PLANE_MODEL = "similarity"
-
-
 def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
              decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
     """A matched fundamental matrix ``result``, kept only where a plane map of the same pair
@@ -137,11 +131,12 @@ def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Con
     A 3-D scene seen from two places has a dominant plane, and the default search finds its
     map (``evidence.parallax``). That map faces the tests an epipolar geometry cannot: a
     plausible scale and footprint, no repeated structure, the pixels. The plane map is
-    searched as the default would search it (``config`` with :data:`PLANE_MODEL`); its inliers
+    searched as the default would search it (``config`` with ``decision.plane_model``); its inliers
     must lie within the inlier threshold of the matrix's epipolar lines.
     """
     t0 = time.perf_counter()
-    plane = match(low, high, replace(config, model=PLANE_MODEL), decoded_factors=decoded_factors)
+    plane = match(low, high, replace(config, model=config.decision.plane_model),
+                  decoded_factors=decoded_factors)
     pairs = np.asarray(plane.inliers, np.float64).reshape(-1, 4)
     if plane.matched and plane.order != result.order:  # the other image taken as the coarser
         pairs = pairs[:, [2, 3, 0, 1]]
@@ -149,8 +144,8 @@ def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Con
     f_coarser = e.low_working_factor if result.order is Direction.GIVEN else e.high_working_factor
     share = on_lines(result.transform, pairs, config.ransac.threshold_px * f_coarser) \
         if plane.matched else math.nan
-    evidence = replace(e, plane_inliers=plane.n_inliers if plane.matched else 0,
-                       plane_on_lines=share)
+    evidence = build_evidence(asdict(e), dict(
+        plane_inliers=plane.n_inliers if plane.matched else 0, plane_on_lines=share))
     timings = dict(result.timings, plane=time.perf_counter() - t0)
     timings["total"] = result.seconds + timings["plane"]
     limit = config.decision.min_plane_on_lines
@@ -333,10 +328,10 @@ class Memo:
     #: each direction's finer image detected at every scale by its pass 0 (``Probed``), which
     #: the views of the coarser image are probed and matched against
     plain: Dict[Direction, "Probed"] = field(default_factory=dict)
-    _contrasts: Dict[Tuple[int, float], Contrast] = field(default_factory=dict, repr=False)
+    _contrasts: Dict[tuple, Contrast] = field(default_factory=dict, repr=False)
     #: the gradients each contrast was measured from, until the image's s = 1 detection
-    _gradients: Dict[Tuple[int, float], Gradients] = field(default_factory=dict, repr=False)
-    _locks: Dict[Tuple[int, float], threading.Lock] = field(default_factory=dict, repr=False)
+    _gradients: Dict[tuple, Gradients] = field(default_factory=dict, repr=False)
+    _locks: Dict[tuple, threading.Lock] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     #: the views of one pass (``_view_pass``) by (image, view key), and their bytes
     _views: Dict[tuple, View] = field(default_factory=dict, repr=False)
@@ -393,7 +388,7 @@ class Memo:
             return self._firsts.get((id(image), *key))
 
     def contrast(self, image: np.ndarray, params) -> Optional[Contrast]:
-        """``image_contrast(image, params.sigma)`` once per image (None: not adaptive). Threads
+        """``image_contrast(image, params)`` once per image (None: not adaptive). Threads
         asking for the same image wait for the one measuring it; two images are measured side
         by side (the coarser image is described on a thread while the finer one is detected)."""
         return self.measured(image, params, take=False)[0]
@@ -404,13 +399,15 @@ class Memo:
         Harris response shares (None after that, or when not adaptive)."""
         if not params.adaptive:
             return Measured(None, None)
-        key = (id(image), float(params.sigma))
+        # the same measure for every detector of the same sigma and contrast parameters
+        key = (id(image), float(params.sigma), params.contrast_percentile,
+               params.contrast_sample_step)
         with self._lock:
             lock = self._locks.setdefault(key, threading.Lock())
         with lock:
             if key not in self._contrasts:
                 grads = gradients(image, params.sigma)
-                self._contrasts[key] = image_contrast(image, params.sigma, grads)
+                self._contrasts[key] = image_contrast(image, params, grads)
                 self._gradients[key] = grads
             return Measured(self._contrasts[key],
                             self._gradients.pop(key, None) if take else None)
@@ -875,25 +872,16 @@ def final_fit(attempt: Attempt, config: Config):
     return union_homography(fit, view, attempt.outcomes, config.model_check, spec, coarser)
 
 
-#: An accepted answer is grown by guided matching (:func:`grown_answer`) when it has fewer
-#: inliers than this: there its map is loose away from them. On the Oxford and perspective
-#: pairs (lab real-pairs, both orders) the answers under 30 inliers were 0.82 px off (median),
-#: 0.52 once grown (graf 1->5 0.97 -> 0.28 px; a perspective facade 4.9 px off as a
-#: similarity, 0.49 as the homography its growth showed); no pair was lost. The zoom pairs of
-#: scripts/compare_versions gave identical answers (186 of 186); docs/BENCHMARKS.md
-GROW_BELOW_INLIERS = 30
-
-
 def grown_answer(attempt: Attempt, fit, search: Search):
     """(t, inliers, model): an accepted answer ``fit`` (:func:`final_fit`) grown by guided
     matching over every scale matched in full (:func:`stages.refit.guided_refit`): the paper's
     step (iv), "establish many other matches once this matrix is known", for an answer of
-    fewer than :data:`GROW_BELOW_INLIERS` inliers. It follows the decision and the pixel
+    fewer than ``GuidedParams.grow_below_inliers`` inliers. It follows the decision and the pixel
     tests, which judge the map the search found: growth spreads a repeated structure's copy as
     readily as the truth. In the default mode only (the paper's jets have no guided distance
     of their own)."""
     config = search.config
-    if search.mode.orientation is None or len(fit[1]) >= GROW_BELOW_INLIERS:
+    if search.mode.orientation is None or len(fit[1]) >= search.mode.guided.grow_below_inliers:
         return fit
     if not attempt.view.is_identity or attempt.coarser_view is not None:
         return fit  # a view's points and orientations are in the view's frame
@@ -971,17 +959,17 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     direction = shown.step.direction
     g = shown_scale(work, direction)
     f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
-    return replace(decided, **(asdict(final) if final is not None else {}),
-                   searches=sum(r.views for r in records), search_order=direction,
-                   view_tilt=shown.shown_view.tilt,
-                   view_longitude_deg=shown.shown_view.longitude_deg,
-                   view_of=shown.step.side, probe_score=shown.probe,
-                   probe_best=probe_best([r.probe_best for r in records]),
-                   steps_run=len(records), steps_planned=len(plan), stopped=stopped,
-                   low_working_factor=work.f_low, high_working_factor=work.f_high,
-                   implied_ratio=decided.implied_ratio * g,
-                   footprint_area_px=decided.footprint_area_px * f_coarser ** 2,
-                   **(seen or {}))
+    searched_ = dict(searches=sum(r.views for r in records), search_order=direction,
+                     view_tilt=shown.shown_view.tilt,
+                     view_longitude_deg=shown.shown_view.longitude_deg,
+                     view_of=shown.step.side, probe_score=shown.probe,
+                     probe_best=probe_best([r.probe_best for r in records]),
+                     steps_run=len(records), steps_planned=len(plan), stopped=stopped)
+    sized = dict(low_working_factor=work.f_low, high_working_factor=work.f_high,
+                 implied_ratio=decided.implied_ratio * g,
+                 footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
+    return build_evidence(asdict(decided), asdict(final) if final is not None else {},
+                          searched_, sized, seen or {})
 
 
 def out_of_reach(config: Config, work: WorkImages) -> str:
@@ -1038,8 +1026,9 @@ def unreachable(search: Search, run: SearchRun) -> MatchResult:
         matched=False, model=config.model, reason=out_of_reach(config, work),
         timings=run.timings, config=config, search=run.records,
         covariance_used=search.mode.covariance_used,
-        evidence=Evidence(steps_planned=len(run.plan), stopped=run.stopped,
-                          low_working_factor=work.f_low, high_working_factor=work.f_high))
+        evidence=build_evidence(dict(steps_planned=len(run.plan), stopped=run.stopped,
+                                     low_working_factor=work.f_low,
+                                     high_working_factor=work.f_high)))
 
 
 def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:

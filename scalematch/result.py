@@ -12,7 +12,7 @@ import enum
 import json
 import math
 from dataclasses import asdict, dataclass, field, is_dataclass
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -54,9 +54,10 @@ class NoDataSeen:
 class Evidence:
     """The figures behind the decision (JSON ``evidence``); NaN where a figure was not reached.
 
-    Assembled once (:func:`scalematch.pipeline.evidence_of`) from the decision's figures for
-    the best transform of one search (:mod:`scalematch.stages.decision`), the final transform's
-    pixel tests, the search's own figures and the working size's.
+    Made only by :func:`build_evidence`, once per search decided
+    (:mod:`scalematch.stages.decision`) and once for the answer
+    (:func:`scalematch.pipeline.evidence_of`: the decision's figures, the final transform's
+    pixel tests, the search's own figures and the working size's).
     """
 
     inliers: int = 0  #: distinct inliers of the best transform
@@ -120,6 +121,23 @@ class Evidence:
     low_working_factor: float = 1.0  #: the low image was matched shrunk by this factor
     high_working_factor: float = 1.0  #: the high image was matched shrunk by this factor
 
+
+
+def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
+    """The one way an :class:`Evidence` is made: the figures of ``parts``, in order, a later
+    part's over an earlier one's; a figure no part gives keeps its default (NaN or 0: not
+    reached). The decision's tests, the pixel tests of the final map, the search and the
+    working size each give their figures (``stages.decision.decide``,
+    ``pipeline.evidence_of``).
+
+    >>> e = build_evidence({"inliers": 12, "log10_nfa": -20.0}, {"log10_nfa": -21.5})
+    >>> e.inliers, e.log10_nfa, math.isnan(e.final_ncc)
+    (12, -21.5, True)
+    """
+    figures: Dict[str, Any] = {}
+    for part in parts:
+        figures.update(part)
+    return Evidence(**figures)
 
 @dataclass(frozen=True)
 class StepRecord:

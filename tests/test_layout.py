@@ -52,3 +52,85 @@ def test_import_and_help_load_neither_the_pipeline_nor_the_lab():
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip().endswith("[] []"), run.stdout[-300:]
     assert "lab" in run.stdout and "bench" in run.stdout  # listed all the same
+
+
+# --------------------------------------------------------------------------------------------
+# The shape of the product's code (the lab's studies are not held to it)
+# --------------------------------------------------------------------------------------------
+
+#: Longest function of the product package, lines from ``def`` to its last line (docstring
+#: included), and most parameters (``self`` and ``cls`` not counted): a function past these
+#: does several things, which one reader cannot hold at once
+MAX_FUNCTION_LINES = 60
+MAX_PARAMETERS = 7
+#: ``match()`` reads as the method: numbered steps calling named stages
+MAX_MATCH_LINES = 45
+
+
+def _functions():
+    import ast
+
+    for path in sorted((ROOT / "scalematch").rglob("*.py")):
+        if "lab" in path.relative_to(ROOT / "scalematch").parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                yield path.relative_to(ROOT), node
+
+
+def test_no_product_function_is_longer_than_60_lines_or_takes_more_than_7_parameters():
+    too_long, too_many = [], []
+    for path, node in _functions():
+        lines = node.end_lineno - node.lineno + 1
+        names = [a.arg for a in node.args.posonlyargs + node.args.args + node.args.kwonlyargs]
+        params = len([n for n in names if n not in ("self", "cls")])
+        if lines > MAX_FUNCTION_LINES:
+            too_long.append(f"{path}:{node.lineno} {node.name} ({lines} lines)")
+        if params > MAX_PARAMETERS:
+            too_many.append(f"{path}:{node.lineno} {node.name} ({params} parameters)")
+    assert not too_long and not too_many, too_long + too_many
+
+
+def test_match_reads_as_numbered_steps():
+    match = next(node for path, node in _functions()
+                 if path.name == "pipeline.py" and node.name == "match")
+    assert match.end_lineno - match.lineno + 1 <= MAX_MATCH_LINES
+
+
+def _calls(tree):
+    """(call node, name of the function it is in) of every call in a module."""
+    import ast
+
+    def walk(node, owner):
+        for child in ast.iter_child_nodes(node):
+            inner = child.name if isinstance(child, (ast.FunctionDef,
+                                                      ast.AsyncFunctionDef)) else owner
+            if isinstance(child, ast.Call):
+                yield child, owner
+            yield from walk(child, inner)
+
+    yield from walk(tree, "")
+
+
+def test_evidence_is_made_only_by_its_builder():
+    """An ``Evidence`` comes from ``result.build_evidence`` alone, and none is changed after
+    (``replace`` on an evidence): the figures of a decision are assembled in one place."""
+    import ast
+
+    def name(f):
+        return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+
+    def an_evidence(arg) -> bool:
+        return (isinstance(arg, ast.Name) and arg.id in ("evidence", "e", "decided")) or \
+            (isinstance(arg, ast.Attribute) and arg.attr == "evidence")
+
+    offenders = []
+    for path in sorted((ROOT / "scalematch").rglob("*.py")):
+        if "lab" in path.relative_to(ROOT / "scalematch").parts:
+            continue
+        for call, owner in _calls(ast.parse(path.read_text())):
+            made = name(call.func) == "Evidence" and owner != "build_evidence"
+            changed = name(call.func) == "replace" and call.args and an_evidence(call.args[0])
+            if made or changed:
+                offenders.append(f"{path.relative_to(ROOT)}:{call.lineno} in {owner}")
+    assert not offenders, offenders

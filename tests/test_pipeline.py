@@ -149,7 +149,7 @@ def test_the_answer_is_grown_by_guided_matching(raccoon):
     r = match(pair.low, pair.high, Config(model="homography"))
     _check_known_answer(r, pair)
     assert r.model == "homography"
-    assert r.evidence.inliers < pipeline.GROW_BELOW_INLIERS
+    assert r.evidence.inliers < r.config.guided.grow_below_inliers
     assert r.n_inliers > 2 * r.evidence.inliers
     moved = np.linalg.norm(apply(r.transform, r.inliers[:, :2]) - r.inliers[:, 2:], axis=1)
     assert np.all(moved <= Config().ransac.threshold_px + 1e-6)
@@ -594,8 +594,8 @@ def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_
     search = pipeline.Search(at_working_size(pair.low, pair.high, config), config,
                              mode_of(config), pipeline.Memo(), pipeline.Meter(None, 0))
     low = pipeline.describe_low(pair.low, search,
-                                pipeline.image_contrast(pair.low, config.harris_low.sigma))
-    contrast = pipeline.image_contrast(pair.high, config.harris.sigma)
+                                pipeline.image_contrast(pair.low, config.harris_low))
+    contrast = pipeline.image_contrast(pair.high, config.harris)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
     measured = pipeline.Measured(contrast)
     every = pipeline.score_view(view, *pipeline.detect_view(
@@ -643,7 +643,7 @@ def test_a_view_found_as_the_finer_image_is_described_as_the_coarser_one_found_a
     pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
     search = _search(config, pair.low, pair.high)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
-    measured = pipeline.Measured(pipeline.image_contrast(pair.high, config.harris.sigma))
+    measured = pipeline.Measured(pipeline.image_contrast(pair.high, config.harris))
     kept = []
     shared, _ = pipeline.detect_view(view, search, config.scales, reuse=pipeline.Reuse(
         measured=measured, every=2, share=kept.append))

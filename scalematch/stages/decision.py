@@ -32,13 +32,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..checks import Bounds, in_range
 from ..geometry import apply, epipolar_distances, footprint, grid
-from ..result import Evidence
+from ..result import Evidence, build_evidence
 from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import FitSpec, model_of
@@ -167,7 +167,7 @@ class DecisionParams:
     second_angle_deg: float = 10.0
     #: ... and shifted by at least this fraction of the footprint's size (sqrt of its area): a
     #: copy stands elsewhere, as the pixels' uniqueness test counts it
-    #: (``pixelcheck.UNIQUE_EXCLUSION``); a nearer second similarity is the same scene fitted
+    #: (``PixelParams.unique_exclusion``); a nearer second similarity is the same scene fitted
     #: piecewise (a tilted plane fits two similarities a few px apart)
     second_min_shift: float = 0.5
     #: the scene shows parallax (``Evidence.parallax``: a 3-D scene, the answer the map of its
@@ -197,6 +197,9 @@ class DecisionParams:
     #: of the right F's lines and 98 to 100 % within 3 px; a plane map unrelated to F would
     #: put about ``chance_p`` (0.1-0.2 %) there
     min_plane_on_lines: float = 0.5
+    #: the model that plane map is searched with: the default's, which the model check turns
+    #: into an affine map or a homography where the scene asks for one
+    plane_model: str = "similarity"
 
     def __post_init__(self) -> None:
         for name in ("min_inliers", "min_agreeing_scales"):
@@ -233,6 +236,9 @@ class DecisionParams:
         in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
                  Bounds(lo=0, lo_open=True))
         in_range("decision", "min_plane_on_lines", self.min_plane_on_lines, Bounds(lo=0, hi=1))
+        if self.plane_model not in ("similarity", "affine", "homography"):
+            raise ValueError(f"decision.plane_model must be one of ('similarity', 'affine', "
+                             f"'homography'), got {self.plane_model!r}")
 
 
 @dataclass(frozen=True)
@@ -242,7 +248,7 @@ class Decision:
     best_scale: float
     transform: Optional[np.ndarray] = field(repr=False)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) x, y finer; x, y coarser
-    evidence: Evidence = field(default_factory=Evidence)
+    evidence: Evidence = field(default_factory=build_evidence)
     #: a "no": the test that refused (a key of ``TESTS``; "" when matched or nothing to refuse)
     test: str = ""
     #: a "no": the best transform and its inliers, as ``transform`` and ``inliers`` would be
@@ -523,7 +529,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
               and o.row.inliers > 0]
     if not with_t:
         return Decision(False, "no scale produced a transform (too few candidate matches)",
-                        math.nan, None, np.zeros((0, 4)), Evidence())
+                        math.nan, None, np.zeros((0, 4)), build_evidence())
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
     plausible = [o for o in with_t if not spec.has_ratio
                  or _closeness(o) <= math.log(params.scale_agreement)]
@@ -543,7 +549,7 @@ def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
     return Decision(False, f"no scale found a transform consistent with its own scale "
                     f"(the one with the most inliers, {best.row.inliers} at scale "
                     f"{best.row.s * shown_scale:.3g}, {implies})",
-                    best.row.s, None, np.zeros((0, 4)), Evidence())
+                    best.row.s, None, np.zeros((0, 4)), build_evidence())
 
 
 def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext) -> Winner:
@@ -571,18 +577,17 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     shown = best.row.s * context.shown_scale
     t = best.estimate.transform
     pairs = np.hstack([best.src[best.estimate.inliers], best.dst[best.estimate.inliers]])
-    evidence = replace(Evidence(), inliers=int(k), candidates=int(w.n), log10_nfa=lnfa,
-                       chance_p=w.p)
+    figs = dict(inliers=int(k), candidates=int(w.n), log10_nfa=lnfa, chance_p=w.p)
 
-    def no(reason: str, test: str) -> Decision:  # with the evidence, t and pairs reached
-        return Decision(False, reason, best.row.s, None, np.zeros((0, 4)), evidence, test, t,
-                        pairs)
+    def no(reason: str, test: str) -> Decision:  # with the figures, t and pairs reached
+        return Decision(False, reason, best.row.s, None, np.zeros((0, 4)),
+                        build_evidence(figs), test, t, pairs)
 
     # the second look decides only below min_inliers (the final map's pixel tests follow
     # every match, final_checks): above, it would cost a tenth of a plain pair's time for nothing
     second = look(t, best) if look is not None and spec.has_ratio and \
         params.look_min_inliers <= k < params.min_inliers else None
-    evidence = _with_look(evidence, second)
+    figs = _with_look(figs, second)
     if k < params.min_inliers:
         if not _few_confirmed(w, second, params):
             return no(f"too few inliers: {k} at scale {shown:.3g} (at least "
@@ -596,24 +601,29 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
                   f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})",
                   "chance")
     if not spec.has_ratio:  # no footprint to check
-        return Decision(True, "", best.row.s, t, pairs, evidence)
-    evidence, refusal = _footprint_tests(t, shapes, w, evidence, params)
+        return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
+    figs, refusal = _footprint_tests(t, shapes, w, figs, params)
     if refusal is None:
-        evidence, refusal = _agreement_test(t, w, with_t, shapes[1], evidence, params,
-                                            context.shown_scale)
+        figs, refusal = _agreement_test(t, w, with_t, shapes[1], figs, params,
+                                        context.shown_scale)
     if refusal is None:
-        evidence, refusal = _rival_test(w, shapes[1], evidence, params, context.fit)
+        figs, refusal = _rival_test(w, shapes[1], figs, params, context.fit)
     if refusal is not None:
         return no(*refusal)
-    return Decision(True, "", best.row.s, t, pairs, evidence)
+    return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
 
 
-def _with_look(evidence: Evidence, second: Optional[Look]) -> Evidence:
-    """``evidence`` with the second look's figures (unchanged without one)."""
+#: The figures the tests have reached (``Evidence``'s names; :func:`build_evidence` makes the
+#: evidence of them)
+Figures = Dict[str, Any]
+
+
+def _with_look(figs: Figures, second: Optional[Look]) -> Figures:
+    """``figs`` with the second look's figures (unchanged without one)."""
     if second is None:
-        return evidence
-    return replace(evidence, grown_inliers=len(second.inliers), grown_chance=second.chance,
-                   pixel_ncc=second.ncc, pixel_margin=second.margin, pixel_z=second.z)
+        return figs
+    return {**figs, "grown_inliers": len(second.inliers), "grown_chance": second.chance,
+            "pixel_ncc": second.ncc, "pixel_margin": second.margin, "pixel_z": second.z}
 
 
 def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) -> bool:
@@ -628,34 +638,34 @@ def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) ->
 Refusal = Optional[Tuple[str, str]]
 
 
-def _footprint_tests(t: np.ndarray, shapes, w: Winner, evidence: Evidence,
-                     params: DecisionParams) -> Tuple[Evidence, Refusal]:
+def _footprint_tests(t: np.ndarray, shapes, w: Winner, figs: Figures,
+                     params: DecisionParams) -> Tuple[Figures, Refusal]:
     """Test 3, a plausible footprint of ``t`` (finer px -> coarser px; ``shapes``: (coarser,
     finer) (H, W)): not folded over, not too small, inside enough unless the evidence is
-    overwhelming or the second look's pixels confirm it. (evidence with the footprint's
-    figures, refusal)."""
+    overwhelming or the second look's pixels confirm it. (figures with the footprint's,
+    refusal)."""
     coarser_shape, finer_shape = shapes
     poly = footprint(t, finer_shape, edges=False)  # corner pixel centres, as measured
     area = abs(_polygon_area(poly)) if poly is not None else 0.0  # None: a corner at infinity
     inside = _inside_fraction(t, finer_shape, coarser_shape)
-    evidence = replace(evidence, implied_ratio=w.outcome.row.ratio, footprint_area_px=area,
-                       footprint_inside=inside)
+    figs = {**figs, "implied_ratio": w.outcome.row.ratio, "footprint_area_px": area,
+            "footprint_inside": inside}
     if folded(t, finer_shape):
-        return evidence, ("the transform folds the high image over (a mirror image): not a "
-                          "view of it", "folded")
+        return figs, ("the transform folds the high image over (a mirror image): not a "
+                      "view of it", "folded")
     if area < params.min_area_px:
-        return evidence, (f"the high image would cover only {area:.0f} px^2 of the low image",
-                          "footprint area")
+        return figs, (f"the high image would cover only {area:.0f} px^2 of the low image",
+                      "footprint area")
     if inside < params.min_inside and w.log10_nfa > params.max_log_nfa_alone and \
-            not pixels_confirm(w.log10_nfa, evidence.pixel_margin, params):
-        return evidence, (f"only {inside:.0%} of the high image's footprint lies inside the "
-                          f"low image", "footprint inside")
-    return evidence, None
+            not pixels_confirm(w.log10_nfa, figs.get("pixel_margin", math.nan), params):
+        return figs, (f"only {inside:.0%} of the high image's footprint lies inside the "
+                      f"low image", "footprint inside")
+    return figs, None
 
 
 def _agreement_test(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape,
-                    evidence: Evidence, params: DecisionParams,
-                    shown_scale: float) -> Tuple[Evidence, Refusal]:
+                    figs: Figures, params: DecisionParams,
+                    shown_scale: float) -> Tuple[Figures, Refusal]:
     """Test 4, consistent neighbouring scales: how many other scales found (nearly) ``t``;
     enough of them unless the winner is overwhelming alone or has fewer than ``min_inliers``
     (the second look confirmed it). ``shown_scale``: :attr:`SearchContext.shown_scale`."""
@@ -667,19 +677,19 @@ def _agreement_test(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape,
             continue
         if mean_transfer_gap(o.estimate.transform, t, finer_shape) <= params.agreement_px:
             agreeing += 1
-    evidence = replace(evidence, agreeing_scales=agreeing)
+    figs = {**figs, "agreeing_scales": agreeing}
     if agreeing < params.min_agreeing_scales and w.log10_nfa > params.max_log_nfa_alone \
             and not few:
-        return evidence, (f"no other scale agrees with the best one "
-                          f"(scale {best.row.s * shown_scale:.3g}, "
-                          f"{w.k} inliers)", "agreeing scales")
-    return evidence, None
+        return figs, (f"no other scale agrees with the best one "
+                      f"(scale {best.row.s * shown_scale:.3g}, "
+                      f"{w.k} inliers)", "agreeing scales")
+    return figs, None
 
 
-def _rival_test(w: Winner, finer_shape, evidence: Evidence, params: DecisionParams,
-                fit: FitSpec) -> Tuple[Evidence, Refusal]:
+def _rival_test(w: Winner, finer_shape, figs: Figures, params: DecisionParams,
+                fit: FitSpec) -> Tuple[Figures, Refusal]:
     """What the candidates the winner leaves over show: a second transform of the same scale
-    and angle (a repeated structure, refused: :func:`repeats`). (evidence with its figures,
+    and angle (a repeated structure, refused: :func:`repeats`). (figures with its own,
     refusal). The points off the plane (parallax) are counted once, for the answer's own map
     (``pipeline.answer_parallax``), not for every winner decided."""
     best, k = w.outcome, w.k
@@ -688,13 +698,13 @@ def _rival_test(w: Winner, finer_shape, evidence: Evidence, params: DecisionPara
     rival = second_transform(best.src, best.dst, inl, est.transform, finer_shape,
                              fit.ransac, fit.seed)
     rival_nfa = w.nfa_of(rival.inliers)
-    evidence = replace(evidence, second_inliers=rival.inliers, second_log10_nfa=rival_nfa,
-                       second_gap_px=rival.gap_px)
-    if repeats(rival, rival_nfa, k, evidence.footprint_area_px, est.transform, params):
-        return evidence, (f"ambiguous: a second transform of the same scale and angle, "
-                          f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
-                          f"{k}: a repeated structure", "repeated structure")
-    return evidence, None
+    figs = {**figs, "second_inliers": rival.inliers, "second_log10_nfa": rival_nfa,
+            "second_gap_px": rival.gap_px}
+    if repeats(rival, rival_nfa, k, figs["footprint_area_px"], est.transform, params):
+        return figs, (f"ambiguous: a second transform of the same scale and angle, "
+                      f"{rival.gap_px:.0f} px away, has {rival.inliers} inliers against "
+                      f"{k}: a repeated structure", "repeated structure")
+    return figs, None
 
 
 @dataclass(frozen=True)

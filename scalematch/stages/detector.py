@@ -23,7 +23,7 @@ every scale:
 * ``contrast_relative`` (on by default, as ``Config`` uses it, so :func:`detect` is the
   detector of :func:`scalematch.match`; off, the paper's absolute threshold): the threshold is
   multiplied by ``min(contrast_cap, (c / c_ref)^4)``, ``c`` the 90th percentile of the
-  gradient magnitude and ``c_ref`` = ``REFERENCE_CONTRAST`` (that of the benchmark photos),
+  gradient magnitude and ``c_ref`` = ``HarrisParams.reference_contrast`` (that of the benchmark photos),
   never below the noise floor (:func:`noise_floor`: ten times the largest response pure noise
   of the image's estimated noise std gives);
 * ``min_points`` (off by default): when fewer points pass the threshold at a scale, the
@@ -69,7 +69,7 @@ class HarrisParams:
     decimate: bool = True  #: compute coarse scales on decimated levels (same response)
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
     #: adaptive detection (False: the paper's absolute threshold above): multiply
-    #: ``threshold`` by ``min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, ``c`` the image's
+    #: ``threshold`` by ``min(contrast_cap, (c / reference_contrast)^4)``, ``c`` the image's
     #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`).
     #: On, as ``Config`` uses it: a 12-bit image stored as 0-4095 in 16 bits, or 32 grey levels,
     #: found no point at the absolute threshold (docs/design/DECISION.md, "Adaptive detection")
@@ -81,6 +81,31 @@ class HarrisParams:
     #: maxima above the noise floor are kept up to this many (the footprint at ratio 8-10 had
     #: 5-14 points at the winning scale)
     min_points: int = 0
+    #: percentile of the gradient magnitude (Gaussian derivatives of std ``sigma``, s = 1) taken
+    #: as an image's contrast (:func:`image_contrast`). The median measures the flat parts: on
+    #: the low images cut from the shared photos it ranged 0.05 to 5.7 grey levels/px (sky,
+    #: walls) while the 90th percentile ranged 6.4 to 17.9 (19 pairs at ratio 8, seed 0;
+    #: docs/design/DECISION.md, "Adaptive detection")
+    contrast_percentile: float = 90.0
+    #: ... taken over every n-th pixel along each axis: a quarter of the pixels (77k at
+    #: 640x480) gives the full image's 90th percentile within 1.2 % (median 0.16 %, 120 images
+    #: of 60 zoom pairs, seed 0), and the full sort was half the measure's cost (8.0 ms -> 3.2
+    #: ms a 640x480 image; docs/design/DECISION.md, "What the pixel tests cost")
+    contrast_sample_step: int = 2
+    #: the contrast ``threshold`` = 100 was tuned at, grey levels/px: the median contrast of
+    #: the 76 images (high crop and low image) cut from the 38 photos of ../shared/data/photos
+    #: at ratio 4, seed 0 (high 14.6, low 10.2, both 12.0)
+    reference_contrast: float = 12.0
+    #: largest Harris response C (s = 1) of pure Gaussian noise of std 1 grey level over a
+    #: 640x480 image: measured 1.08 for std 3 (C scales as std^4: 1.08 / 81), seed 0
+    noise_response_per_std4: float = 1.08 / 81.0
+    #: the largest pure-noise response falls with the scale as s^-4.4 to s^-4.7 (measured, same
+    #: image: 4.5e-2 at s = 2, 1.7e-3 at s = 4, 1.1e-4 at s = 8, 1.8e-5 at s = 12.7); the floor
+    #: falls as s^-this, a little slower, so it stays above the noise at every scale
+    noise_scale_exponent: float = 4.0
+    #: the noise floor is this many times the largest pure-noise response (a factor 10 in C is a
+    #: factor 1.8 in gradient: noise maxima do not reach it)
+    noise_margin: float = 10.0
 
     @property
     def adaptive(self) -> bool:
@@ -98,6 +123,13 @@ class HarrisParams:
         in_range("harris", "contrast_cap", self.contrast_cap, Bounds(lo=0, lo_open=True),
                  allow_inf=True)
         in_range("harris", "min_points", self.min_points, Bounds(lo=0), integer=True)
+        in_range("harris", "contrast_percentile", self.contrast_percentile, Bounds(lo=0, hi=100))
+        in_range("harris", "contrast_sample_step", self.contrast_sample_step, Bounds(lo=1),
+                 integer=True)
+        for name in ("reference_contrast", "noise_response_per_std4"):
+            in_range("harris", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+        for name in ("noise_scale_exponent", "noise_margin"):
+            in_range("harris", name, getattr(self, name), Bounds(lo=0))
 
 
 @dataclass(frozen=True)
@@ -116,39 +148,12 @@ class Keypoints:
         return Keypoints(s=s, xy=np.zeros((0, 2)), response=np.zeros(0, np.float32))
 
 
-#: Percentile of the gradient magnitude (Gaussian derivatives of std sigma = 1 px, s = 1) taken
-#: as an image's contrast. The median measures the flat parts: on the low images cut from the
-#: shared photos it ranged 0.05 to 5.7 grey levels/px (sky, walls) while the 90th percentile
-#: ranged 6.4 to 17.9 (measured on 19 pairs at ratio 8, seed 0; docs/design/DECISION.md,
-#: "Adaptive detection").
-CONTRAST_PERCENTILE = 90.0
-#: The percentile is taken over every CONTRAST_SAMPLE_STEP-th pixel along each axis: a quarter
-#: of the pixels (77k at 640x480) gives the full image's 90th percentile within 1.2 % (median
-#: 0.16 %, 120 images of 60 zoom pairs, seed 0), and the full sort was half the measure's cost
-#: (8.0 ms -> 3.2 ms a 640x480 image; a match measures two; docs/design/DECISION.md, "What
-#: the pixel tests cost")
-CONTRAST_SAMPLE_STEP = 2
-#: The contrast the absolute ``threshold`` = 100 was tuned at, grey levels/px: the median
-#: ``image_contrast`` of the 76 images (high crop and low image) cut from the 38 photos of
-#: ../shared/data/photos at ratio 4, seed 0 (high 14.6, low 10.2, both 12.0).
-REFERENCE_CONTRAST = 12.0
-#: Largest Harris response C (s = 1) of pure Gaussian noise of std 1 grey level over a 640x480
-#: image: measured 1.08 for std 3 (C scales as std^4: 1.08 / 81), seed 0.
-NOISE_RESPONSE_PER_STD4 = 1.08 / 81.0
-#: The largest pure-noise response falls with the scale as s^-4.4 to s^-4.7 (measured, same
-#: image: 4.5e-2 at s = 2, 1.7e-3 at s = 4, 1.1e-4 at s = 8, 1.8e-5 at s = 12.7); the floor
-#: falls as s^-NOISE_SCALE_EXPONENT, a little slower, so it stays above the noise at every scale.
-NOISE_SCALE_EXPONENT = 4.0
-#: The noise floor is this many times the largest pure-noise response (a factor 10 in C is a
-#: factor 1.8 in gradient: noise maxima do not reach it).
-NOISE_MARGIN = 10.0
-
-
 @dataclass(frozen=True)
 class Contrast:
     """How strong an image's structure and noise are, measured once on the s = 1 image."""
 
-    gradient: float  #: CONTRAST_PERCENTILE of the gradient magnitude at sigma, grey levels/px
+    #: the ``contrast_percentile`` of the gradient magnitude at sigma, grey levels/px
+    gradient: float
     noise_std: float  #: estimated noise std, grey levels (Immerkaer 1996; texture inflates it)
 
 
@@ -184,31 +189,32 @@ def gradients(image: np.ndarray, sigma: float = 1.0) -> Gradients:
                      gaussian_derivative(img, sigma, 0, 1))
 
 
-def image_contrast(image: np.ndarray, sigma: float = 1.0,
+def image_contrast(image: np.ndarray, params: "HarrisParams" = HarrisParams(),
                    grads: Optional[Gradients] = None) -> Contrast:
     """The :class:`Contrast` of a grey image (H, W), to be computed once on the s = 1 image.
 
-    ``gradient`` is the ``CONTRAST_PERCENTILE`` (90th) percentile of the gradient magnitude
-    (Gaussian derivatives of std ``sigma`` px; ``grads``: those of ``image``, when measured
-    already): robust to large flat areas, and exactly proportional to a grey-level gain
-    (offset-free). A flat image gives 0.
+    ``gradient`` is the ``params.contrast_percentile`` (90th) percentile of the gradient
+    magnitude (Gaussian derivatives of std ``params.sigma`` px; ``grads``: those of ``image``,
+    when measured already): robust to large flat areas, and exactly proportional to a
+    grey-level gain (offset-free). A flat image gives 0.
 
     >>> rng = np.random.default_rng(0)
     >>> img = rng.uniform(0, 255, (64, 64)).astype(np.float32)
     >>> a, b = image_contrast(img), image_contrast(img / 16 + 3)
     >>> round(a.gradient / b.gradient, 3), round(a.noise_std / b.noise_std, 3)
     (16.0, 16.0)
-    >>> image_contrast(img, 1.0, gradients(img, 1.0)) == a
+    >>> image_contrast(img, HarrisParams(), gradients(img, 1.0)) == a
     True
     """
     img = np.asarray(image, np.float32)
+    sigma = params.sigma
     if grads is None or round(grads.sigma, 6) != round(float(sigma), 6) or \
             grads.ix.shape != img.shape:
         grads = gradients(img, sigma)
-    step = CONTRAST_SAMPLE_STEP
+    step = params.contrast_sample_step
     gx = np.ascontiguousarray(grads.ix[::step, ::step])
     gy = np.ascontiguousarray(grads.iy[::step, ::step])
-    return Contrast(gradient=percentile(cv2.magnitude(gx, gy), CONTRAST_PERCENTILE),
+    return Contrast(gradient=percentile(cv2.magnitude(gx, gy), params.contrast_percentile),
                     noise_std=noise_std(img))
 
 
@@ -232,12 +238,13 @@ def percentile(values: np.ndarray, q: float) -> float:
     return a + (b - a) * (pos - lo)
 
 
-def noise_floor(contrast: Contrast, s: float = 1.0) -> float:
-    """Response (C units) below which a local maximum at scale ``s`` may be noise: NOISE_MARGIN
-    times the largest response of pure noise of the image's noise std (``NOISE_RESPONSE_PER_STD4``
-    at s = 1, falling as ``s^-NOISE_SCALE_EXPONENT``)."""
-    return (NOISE_MARGIN * NOISE_RESPONSE_PER_STD4 * contrast.noise_std ** 4
-            / max(s, 1.0) ** NOISE_SCALE_EXPONENT)
+def noise_floor(contrast: Contrast, s: float = 1.0,
+                params: "HarrisParams" = HarrisParams()) -> float:
+    """Response (C units) below which a local maximum at scale ``s`` may be noise:
+    ``noise_margin`` times the largest response of pure noise of the image's noise std
+    (``noise_response_per_std4`` at s = 1, falling as ``s^-noise_scale_exponent``)."""
+    return (params.noise_margin * params.noise_response_per_std4 * contrast.noise_std ** 4
+            / max(s, 1.0) ** params.noise_scale_exponent)
 
 
 def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = None,
@@ -245,7 +252,7 @@ def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = N
     """The cornerness threshold used at scale ``s`` on an image of ``contrast``.
 
     ``params.threshold`` when ``contrast_relative`` is off; otherwise
-    ``threshold * min(contrast_cap, (c / REFERENCE_CONTRAST)^4)``, but not below
+    ``threshold * min(contrast_cap, (c / reference_contrast)^4)``, but not below
     :func:`noise_floor` at ``s`` (nor above ``threshold * contrast_cap``).
 
     >>> p = HarrisParams(contrast_relative=True)
@@ -259,9 +266,9 @@ def effective_threshold(params: "HarrisParams", contrast: Optional[Contrast] = N
     if contrast is None:
         raise ValueError("contrast_relative needs the image's contrast: pass "
                          "contrast=image_contrast(image) computed on the s = 1 image")
-    factor = min(params.contrast_cap, (contrast.gradient / REFERENCE_CONTRAST) ** 4)
+    factor = min(params.contrast_cap, (contrast.gradient / params.reference_contrast) ** 4)
     top = params.threshold * params.contrast_cap
-    return float(min(max(params.threshold * factor, noise_floor(contrast, s)), top))
+    return float(min(max(params.threshold * factor, noise_floor(contrast, s, params)), top))
 
 
 def harris_response(level: Level, params: HarrisParams,
@@ -353,7 +360,7 @@ def _level_contrast(level: Level, params: HarrisParams, contrast: Optional[Contr
         raise ValueError(f"adaptive detection at s = {level.s:g} needs the image's contrast: "
                          f"pass contrast=image_contrast(image) computed on the s = 1 image")
     grads = gradients(level.image, params.sigma) if grads is None else grads
-    return image_contrast(level.image, params.sigma, grads), grads
+    return image_contrast(level.image, params, grads), grads
 
 
 def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
@@ -379,7 +386,7 @@ def detect_on_level(level: Level, params: HarrisParams = HarrisParams(),
     resp = harris_response(level, params, grads)
     threshold = effective_threshold(params, contrast, level.s)
     if params.min_points > 0:  # every maximum above the noise floor, the budget picks from them
-        floor = max(noise_floor(contrast, level.s), 0.0)
+        floor = max(noise_floor(contrast, level.s, params), 0.0)
         rc = _local_maxima(resp, radius, min(floor, threshold), border)
     else:
         rc = _local_maxima(resp, radius, threshold, border)
@@ -437,7 +444,7 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     0
     """
     if params.adaptive and contrast is None:
-        contrast = image_contrast(as_float_image(image), params.sigma)
+        contrast = image_contrast(as_float_image(image), params)
     levels = scale_space(image, scales, sigma=params.sigma,
                          min_level_sigma=params.min_level_sigma, decimate=params.decimate)
     return [detect_on_level(level, params, contrast) for level in levels]

@@ -31,9 +31,17 @@ class RansacParams:
     confidence: float = 0.999  #: RANSAC confidence (OpenCV default 0.99; higher for few inliers)
     max_iters: int = 5000  #: RANSAC iterations cap
     refine_iters: int = 10  #: Levenberg-Marquardt refinement iterations (OpenCV default)
+    #: MAGSAC++'s threshold for the fundamental matrix, px: the largest noise scale it
+    #: marginalises over (Barath et al. 2020, "MAGSAC++"). 1 px is the reference's setting
+    #: (ef/SOURCES.md); on the 8 ef pairs, both orders, 1 and 2 px gave the same median error
+    #: (0.61 px) and 3 px (the plane models' inlier threshold) 0.62, with a worst pair at 0.95,
+    #: 0.93 and 1.30 px. The inliers are still counted at ``threshold_px``
+    magsac_threshold_px: float = 1.0
 
     def __post_init__(self) -> None:
         in_range("ransac", "threshold_px", self.threshold_px, Bounds(lo=0, lo_open=True))
+        in_range("ransac", "magsac_threshold_px", self.magsac_threshold_px,
+                 Bounds(lo=0, lo_open=True))
         in_range("ransac", "confidence", self.confidence,
                  Bounds(lo=0, hi=1, lo_open=True, hi_open=True))
         in_range("ransac", "max_iters", self.max_iters, Bounds(lo=1), integer=True)
@@ -114,14 +122,6 @@ def _fit_homography(src, dst, thr: float, params: "RansacParams", ransac: bool):
                               maxIters=params.max_iters, confidence=params.confidence)[0]
 
 
-#: MAGSAC++'s threshold for the fundamental matrix, px: the largest noise scale it marginalises
-#: over (Barath et al. 2020, "MAGSAC++"). 1 px is the reference's setting (ef/SOURCES.md); on
-#: the 8 ef pairs, both orders, 1 and 2 px gave the same median error (0.61 px) and 3 px (the
-#: plane models' inlier threshold) 0.62, with a worst pair at 0.95, 0.93 and 1.30 px. The
-#: inliers are still counted at the search's threshold (``RansacParams.threshold_px``)
-MAGSAC_THRESHOLD_PX = 1.0
-
-
 def _fit_fundamental(src, dst, thr: float, params: "RansacParams", ransac: bool):
     """MAGSAC++ (OpenCV's USAC, with its local optimisation and degeneracy test) when robust,
     OpenCV's RANSAC where USAC fails on a sample it cannot use (an assertion on an empty model
@@ -132,7 +132,7 @@ def _fit_fundamental(src, dst, thr: float, params: "RansacParams", ransac: bool)
         t, _ = cv2.findFundamentalMat(src, dst, cv2.FM_8POINT)
     else:
         try:
-            t, _ = cv2.findFundamentalMat(src, dst, cv2.USAC_MAGSAC, MAGSAC_THRESHOLD_PX,
+            t, _ = cv2.findFundamentalMat(src, dst, cv2.USAC_MAGSAC, params.magsac_threshold_px,
                                           params.confidence, params.max_iters)
         except cv2.error:
             t, _ = cv2.findFundamentalMat(src, dst, cv2.FM_RANSAC, thr, params.confidence,

@@ -92,6 +92,10 @@ class PixelParams:
     #: facade (a third to a half of its windows agree) from the scene itself (two thirds to
     #: nine tenths; docs/design/DECISION.md, "Windows that agree")
     window_ncc: float = 0.8
+    #: distance from the claimed placement, a fraction of the template's shorter side, within
+    #: which a correlation peak counts as the same placement (half a footprint: a copy of the
+    #: structure elsewhere is at least that far away, or it would overlap the claim)
+    unique_exclusion: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
@@ -103,6 +107,7 @@ class PixelParams:
         in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
         in_range("pixel", "window_px", self.window_px, Bounds(lo=2), integer=True)
         in_range("pixel", "window_ncc", self.window_ncc, Bounds(lo=-1, hi=1))
+        in_range("pixel", "unique_exclusion", self.unique_exclusion, Bounds(lo=0))
 
 
 @dataclass(frozen=True)
@@ -400,13 +405,8 @@ def _against_perturbed(ncc: float, pert: np.ndarray, n: int, fraction: float) ->
 
 # --------------------------------------------------------------------------- uniqueness
 
-#: Radius, as a fraction of the template's shorter side, around the claimed placement inside
-#: which a correlation peak counts as the same placement (half a footprint: a copy of the
-#: structure elsewhere is at least that far away, or it would overlap the claim)
-UNIQUE_EXCLUSION = 0.5
-
-
-#: Smallest misfit 1 - ZNCC used as a divisor (a perfect fit would divide by zero)
+#: Smallest misfit 1 - ZNCC used as a divisor (a perfect fit would divide by zero): a numerical
+#: guard, far below any misfit measured (no answer depends on it)
 MISFIT_FLOOR = 1e-6
 
 
@@ -505,7 +505,7 @@ def uniqueness_of(placed: Optional["Template"], params: PixelParams) -> Uniquene
         return Uniqueness(nan, nan, nan)
     r = masked_zncc_map(placed.low, placed.tpl, placed.mask, params.min_std)
     claimed = _at_claim(r, placed)
-    far = _far(r.shape, placed)
+    far = _far(r.shape, placed, params.unique_exclusion)
     if not far.any():
         return Uniqueness(claimed, nan, nan)
     elsewhere = float(r[far].max())
@@ -560,11 +560,11 @@ def _at_claim(score: np.ndarray, placed: Template) -> float:
     return float(score[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
 
 
-def _far(shape: Tuple[int, int], placed: Template) -> np.ndarray:
-    """(shape) bool: the placements ``UNIQUE_EXCLUSION`` of the template's size away from the
-    claimed one."""
+def _far(shape: Tuple[int, int], placed: Template, exclusion: float) -> np.ndarray:
+    """(shape) bool: the placements ``exclusion`` of the template's size away from the
+    claimed one (``PixelParams.unique_exclusion``)."""
     yy, xx = np.ogrid[0:shape[0], 0:shape[1]]
-    radius = UNIQUE_EXCLUSION * min(placed.tpl.shape)
+    radius = exclusion * min(placed.tpl.shape)
     return (yy - placed.y0) ** 2 + (xx - placed.x0) ** 2 > radius * radius
 
 
@@ -631,5 +631,5 @@ def agreement_of(placed: Optional[Template], params: PixelParams) -> Agreement:
                              params.window_ncc)
     if n == 0:
         return Agreement(0, nan, nan)
-    far = _far(share.shape, placed)
+    far = _far(share.shape, placed, params.unique_exclusion)
     return Agreement(n, _at_claim(share, placed), float(share[far].max()) if far.any() else nan)

@@ -101,8 +101,8 @@ def test_points_are_strongest_first_and_capped(raccoon):
 
 # ------------------------------------------------------------------------ adaptive detection
 
-from scalematch.stages.detector import (REFERENCE_CONTRAST, Contrast,  # noqa: E402
-                                        detect_on_level, effective_threshold, image_contrast)
+from scalematch.stages.detector import (Contrast, detect_on_level,  # noqa: E402
+                                        effective_threshold, image_contrast)
 from scalematch.stages.scalespace import scale_space  # noqa: E402
 from scalematch.lab.synthetic import smooth_scene  # noqa: E402
 
@@ -157,6 +157,7 @@ def test_contrast_is_proportional_to_gain():
     assert c2.noise_std == pytest.approx(0.1 * c1.noise_std, rel=1e-4)
     # the threshold follows gain^4 below the reference, is capped at 1x above it
     p = HarrisParams(contrast_relative=True)
+    REFERENCE_CONTRAST = p.reference_contrast
     quiet = Contrast(gradient=REFERENCE_CONTRAST / 10, noise_std=0.0)
     assert effective_threshold(p, quiet) == pytest.approx(p.threshold * 1e-4)
     assert effective_threshold(p, Contrast(REFERENCE_CONTRAST * 3, 0.0)) == p.threshold
@@ -209,7 +210,7 @@ def test_gradients_shared_with_the_contrast_give_the_same_points(raccoon):
     level = next(scale_space(img, (1.0,)))
     grads = gradients(img, ADAPTIVE.sigma)
     before = (grads.ix.copy(), grads.iy.copy())
-    assert image_contrast(img, ADAPTIVE.sigma, grads) == image_contrast(img, ADAPTIVE.sigma)
+    assert image_contrast(img, ADAPTIVE, grads) == image_contrast(img, ADAPTIVE)
     assert np.array_equal(harris_response(level, ADAPTIVE, grads),
                           harris_response(level, ADAPTIVE))
     shared = detect_on_level(level, ADAPTIVE, image_contrast(img), grads)
