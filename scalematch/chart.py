@@ -1,4 +1,4 @@
-"""The bar chart of a match's scales, drawn with OpenCV only (ALGORITHM.md step 8: the per-scale table).
+"""The bar chart of a match's scales, drawn with OpenCV only (docs/ALGORITHM.md step 8: the per-scale table).
 
 A white canvas with axes, ticks with numeric labels, grid lines, axis titles and a title, as a
 BGR image; no plotting library is needed. Lines and text are anti-aliased (``cv2.LINE_AA``). A bar

@@ -7,7 +7,7 @@ size, builds one :class:`Search` (the images, the configuration, the mode's stra
 finer image at every scale (scale-adapted Harris), describes their strongest points, scores the
 scales with the probe, and matches the promising ones in full against the coarser image's
 points (found once, at s = 1): candidates, geometric constraints, robust estimation. The scale
-with the most inliers wins (ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says
+with the most inliers wins (docs/ALGORITHM.md step 7) and :mod:`scalematch.stages.decision` says
 whether the evidence is enough; the winner is refit in the finer image's pixels
 (:mod:`scalematch.stages.refit`) and turned into one :class:`MatchResult`.
 """
@@ -273,7 +273,7 @@ def _part(kp: Keypoints, rows: slice) -> Keypoints:
 
 @dataclass(frozen=True)
 class LowFeatures:
-    """The coarser image described once, at s = 1 (ALGORITHM.md step 1: I' at s = 1)."""
+    """The coarser image described once, at s = 1 (docs/ALGORITHM.md step 1: I' at s = 1)."""
 
     image: np.ndarray = field(repr=False)  #: (H, W) float32
     described: Described = field(repr=False)

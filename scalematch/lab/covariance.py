@@ -1,6 +1,6 @@
 """Lab: estimate the jet covariance Lambda by tracking points through known synthetic changes.
 
-The product only loads Lambda (:mod:`scalematch.stages.mahalanobis`, ALGORITHM.md step 4); this
+The product only loads Lambda (:mod:`scalematch.stages.mahalanobis`, docs/ALGORITHM.md step 4); this
 module makes it. Schmid & Mohr estimated it by tracking points through image sequences; here
 points of real photos are tracked through known synthetic changes (rotation, a small scale
 error, noise, gain and offset). ``scalematch lab covariance`` re-estimates it from a user's own
@@ -28,7 +28,7 @@ ABSOLUTE = HarrisParams(contrast_relative=False)
 
 @dataclass(frozen=True)
 class CovarianceRecipe:
-    """The synthetic changes points are tracked through (ALGORITHM.md step 4)."""
+    """The synthetic changes points are tracked through (docs/ALGORITHM.md step 4)."""
 
     crop: int = 512  #: side of the square crop taken from each photo, px
     crops_per_photo: int = 4

@@ -1,4 +1,4 @@
-"""Stage 5: geometric constraints on candidate matches (ALGORITHM.md step 5, paper 4.1).
+"""Stage 5: geometric constraints on candidate matches (docs/ALGORITHM.md step 5, paper 4.1).
 
 **Semi-local constraints (the paper).** A candidate (m, m') is supported by the other candidates
 (m_j, m'_j) with m_j in the neighbourhood N(m) of m in the high image (radius grows with s) and

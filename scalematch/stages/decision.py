@@ -1,4 +1,4 @@
-"""Scale selection and the decision "matched" or "no reliable match" (ALGORITHM.md steps 7-8).
+"""Scale selection and the decision "matched" or "no reliable match" (docs/ALGORITHM.md steps 7-8).
 
 **Scale selection.** The scale with the most inliers wins (paper section 4.2); ties go to the
 scale whose transform implies a ratio closest to the scale itself (the scale-space premise

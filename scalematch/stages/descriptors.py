@@ -1,4 +1,4 @@
-"""Stage 3: descriptors of interest points (ALGORITHM.md step 3, paper section 4).
+"""Stage 3: descriptors of interest points (docs/ALGORITHM.md step 3, paper section 4).
 
 Two descriptors, both computed on a scale-space :class:`~scalematch.stages.scalespace.Level` for all the
 points of one scale in one vectorised pass.

@@ -1,4 +1,4 @@
-"""Stage 2: scale-adapted Harris interest points (ALGORITHM.md step 2, paper section 3).
+"""Stage 2: scale-adapted Harris interest points (docs/ALGORITHM.md step 2, paper section 3).
 
 At scale ``s`` (paper eq. "Harris-scale")::
 

@@ -1,4 +1,4 @@
-"""Stage 6: robust estimation of the finer -> coarser transform (ALGORITHM.md step 6, paper 4.2).
+"""Stage 6: robust estimation of the finer -> coarser transform (docs/ALGORITHM.md step 6, paper 4.2).
 
 RANSAC through OpenCV for the four models of the paper: similarity (default,
 ``cv2.estimateAffinePartial2D``), affine (``cv2.estimateAffine2D``), plane homography

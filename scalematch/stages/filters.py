@@ -1,4 +1,4 @@
-"""Stages 2-3: sampled Gaussian derivative filters, the building block of Harris and the jet (ALGORITHM.md steps 2-3).
+"""Stages 2-3: sampled Gaussian derivative filters, the building block of Harris and the jet (docs/ALGORITHM.md steps 2-3).
 
 ``gaussian_derivative(image, sigma, ox, oy)`` is the derivative of order ``ox`` in x and ``oy`` in
 y of the image smoothed by a Gaussian of std ``sigma`` px: the "L_{x..xy..y}" of the local jet

@@ -1,4 +1,4 @@
-"""Stage 4: the covariance Lambda, loaded, and whitening for the Mahalanobis distance (ALGORITHM.md step 4).
+"""Stage 4: the covariance Lambda, loaded, and whitening for the Mahalanobis distance (docs/ALGORITHM.md step 4).
 
 ``d(V, V') = sqrt((V - V')^T Lambda^-1 (V - V'))`` equals the Euclidean distance between
 ``W V`` and ``W V'`` with ``W = Lambda^-1/2`` (whitening), so whitened descriptors go through

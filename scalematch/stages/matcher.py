@@ -1,4 +1,4 @@
-"""Stage 4: candidate matches between descriptors (ALGORITHM.md step 4, paper eq. mahalanobis).
+"""Stage 4: candidate matches between descriptors (docs/ALGORITHM.md step 4, paper eq. mahalanobis).
 
 Descriptors are compared by Euclidean distance; the Mahalanobis distance of the paper becomes a
 Euclidean one once the jets are whitened by Lambda^-1/2 (see :mod:`scalematch.stages.mahalanobis`).

@@ -1,4 +1,4 @@
-"""What the candidates show beside the winning transform (ALGORITHM.md step 8, the decision).
+"""What the candidates show beside the winning transform (docs/ALGORITHM.md step 8, the decision).
 
 The winner of the robust estimation explains some of the candidate matches at its scale. The
 rest tell two things a user needs to know:

@@ -1,4 +1,4 @@
-"""Stage 1: the scale-space of the high-resolution image (ALGORITHM.md step 1, paper section 3.2).
+"""Stage 1: the scale-space of the high-resolution image (docs/ALGORITHM.md step 1, paper section 3.2).
 
 At scale ``s`` the paper smooths the full-resolution image with Gaussians of std ``s*sigma``
 (derivation) and ``s*sigma~`` (integration). Computing that at full resolution for s = 8 costs
