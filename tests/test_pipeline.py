@@ -16,7 +16,7 @@ from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
 from scalematch.pipeline import distinct_pairs
 from scalematch.result import Evidence, MatchResult
-from scalematch.stages.detector import HarrisParams
+from scalematch.stages.detector import HarrisParams, image_contrast
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
 
@@ -594,8 +594,8 @@ def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_
     search = pipeline.Search(at_working_size(pair.low, pair.high, config), config,
                              mode_of(config), pipeline.Memo(), pipeline.Meter(None, 0))
     low = pipeline.describe_low(pair.low, search,
-                                pipeline.image_contrast(pair.low, config.harris_low))
-    contrast = pipeline.image_contrast(pair.high, config.harris)
+                                image_contrast(pair.low, config.harris_low))
+    contrast = image_contrast(pair.high, config.harris)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
     measured = pipeline.Measured(contrast)
     every = pipeline.score_view(view, *pipeline.detect_view(
@@ -643,7 +643,7 @@ def test_a_view_found_as_the_finer_image_is_described_as_the_coarser_one_found_a
     pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
     search = _search(config, pair.low, pair.high)
     view = tilt_view(pair.high, 4.0, 36.0, config.views)
-    measured = pipeline.Measured(pipeline.image_contrast(pair.high, config.harris))
+    measured = pipeline.Measured(image_contrast(pair.high, config.harris))
     kept = []
     shared, _ = pipeline.detect_view(view, search, config.scales, reuse=pipeline.Reuse(
         measured=measured, every=2, share=kept.append))
@@ -674,7 +674,7 @@ def test_the_best_views_of_a_step_keep_their_levels_and_only_they():
     scores = [3.0, 9.0, 5.0, 9.0, 1.0, 5.0, 7.0]
     level = np.zeros((4, 4), np.float32)
     rng = np.random.default_rng(0)
-    leaders = pipeline.Leaders(3)
+    leaders = pipeline.Leaders(3, pipeline.without_levels)
     for k in rng.permutation(len(scores)):
         detected = (pipeline.Detected(Keypoints.empty(1.0), None, level),)
         leaders.add(int(k), pipeline.Probed(None, detected, (), (), scores[k], True))
@@ -701,7 +701,9 @@ def test_a_view_is_made_once_in_a_pass_within_the_budget(monkeypatch):
     assert memo.view(image, (2.0, 36.0), 1, make) is first and len(made) == 1
     memo.view(image, (2.0, 36.0), 2, make)
     assert len(made) == 2
-    monkeypatch.setattr(pipeline, "VIEW_CACHE_MAX_BYTES", 0)
+    from scalematch import sharing
+
+    monkeypatch.setattr(sharing, "VIEW_CACHE_MAX_BYTES", 0)
     memo = pipeline.Memo()
     memo.view(image, (2.0, 36.0), 1, make)
     memo.view(image, (2.0, 36.0), 1, make)
@@ -717,7 +719,9 @@ def test_views_made_once_and_shared_give_the_answer_of_views_made_each_time(racc
 
     pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(2), high_size=(160, 120))
     shared = match(pair.low, pair.high)
-    monkeypatch.setattr(pipeline, "VIEW_CACHE_MAX_BYTES", 0)
+    from scalematch import sharing
+
+    monkeypatch.setattr(sharing, "VIEW_CACHE_MAX_BYTES", 0)
     monkeypatch.setattr(pipeline.Memo, "first_level", lambda self, *args: None)
     alone = match(pair.low, pair.high)
     assert shared.matched and shared.evidence.view_of == "coarser"
