@@ -642,15 +642,16 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
         raise click.ClickException(msg)
     log = lambda s: click.echo(s, err=True)
     meta_old, baseline = read_baseline(baseline_path)
+    # the code as it is when the workers import it (a commit made during the run is not it)
+    src = Path(tree) if tree else Path(__file__).resolve().parents[2]
+    commit = _git(src, "rev-parse", "--short", "HEAD")
+    dirty = bool(_git(src, "status", "--porcelain", "--untracked-files=no"))
     t0 = time.perf_counter()
     log(f"regress: {', '.join(wanted)}; {jobs} workers; matcher from "
         f"{tree or 'the installed scalematch'}")
     rows, source = run_cases(cases(Path(shared), wanted), jobs, str(tree) if tree else None, log)
     wall = time.perf_counter() - t0
     reports = compare(rows, baseline)
-    src = Path(source)
-    commit = _git(src, "rev-parse", "--short", "HEAD")
-    dirty = bool(_git(src, "status", "--porcelain", "--untracked-files=no"))
     click.echo(f"\nregress: {len(rows)} runs in {wall / 60:.1f} min, matcher {commit or '?'}"
                f"{' (with uncommitted changes)' if dirty else ''} from {source}; baseline "
                f"{meta_old.get('commit', 'none')} of {meta_old.get('date', '-')}\n")
