@@ -20,6 +20,7 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
+import cv2
 import numpy as np
 
 from .config import Config
@@ -28,7 +29,7 @@ from .imageio import grey_levels
 from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
                      StepRecord, build_evidence)
 from .sharing import Leaders, Measured, Memo, Meter
-from .search import (Attempt, ScaleOutcome, Step, out_of_time, overwhelming,
+from .search import (Attempt, ScaleOutcome, Step, ViewKey, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
                               final_checks, look_again, on_lines, unique_threshold)
@@ -44,7 +45,7 @@ from .stages.refit import (candidates_in_images, guided_refit, pooled_refit, ref
 from .stages.rivals import off_plane
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, identity_view, tilt_view, valid_in
+from .stages.views import View, ViewParams, identity_view, tilt_view, valid_in
 from .modes import Mode, mode_of
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
@@ -533,18 +534,90 @@ def run_step(search: Search, step: Step,
     t0 = time.perf_counter()
     meter = search.meter
     start = meter.done
-    if step.side == "coarser":
-        candidates = probe_coarser_views(search, step)
+    # the views worth probing at full resolution (every view, without the first look)
+    followed = replace(step, views=first_look(search, step))
+    if not followed.views:
+        candidates = []
+    elif step.side == "coarser":
+        candidates = probe_coarser_views(search, followed)
     else:
-        candidates = probe_finer_views(search, step)
+        candidates = probe_finer_views(search, followed)
     if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
         search.memo.plain[step.direction] = candidates[0][0]
-    attempts = match_chosen(search, step, candidates, searches + len(candidates))
+    # every view looked at counts in the a-contrario test, those of the first look too
+    attempts = match_chosen(search, step, candidates, searches + len(step.views))
     meter.tick(start + step.cost - meter.done)  # the views the probe left out
-    record = StepRecord(step.direction, step.view_pass, len(candidates), len(attempts),
+    record = StepRecord(step.direction, step.view_pass, len(step.views), len(attempts),
                         probe_best([p.score for p, _, _ in candidates]),
                         any(a.matched for a in attempts), step.side)
     return attempts, record, time.perf_counter() - t0
+
+
+def look_factor(shape: Tuple[int, int], views: ViewParams) -> float:
+    """The first look's shrink factor K for a coarser image of ``shape`` (H, W): its shorter
+    side brought to ``first_look_short_px``, at most ``first_look_max_factor``; 1 (no first
+    look) below ``first_look_min_factor`` or when the first look is off.
+
+    >>> p = ViewParams(first_look_short_px=300)
+    >>> look_factor((768, 1024), p), look_factor((2000, 3000), p), look_factor((400, 500), p)
+    (2.56, 3.0, 1.0)
+    """
+    if views.first_look_short_px <= 0:
+        return 1.0
+    k = min(min(shape) / views.first_look_short_px, views.first_look_max_factor)
+    return round(k, 3) if k >= views.first_look_min_factor else 1.0
+
+
+def first_look(search: Search, step: Step) -> Tuple[ViewKey, ...]:
+    """The views of ``step`` to probe at full resolution: all of them, unless the first look
+    (``ViewParams.first_look_short_px``) ranks them on both images shrunk by
+    :func:`look_factor`, probed as at full resolution; then the ``first_look_follow`` best that
+    score at least ``first_look_min_score``, in the step's order."""
+    views = search.config.views
+    lo_img = step.direction.coarser_finer(search.work.low, search.work.high)[0]
+    k = look_factor(lo_img.shape, views)
+    if step.view_pass == 0 or k <= 1.0:
+        return step.views
+    small = search.memo.small(k, lambda: shrunk_search(search, k))
+    keys = list(step.views)
+    # the first view alone: what every view shares (the coarser image described, the finer
+    # image's plain scales) is made once, then the others side by side
+    scores = [look_score(small, step, keys[0])]
+    scores += thread_map(lambda key: look_score(small, step, key), keys[1:])
+    best = sorted(range(len(keys)), key=lambda i: (-scores[i], i))[:views.first_look_follow]
+    return tuple(keys[i] for i in sorted(best) if scores[i] >= views.first_look_min_score)
+
+
+def shrunk_search(search: Search, k: float) -> "Search":
+    """A :class:`Search` of both images shrunk by ``k`` (``cv2.INTER_AREA``), no-data too, with
+    its own memo and no progress meter: the first look's."""
+    work = search.work
+
+    def small(image: np.ndarray) -> np.ndarray:
+        return cv2.resize(image, (0, 0), fx=1.0 / k, fy=1.0 / k, interpolation=cv2.INTER_AREA)
+
+    def nodata(nd: NoData, image: np.ndarray) -> NoData:
+        if nd.valid is None:
+            return nd
+        shrunk = cv2.resize(nd.valid.astype(np.uint8), (image.shape[1], image.shape[0]),
+                            interpolation=cv2.INTER_NEAREST).astype(bool)
+        return replace(nd, valid=shrunk)
+
+    low, high = small(work.low), small(work.high)
+    shrunk = replace(work, low=low, high=high, low_nodata=nodata(work.low_nodata, low),
+                     high_nodata=nodata(work.high_nodata, high))
+    return Search(shrunk, search.config, search.mode, Memo(), Meter(None, 0))
+
+
+def look_score(small: "Search", step: Step, key: ViewKey) -> float:
+    """The first look's score of one view of ``step``: its probe's best score on the shrunk
+    images of ``small`` (:func:`shrunk_search`), as the full-resolution probe would score it."""
+    look = replace(step, views=(key,), full_searches=1)
+    if step.side == "coarser":
+        candidates = probe_coarser_views(small, look)
+    else:
+        candidates = probe_finer_views(small, look)
+    return max((p.score for p, _, _ in candidates), default=0.0)
 
 
 def without_levels(probed: Probed) -> Probed:

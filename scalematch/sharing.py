@@ -65,6 +65,9 @@ class Memo:
     _view_pass: int = -1
     #: the s = 1 points of those views as the finer side found them (:class:`FirstLevel`)
     _firsts: Dict[tuple, "FirstLevel"] = field(default_factory=dict, repr=False)
+    #: the first look's searches of the shrunk images, by factor (:meth:`small`)
+    _small: Dict[tuple, Any] = field(default_factory=dict, repr=False)
+    _small_locks: Dict[tuple, threading.Lock] = field(default_factory=dict, repr=False)
 
     def _enter(self, view_pass: int) -> None:
         """Forget the views of another pass (called with ``_lock`` held)."""
@@ -92,6 +95,18 @@ class Memo:
                 self._views[k] = view
                 self._view_bytes += size
         return view
+
+    def small(self, k: float, make: Callable[[], Any]) -> Any:
+        """The first look's search of the images shrunk by ``k``: ``make()`` the first time,
+        kept for the rest of the search (its memo keeps the shrunk images' own work: each
+        direction's coarser image described, the contrasts, the finer image's plain scales)."""
+        key = k
+        with self._lock:
+            lock = self._small_locks.setdefault(key, threading.Lock())
+        with lock:
+            if key not in self._small:
+                self._small[key] = make()
+            return self._small[key]
 
     def forget_views(self) -> None:
         """Drop the views kept for the last pass (the search is over)."""

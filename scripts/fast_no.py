@@ -67,9 +67,22 @@ def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity
     if method == "sift":
         t, fwd = match_baseline(low, high, "sift", model=model).transform, True
     else:
-        r = match(low, high, Config.preset(method))
+        r = match(low, high, configured(method))
         t, fwd = (r.transform if r.matched else None), r.order == "given"
     return t, fwd, time.perf_counter() - t0, time.process_time() - c0
+
+
+def configured(method: str) -> Config:
+    """The Config of a method: a preset, and with "+path=value" the values of ``--set`` on it
+    (``first-look+views.first_look_follow=2``)."""
+    from scalematch.cli import set_path
+
+    name, *settings = method.split("+")
+    config = Config.preset(name)
+    for item in settings:
+        path, _, value = item.partition("=")
+        config = set_path(config, path, value)
+    return config
 
 
 def alternate(items, judge, methods=METHODS):
@@ -182,13 +195,14 @@ def main() -> None:
     ap.add_argument("--big-pairs", type=int, default=1, help=f"how many of the "
                     f"{len(BIG_PAIRS)} 12-16 MP unrelated pairs (BIG_PAIRS)")
     ap.add_argument("--methods", default=",".join(METHODS),
-                    help="sift and Config presets, comma-separated (the big pair: always "
-                         "default and no-views)")
+                    help="sift and Config presets, comma-separated, each with values set as "
+                         "+path=value (first-look+views.first_look_follow=2; the big pair: "
+                         "always default and no-views)")
     a = ap.parse_args()
     methods = tuple(m for m in a.methods.split(",") if m)
     for m in methods:
         if m != "sift":
-            Config.preset(m)  # an unknown name fails here, before any run
+            configured(m)  # an unknown name fails here, before any run
     shared = find_shared()
     if shared is None:
         sys.exit("../shared is absent")

@@ -6,6 +6,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -736,3 +737,35 @@ def test_a_path_given_for_an_image_points_to_read_grey(path):
                                          r"an array; read it first: "
                                          r"scalematch.read_grey\('data/demo_low.png'\)"):
         match(path, "data/demo_high.png")
+
+
+def test_the_first_look_hands_on_only_its_best_views_and_the_pair_is_still_matched(raccoon):
+    """With the first look (``ViewParams.first_look_short_px``), a pass's views are ranked on
+    the images shrunk and only the ``first_look_follow`` best, in the step's order, are probed
+    at full resolution; a score floor above every score hands on none. The tilted pair (t = 4,
+    ratio 2) is still matched, and every view looked at counts in its steps' records."""
+    from dataclasses import replace
+
+    from scalematch.search import search_plan
+
+    photo = cv2.resize(raccoon, (2048, 1536), interpolation=cv2.INTER_AREA)
+    pair = make_tilted_pair(photo, 2.0, 4.0, np.random.default_rng(1))
+    config = Config.preset("first-look", views=replace(
+        Config().views, first_look_short_px=300.0, first_look_follow=2))
+    search = _search(config, pair.low, pair.high)
+    assert pipeline.look_factor(pair.low.shape, config.views) == pytest.approx(
+        min(pair.low.shape) / 300.0, abs=1e-3)
+    plan = search_plan(config, search.work.scales, pipeline.finer_sides(search.work))
+    step = next(s for s in plan if s.view_pass == 2 and s.side == "finer")
+    chosen = pipeline.first_look(search, step)
+    assert len(chosen) == 2 and set(chosen) <= set(step.views)
+    assert list(chosen) == sorted(chosen, key=step.views.index)
+    strict = replace(search, config=replace(config, views=replace(config.views,
+                                                                   first_look_min_score=1e9)))
+    assert pipeline.first_look(strict, step) == ()
+    r = match(pair.low, pair.high, config)
+    assert r.matched, r.reason
+    err = reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape)
+    assert err < 3.0
+    views = {(s.direction, s.view_pass, s.side): len(s.views) for s in plan}
+    assert all(rec.views == views[rec.direction, rec.view_pass, rec.side] for rec in r.search)

@@ -93,6 +93,19 @@ class ViewParams:
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0
+    #: the first look (ASIFT's two resolutions, Morel & Yu 2009, section 4): every view of a
+    #: pass is probed on copies of both images shrunk by a factor K, and only the views it
+    #: ranks best are probed and matched at full resolution. K makes the coarser image's
+    #: shorter side this many px (0: no first look), at most ``first_look_max_factor``; below
+    #: ``first_look_min_factor`` the images are searched at full resolution only
+    first_look_short_px: float = 0.0
+    first_look_max_factor: float = 3.0
+    first_look_min_factor: float = 1.5
+    #: views of a step that the first look hands on to the full-resolution probe, at most ...
+    first_look_follow: int = 3
+    #: ... and only those whose first-look score reaches this (0: the best ones, whatever they
+    #: scored)
+    first_look_min_score: float = 0.0
 
     def __post_init__(self) -> None:
         for tilts in self.passes:
@@ -103,6 +116,12 @@ class ViewParams:
         for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
             in_range("views", name, getattr(self, name), Bounds(lo=0))
         in_range("views", "full_searches", self.full_searches, Bounds(lo=1), integer=True)
+        for name in ("first_look_short_px", "first_look_min_score"):
+            in_range("views", name, getattr(self, name), Bounds(lo=0))
+        for name in ("first_look_max_factor", "first_look_min_factor"):
+            in_range("views", name, getattr(self, name), Bounds(lo=1))
+        in_range("views", "first_look_follow", self.first_look_follow, Bounds(lo=1),
+                 integer=True)
         in_range("views", "probe_every", self.probe_every, Bounds(lo=1), integer=True)
         in_range("views", "confirm_below_inliers", self.confirm_below_inliers, Bounds(lo=0),
                  integer=True)
