@@ -1161,7 +1161,9 @@ def by_eye(entry: Dict[str, Any]) -> str:
     if entry["label"] in BY_EYE_DROPPED:
         return f"dropped: {BY_EYE_DROPPED[entry['label']]}"
     points, why = BY_EYE_DROPPED_POINTS.get(entry["label"], ((), ""))
-    return f"accepted, {len(points)} points dropped: {why}" if points else "accepted"
+    if not points:
+        return "accepted"
+    return f"accepted, {len(points)} point{'s' if len(points) > 1 else ''} dropped: {why}"
 
 
 def _read_colour(path: Path) -> np.ndarray:
