@@ -3,8 +3,10 @@
 
 Protocol (../shared/EVALUATION.md, "Real pairs"): the eight ef pairs are too few to tune a
 decision on; the photos of one scene seen from several places give more. A pair is two photos
-of one scene (:func:`candidate_pairs`) that truly overlap: its reference has at least
-``MIN_REFERENCE_INLIERS`` inliers and passed a check by eye (``BY_EYE_DROPPED``).
+of one scene (:func:`candidate_pairs`) that truly overlap: the first look of its reference
+has at least ``MIN_FIRST_LOOK_INLIERS`` inliers, the reference ``MIN_REFERENCE_INLIERS``, and
+it passed a check by eye (``BY_EYE_DROPPED``). Each pair is given as a zoom pair, one photo
+shrunk by 4 (``KINDS``).
 
 The reference of a pair (:func:`reference_of`), made once by ``scalematch lab 3d-reference``
 and stored in ``threed_reference.json`` beside this module: SIFT on the full-resolution photos
@@ -1570,9 +1572,9 @@ def _listed(text: str, known: Sequence[str], what: str, hint: str) -> List[str]:
 def threed_pairs_command(shared, reference_path, pairs, scenes, kinds, methods, ef, seed,
                          out_dir, write_doc, silent):
     """The fundamental matrix on the real 3-D pairs of the multi-view scenes of
-    ../shared/data/photos, both orders, B as the photo and shrunk: scalematch (model
+    ../shared/data/photos, each photo shrunk by 4 in turn, both orders: scalematch (model
     fundamental) and SIFT + USAC_MAGSAC in the same run, scored against the reference F of
-    each pair; with the 8 ef pairs.
+    each pair; with the 8 ef pairs. docs/THREED.md.
 
     \b
     Example:
