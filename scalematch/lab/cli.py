@@ -16,6 +16,8 @@ LAB_COMMANDS = {
     "bench": ("scalematch.lab.bench", "bench_command"),
     "real-pairs": ("scalematch.lab.realpairs", "real_pairs_command"),
     "ef-pairs": ("scalematch.lab.efpairs", "ef_pairs_command"),
+    "3d-pairs": ("scalematch.lab.threed", "threed_pairs_command"),
+    "3d-reference": ("scalematch.lab.threed", "reference_command"),
     "repeatability": ("scalematch.lab.repeatability", "repeatability_command"),
     "descriptor-study": ("scalematch.lab.descriptor_study", "descriptor_study_command"),
     "covariance": ("scalematch.lab.covariance", "covariance_command"),
@@ -40,9 +42,10 @@ class LabGroup(click.Group):
 @click.group("lab", cls=LabGroup,
              context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 def lab() -> None:
-    """Research commands: the benchmark against the peers, the real pairs (ef-pairs: the
-    fundamental matrix on 3-D scenes), the repeatability and descriptor studies, and the
-    estimation of the jet covariance Lambda.
+    """Research commands: the benchmark against the peers, the real pairs (ef-pairs and
+    3d-pairs: the fundamental matrix on 3-D scenes; 3d-reference fits the latter's reference
+    Fs), the repeatability and descriptor studies, and the estimation of the jet covariance
+    Lambda.
 
     \b
     Examples:

@@ -15,6 +15,7 @@ import os
 from pathlib import Path
 from typing import List, Optional, Tuple, Union
 
+import click
 import numpy as np
 
 from ..imageio import read_grey
@@ -40,6 +41,15 @@ def find_shared(env: Optional[dict] = None) -> Optional[Path]:
     return p if p.is_dir() else None
 
 
+def shared_subfolder(subdir: PathLike, shared: Optional[PathLike] = None) -> Optional[Path]:
+    """``<shared>/<subdir>`` (``shared`` default: :func:`find_shared`); None if absent."""
+    shared = find_shared() if shared is None else Path(shared)
+    if shared is None:
+        return None
+    folder = Path(shared) / subdir
+    return folder if folder.is_dir() else None
+
+
 def list_photos(shared: PathLike) -> List[Path]:
     """The photos of ``shared/data/photos``, sorted by file name (empty when there are none)."""
     folder = Path(shared) / "data" / "photos"
@@ -47,6 +57,12 @@ def list_photos(shared: PathLike) -> List[Path]:
         return []
     return sorted((p for p in folder.iterdir()
                    if p.is_file() and p.suffix.lower() in PHOTO_EXTENSIONS), key=lambda p: p.name)
+
+
+#: The ``--shared`` option of the lab's commands on real pairs (a decorator): the shared folder
+shared_option = click.option(
+    "--shared", type=click.Path(file_okay=False, path_type=Path), default=None,
+    help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
 
 
 def scene_of(name: Union[str, Path]) -> str:
@@ -87,8 +103,6 @@ def study_photos(images, n_photos: Optional[int], silent: bool):
 
     Raises ``click.ClickException`` when there is no photo.
     """
-    import click
-
     if images:
         paths = [Path(p) for p in images]
     else:

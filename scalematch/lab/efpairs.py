@@ -38,7 +38,7 @@ import numpy as np
 from ..geometry import epipolar_distances as geometric_distances
 from ..result import Direction
 from .baselines import RATIO_TEST, detect_and_describe, make_detector, ratio_matches, to_uint8
-from .datasets import find_shared
+from .datasets import shared_option, shared_subfolder
 
 PathLike = Union[str, Path]
 
@@ -109,11 +109,7 @@ def read_points(path: PathLike) -> np.ndarray:
 
 def ef_folder(shared: Optional[PathLike] = None) -> Optional[Path]:
     """``<shared>/data/ef`` (``shared`` default: :func:`datasets.find_shared`); None if absent."""
-    shared = find_shared() if shared is None else Path(shared)
-    if shared is None:
-        return None
-    folder = Path(shared) / EF_SUBDIR
-    return folder if folder.is_dir() else None
+    return shared_subfolder(EF_SUBDIR, shared)
 
 
 def pair_names(folder: PathLike) -> List[str]:
@@ -288,6 +284,22 @@ def run_sift_magsac(pair: EfPair, a_first: bool, seed: int = 0) -> Run:
 RUNNERS = {"scalematch": run_scalematch, "plane": run_plane, "sift-magsac": run_sift_magsac}
 
 
+def run_orders(pair: EfPair, methods: Sequence[str], row_of_run, seed: int = 0,
+               log=lambda s: None) -> List[Dict[str, Any]]:
+    """The rows of ``methods`` (of ``RUNNERS``) on ``pair`` in both orders, alternating (each
+    order, each method), ``row_of_run(order, run)`` making each row; a progress line per run
+    through ``log``."""
+    rows = []
+    for order in ORDERS:
+        for m in methods:
+            row = row_of_run(order, RUNNERS[m](pair, order == ORDERS[0], seed))
+            rows.append(row)
+            log(f"{pair.name} {order} {m:11s} claimed {row['claimed']!s:5s} error "
+                f"{_err(row['error_px']):>8s} px, {row['inliers']} inliers, "
+                f"{row['seconds']:.1f} s")
+    return rows
+
+
 # --------------------------------------------------------------------------------------------
 # Rows, summary, table
 # --------------------------------------------------------------------------------------------
@@ -369,8 +381,7 @@ def markdown(rows: Sequence[Dict[str, Any]], meta: Dict[str, Any]) -> str:
 # --------------------------------------------------------------------------------------------
 
 @click.command("ef-pairs", context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--shared", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
+@shared_option
 @click.option("--pairs", default="", help="Comma-separated pair names (default: all of data/ef).")
 @click.option("--methods", default=",".join(METHODS), show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True,
@@ -417,14 +428,8 @@ def ef_pairs_command(shared, pairs, methods, seed, out_dir, write_doc, silent):
     rows = []
     for name in names:
         pair = load_pair(folder, name)
-        for order in ORDERS:
-            for m in wanted:
-                row = row_of(pair, order, RUNNERS[m](pair, order == ORDERS[0], seed))
-                rows.append(row)
-                log(f"{name:8s} {order} {m:11s} claimed {row['claimed']!s:5s} "
-                    f"error {_err(row['error_px']):>8s} px, {row['inliers']} inliers, "
-                    f"{row['seconds']:.1f} s")
-            (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
+        rows += run_orders(pair, wanted, lambda order, run: row_of(pair, order, run), seed, log)
+        (out_dir / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
     (out_dir / "meta.json").write_text(json.dumps(meta))
     text = markdown(rows, meta)
     (out_dir / "ef-pairs.md").write_text(text)

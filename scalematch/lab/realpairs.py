@@ -42,7 +42,7 @@ import numpy as np
 
 from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
-from .datasets import find_shared, list_photos, scene_of
+from .datasets import find_shared, list_photos, scene_of, shared_option
 from .evaluation import is_success, reprojection_error
 from .synthetic import (OBLIQUE_CASES, SPREADS, TILTS, make_oblique_pair,
                         make_perspective_pair, make_tilted_pair, pair_rng, pairs_from_photos,
@@ -550,8 +550,7 @@ def write_section(doc: Path, text: str, section: str = "real-pairs",
 
 
 @click.command("real-pairs", context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--shared", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="The shared folder (default: ../shared beside the repo, or $SCALEMATCH_SHARED).")
+@shared_option
 @click.option("--sets", default=",".join(SET_ORDER), show_default=True,
               help="Comma-separated sets to run; also " + ", ".join(EXTRA_SETS)
                    + " (tilts 6 and 8, perspective pairs and oblique finer images: "
