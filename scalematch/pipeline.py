@@ -34,7 +34,7 @@ from .search import (Attempt, ScaleOutcome, Step, ViewKey, out_of_time, overwhel
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
                               final_checks, look_again, on_lines, unique_threshold)
 from .stages.descriptors import Described
-from .stages.detector import (MIN_SIDE_PX, Contrast, Gradients, Keypoints, detect_on_level)
+from .stages.detector import (Contrast, Gradients, Keypoints, detect_on_level)
 from .stages.estimator import Estimate, FitSpec, estimate, model_of, residuals
 from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import NoData, distance_inside, with_nan
@@ -42,7 +42,7 @@ from .stages.pixelcheck import pixel_check
 from .stages.probe import probe_scores, select_scales
 from .stages.refit import (candidates_in_images, guided_refit, pooled_refit, refit_in_high,
                            richer_model, union_homography)
-from .stages.rivals import off_plane
+from .stages.rivals import EpipolarFit, off_plane
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
 from .stages.views import View, ViewParams, identity_view, tilt_view, valid_in
@@ -331,7 +331,7 @@ class Probed:
 
 def _space(config: Config) -> dict:
     return dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
-                decimate=config.harris.decimate)
+                decimate=config.harris.decimate, camera_blur_px=config.harris.camera_blur_px)
 
 
 def _joined(head: Described, rest: Described, offset: int) -> Described:
@@ -406,7 +406,7 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
     share = share if share is not None and not reuse and shares_first_level(config) else None
     detected = []
     for n, level in enumerate(scale_space(view.image, scales, **_space(config))):
-        if min(level.image.shape) < MIN_SIDE_PX // 2:
+        if min(level.image.shape) < config.harris.min_level_side_px:
             detected.append(Detected(Keypoints.empty(level.s), None, None))
         elif n % every:  # left to the full search, if it takes this scale
             detected.append(Detected(Keypoints.empty(level.s), None, level if keep else None,
@@ -1028,8 +1028,9 @@ def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config)
     if len(src) == 0:
         return {}
     held = residuals(model, t, src, dst) <= config.ransac.threshold_px
-    n = off_plane(src, dst, held, params.parallax_threshold_px, config.seed, t,
-                  params.parallax_max_offset)
+    fit = EpipolarFit(params.parallax_threshold_px, params.parallax_min_candidates,
+                      params.parallax_confidence)
+    n = off_plane(src, dst, held, fit, config.seed, t, params.parallax_max_offset)
     k = len(distinct_pairs(src[held], dst[held])[0])
     return {"parallax_points": n,
             "parallax": n >= max(params.parallax_min_points, params.parallax_share * k)}

@@ -30,12 +30,14 @@ from .result import MatchResult, ScaleRow
 from .stages.decision import disagrees
 from .stages.estimator import model_of
 from .stages.nodata import NoDataParams, valid_mask
-from .stages.scalespace import CAMERA_BLUR_PX
 from .working import in_decoded
 
 PathLike = Union[str, Path]
 
 #: Footprint outline colour (BGR) and the false colours of the overlay.
+#: blur of the enlarged overlay's finer image, in the low image's px: the camera model of
+#: EVALUATION.md (0.5 px), for the picture only
+DRAWN_CAMERA_BLUR_PX = 0.5
 OUTLINE = (0, 215, 255)  # amber
 INLIER_LINE = (60, 200, 60)  # green
 INLIER_DOT = (0, 215, 255)
@@ -313,7 +315,7 @@ def _blended(low_grey: np.ndarray, high: np.ndarray, t: np.ndarray, enlarged_by:
     high_grey = cv2.cvtColor(to_bgr8(high), cv2.COLOR_BGR2GRAY)
     warped, mask, scene = _warp_high(high_grey, t, (ww, hh), nodata)
     if enlarged_by > 1:  # the low image's camera blur, in the enlarged grid's px
-        warped = cv2.GaussianBlur(warped, (0, 0), CAMERA_BLUR_PX * enlarged_by)
+        warped = cv2.GaussianBlur(warped, (0, 0), DRAWN_CAMERA_BLUR_PX * enlarged_by)
     inside = mask > 0
     # grey where they agree: the levels matched where both show the scene (a canvas's black
     # corners would pull the gain and offset, and the whole overlay would read as one colour)

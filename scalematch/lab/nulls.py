@@ -515,7 +515,7 @@ def footprint_ncc(low: np.ndarray, high: np.ndarray, transform: np.ndarray) -> f
     of the recorder (the lab's view of a claim), not the pipeline's evidence; nan when the
     footprint covers fewer than 16 low pixels.
     """
-    from ..stages.scalespace import CAMERA_BLUR_PX
+    from .synthetic import CAMERA_BLUR_PX
 
     t = np.asarray(transform, np.float64)[:2]
     r = 1.0 / max(math.sqrt(abs(np.linalg.det(t[:, :2]))), 1e-9)

@@ -17,7 +17,11 @@ import cv2
 import numpy as np
 
 from ..geometry import apply, compose, invert, similarity_matrix
-from ..stages.scalespace import CAMERA_BLUR_PX
+
+#: The camera model of EVALUATION.md: a coarser image is blurred by 0.5 sqrt(r^2 - 1) before it
+#: is shrunk by r, "so that after shrinking the camera blur is about 0.5 px" (the matcher
+#: assumes the same: HarrisParams.camera_blur_px, PixelParams.camera_blur_px)
+CAMERA_BLUR_PX = 0.5
 
 
 def zoom_warp(image: np.ndarray, ratio: float, angle_deg: float,

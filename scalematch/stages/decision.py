@@ -49,6 +49,12 @@ from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, S
 from .threads import thread_map
 
 
+#: Points along each side of the grid that measures a footprint's share inside the coarser
+#: image: numerics, not a threshold (an area's quadrature: 121 points put the share within
+#: 1/11 of the exact one, and ``DecisionParams.min_inside`` is compared with it)
+INSIDE_GRID_POINTS = 11
+
+
 @dataclass(frozen=True)
 class DecisionParams:
     #: fewest inliers ever accepted; the a-contrario test below is the real criterion (true
@@ -180,6 +186,12 @@ class DecisionParams:
     parallax_share: float = 0.25
     #: distance to the epipolar line within which a candidate fits it, px
     parallax_threshold_px: float = 1.5
+    #: fewest candidates the epipolar geometry is fitted to: 8 for its linear solver, and as
+    #: many again to tell a fit from a chance one
+    parallax_min_candidates: int = 16
+    #: its RANSAC's confidence (OpenCV's default, 0.99, stops early on the few hundred
+    #: candidates of one scale)
+    parallax_confidence: float = 0.999
     #: ... among the candidates the winner's map sends at most this share of the candidates'
     #: extent (its diagonal, coarser px) from their match: the eight 3-D pairs of
     #: ../shared/data/ef moved 90 % of their off-plane points under 0.17 of it, while false
@@ -235,6 +247,10 @@ class DecisionParams:
                  allow_inf=True)
         in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
                  Bounds(lo=0, lo_open=True))
+        in_range("decision", "parallax_min_candidates", self.parallax_min_candidates,
+                 Bounds(lo=8), integer=True)
+        in_range("decision", "parallax_confidence", self.parallax_confidence,
+                 Bounds(lo=0, hi=1, lo_open=True, hi_open=True))
         in_range("decision", "min_plane_on_lines", self.min_plane_on_lines, Bounds(lo=0, hi=1))
         if self.plane_model not in ("similarity", "affine", "homography"):
             raise ValueError(f"decision.plane_model must be one of ('similarity', 'affine', "
@@ -326,9 +342,9 @@ def _polygon_area(poly: np.ndarray) -> float:
 
 
 def _inside_fraction(t, finer_shape, coarser_shape) -> float:
-    """The fraction of an 11 x 11 grid over the finer image that ``t`` maps inside the coarser
-    image."""
-    p = apply(t, grid(finer_shape, 11))
+    """The fraction of an ``INSIDE_GRID_POINTS``-square grid over the finer image that ``t``
+    maps inside the coarser image."""
+    p = apply(t, grid(finer_shape, INSIDE_GRID_POINTS))
     h, w = coarser_shape
     ok = (p[:, 0] >= -0.5) & (p[:, 1] >= -0.5) & (p[:, 0] <= w - 0.5) & (p[:, 1] <= h - 0.5)
     return float(ok.mean())

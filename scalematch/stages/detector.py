@@ -68,6 +68,13 @@ class HarrisParams:
     subpixel: bool = True  #: refine positions by a quadratic fit of the 3x3 response
     decimate: bool = True  #: compute coarse scales on decimated levels (same response)
     min_level_sigma: float = 1.0  #: decimate while the derivation std stays >= this, level px
+    #: blur a decimated level carries, in its own px (stages/scalespace.py): the camera model
+    #: of EVALUATION.md, whose coarser images are blurred by 0.5 sqrt(r^2 - 1) before shrinking
+    #: by r "so that after shrinking the camera blur is about 0.5 px"
+    camera_blur_px: float = 0.5
+    #: a level whose shorter side is under this many px is not searched (no point found): the
+    #: Harris window at s = 1 (integration std 2, border 2) leaves nothing inside 12 px
+    min_level_side_px: int = 12
     #: adaptive detection (False: the paper's absolute threshold above): multiply
     #: ``threshold`` by ``min(contrast_cap, (c / reference_contrast)^4)``, ``c`` the image's
     #: contrast (:func:`image_contrast`), floored at the image's noise floor (:func:`noise_floor`).
@@ -128,8 +135,10 @@ class HarrisParams:
                  integer=True)
         for name in ("reference_contrast", "noise_response_per_std4"):
             in_range("harris", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        for name in ("noise_scale_exponent", "noise_margin"):
+        for name in ("noise_scale_exponent", "noise_margin", "camera_blur_px"):
             in_range("harris", name, getattr(self, name), Bounds(lo=0))
+        in_range("harris", "min_level_side_px", self.min_level_side_px, Bounds(lo=1),
+                 integer=True)
 
 
 @dataclass(frozen=True)
@@ -446,7 +455,8 @@ def detect(image: np.ndarray, scales: Sequence[float] = PAPER_SCALES,
     if params.adaptive and contrast is None:
         contrast = image_contrast(as_float_image(image), params)
     levels = scale_space(image, scales, sigma=params.sigma,
-                         min_level_sigma=params.min_level_sigma, decimate=params.decimate)
+                         min_level_sigma=params.min_level_sigma, decimate=params.decimate,
+                         camera_blur_px=params.camera_blur_px)
     return [detect_on_level(level, params, contrast) for level in levels]
 
 
@@ -459,5 +469,6 @@ def detect_one(image: np.ndarray, s: float = 1.0, params: HarrisParams = HarrisP
 def response_at(image: np.ndarray, s: float, params: Optional[HarrisParams] = None) -> np.ndarray:
     """The normalised response C_s at full resolution (no decimation): for checks and figures."""
     params = params or HarrisParams()
-    level = next(scale_space(image, (s,), sigma=params.sigma, decimate=False))
+    level = next(scale_space(image, (s,), sigma=params.sigma, decimate=False,
+                             camera_blur_px=params.camera_blur_px))
     return harris_response(level, params)

@@ -36,11 +36,6 @@ from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
 from .matcher import distinct_pairs
 
-#: High points sampled (evenly, no randomness) to estimate the fraction of compatible pairs.
-_CHANCE_SAMPLE = 256
-#: ... and of low points in the region (their pairs with the high sample estimate the fraction)
-_CHANCE_SAMPLE_LOW = 2048
-
 
 @dataclass(frozen=True)
 class GuidedParams:
@@ -71,6 +66,12 @@ class GuidedParams:
     #: once grown (graf 1->5 0.97 -> 0.28 px; a perspective facade 4.9 px off as a similarity,
     #: 0.49 as the homography its growth showed); no pair was lost (docs/BENCHMARKS.md)
     grow_below_inliers: int = 30
+    #: high points sampled (evenly, no randomness) to estimate the fraction of compatible pairs
+    #: behind ``Growth.chance`` (:func:`chance_matches`) ...
+    chance_sample_high: int = 256
+    #: ... and low points of the region: their pairs with the high sample estimate the fraction
+    #: (a mean: the full 256 x 12,000 table, 1.5 GB at 128 dimensions, is not needed to know it)
+    chance_sample_low: int = 2048
 
     def __post_init__(self) -> None:
         for name in ("radius_px", "max_distance"):
@@ -80,7 +81,8 @@ class GuidedParams:
         in_range("guided", "grow_below_inliers", self.grow_below_inliers, Bounds(lo=0),
                  integer=True)
         in_range("guided", "angle_tolerance_deg", self.angle_tolerance_deg, Bounds(lo=0, hi=180))
-        in_range("guided", "max_rounds", self.max_rounds, Bounds(lo=1), integer=True)
+        for name in ("max_rounds", "chance_sample_high", "chance_sample_low"):
+            in_range("guided", name, getattr(self, name), Bounds(lo=1), integer=True)
 
 
 @dataclass(frozen=True)
@@ -186,7 +188,7 @@ def chance_matches(t: np.ndarray, high: Described, low: Described,
     falls within ``radius_px`` with probability ``1 - exp(-rho f pi r^2)``: ``rho`` the density
     of low points in that region (points per low px^2), ``f`` the fraction of (high, low) pairs
     that pass the descriptor and orientation tests (measured on an even sample of
-    ``_CHANCE_SAMPLE`` high points against the low points of the region). Low points cluster in
+    ``chance_sample_high`` high points against the low points of the region). Low points cluster in
     textured parts, so the figure is a guide, not a bound.
     """
     if len(high) == 0 or len(low) == 0:
@@ -203,10 +205,8 @@ def chance_matches(t: np.ndarray, high: Described, low: Described,
     if near.size == 0 or inside == 0:
         return 0.0
     rows = np.nonzero(ok)[0]
-    sample = rows[np.linspace(0, rows.size - 1, min(_CHANCE_SAMPLE, rows.size)).astype(int)]
-    # an even sample of the low points too: the fraction is a mean, and a 256 x 12000 pair
-    # table of descriptor differences (1.5 GB at 128 dimensions) is not needed to know it
-    cols = near[np.linspace(0, near.size - 1, min(_CHANCE_SAMPLE_LOW, near.size)).astype(int)]
+    sample = rows[np.linspace(0, rows.size - 1, min(params.chance_sample_high, rows.size)).astype(int)]
+    cols = near[np.linspace(0, near.size - 1, min(params.chance_sample_low, near.size)).astype(int)]
     a = high.desc[sample].astype(np.float32)
     b = low.desc[cols].astype(np.float32)
     d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)

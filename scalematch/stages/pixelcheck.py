@@ -41,7 +41,6 @@ import numpy as np
 
 from ..checks import Bounds, in_range
 from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
-from .scalespace import CAMERA_BLUR_PX
 
 
 @dataclass(frozen=True)
@@ -96,12 +95,17 @@ class PixelParams:
     #: which a correlation peak counts as the same placement (half a footprint: a copy of the
     #: structure elsewhere is at least that far away, or it would overlap the claim)
     unique_exclusion: float = 0.5
+    #: camera blur the coarser image is taken to carry, in its own px: the finer image is
+    #: blurred by this times sqrt(ratio^2 - 1) before it is compared (:func:`blurred_for_ratio`;
+    #: the camera model of EVALUATION.md, as ``HarrisParams.camera_blur_px``)
+    camera_blur_px: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
             in_range("pixel", name, getattr(self, name), Bounds(lo=0, lo_open=True))
         in_range("pixel", "rotation_deg", self.rotation_deg, Bounds(lo=0, hi=180))
         in_range("pixel", "scale_step", self.scale_step, Bounds(lo=1))
+        in_range("pixel", "camera_blur_px", self.camera_blur_px, Bounds(lo=0))
         in_range("pixel", "min_overlap_px", self.min_overlap_px, Bounds(lo=1), integer=True)
         in_range("pixel", "min_std", self.min_std, Bounds(lo=0))
         in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
@@ -129,11 +133,12 @@ class PixelCheck:
         return math.isfinite(self.margin)
 
 
-def blurred_for_ratio(high: np.ndarray, ratio: float) -> Tuple[np.ndarray, int]:
+def blurred_for_ratio(high: np.ndarray, ratio: float,
+                      camera_blur_px: float = 0.5) -> Tuple[np.ndarray, int]:
     """The high image (h, w) with the camera blur of ``ratio``, on a copy shrunk by ``k``.
 
     Returns (small, k): ``small[y_s, x_s]`` is the high image blurred by
-    ``CAMERA_BLUR_PX * sqrt(ratio^2 - 1)`` high px sampled at ``x = k x_s + (k - 1) / 2``
+    ``camera_blur_px * sqrt(ratio^2 - 1)`` high px sampled at ``x = k x_s + (k - 1) / 2``
     (``cv2.INTER_AREA``'s centre-aligned box, variance ``(k^2 - 1) / 12`` high px^2, counted in
     the blur). ``k = max(1, floor(ratio / 2))`` keeps two small pixels per low pixel.
     """
@@ -145,7 +150,7 @@ def blurred_for_ratio(high: np.ndarray, ratio: float) -> Tuple[np.ndarray, int]:
     if k > 1:
         img = cv2.resize(img[: (h // k) * k, : (w // k) * k], (w // k, h // k),
                          interpolation=cv2.INTER_AREA)
-    total = CAMERA_BLUR_PX * math.sqrt(max(r * r - 1.0, 0.0))
+    total = camera_blur_px * math.sqrt(max(r * r - 1.0, 0.0))
     rest = math.sqrt(max(total * total - (k * k - 1) / 12.0, 0.0)) / k
     if rest > 0.05:
         img = cv2.GaussianBlur(img, (0, 0), rest, borderType=cv2.BORDER_REFLECT_101)
@@ -373,7 +378,7 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
     x0, y0, x1, y1 = box
     crop = low[y0:y1 + 1, x0:x1 + 1]
     size = (x1 - x0 + 1, y1 - y0 + 1)
-    small, k = blurred_for_ratio(high, ratio)
+    small, k = blurred_for_ratio(high, ratio, params.camera_blur_px)
     shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
     from_small = _small_to_high(k)
     crop_shown = np.isfinite(crop)
@@ -534,7 +539,7 @@ def unique_template(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: Pi
     if isinstance(placed, str):
         return None
     low, t3, ratio, _, _ = placed
-    small, k = blurred_for_ratio(high, ratio)
+    small, k = blurred_for_ratio(high, ratio, params.camera_blur_px)
     hh, ww = low.shape
     img, mask = _warp_into(small, t3 @ _small_to_high(k), (ww, hh), params.edge_px)
     shown = np.isfinite(low)

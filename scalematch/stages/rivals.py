@@ -26,12 +26,17 @@ import numpy as np
 from ..geometry import apply, grid, similarity_parts
 from .estimator import estimate
 
-#: Fewest candidates that a fundamental matrix is fitted to: 8 for its linear solver, and as
-#: many again to tell a fit from a chance one
-MIN_EPIPOLAR_CANDIDATES = 16
-#: Confidence of the fundamental matrix's RANSAC (OpenCV's default, 0.99, stops early on the
-#: few hundred candidates of one scale)
-EPIPOLAR_CONFIDENCE = 0.999
+
+class EpipolarFit(NamedTuple):
+    """How :func:`off_plane` fits its fundamental matrix (``DecisionParams.parallax_*``)."""
+
+    threshold_px: float  #: distance to the epipolar line within which a candidate fits it, px
+    #: fewest candidates it is fitted to: 8 for its linear solver, and as many again to tell a
+    #: fit from a chance one
+    min_candidates: int = 16
+    #: its RANSAC's confidence (OpenCV's default, 0.99, stops early on the few hundred
+    #: candidates of one scale)
+    confidence: float = 0.999
 
 
 class Second(NamedTuple):
@@ -95,12 +100,12 @@ def same_scale_and_angle(t1: np.ndarray, t2: np.ndarray, scale_factor: float,
     return abs(math.log(r2 / r1)) <= math.log(scale_factor) and turn <= angle_deg
 
 
-def off_plane(src: np.ndarray, dst: np.ndarray, inliers: np.ndarray, threshold_px: float,
+def off_plane(src: np.ndarray, dst: np.ndarray, inliers: np.ndarray, fit: EpipolarFit,
               seed: int = 0, plane: Optional[np.ndarray] = None,
               max_offset: float = math.inf) -> int:
     """How many candidates off the winner's plane (``inliers``: its (K,) mask) an epipolar
-    geometry explains: a fundamental matrix fitted by RANSAC to all of them (``threshold_px``
-    from the epipolar line), counted among the winner's outliers. 0 when there are too few.
+    geometry explains: a fundamental matrix fitted by RANSAC to all of them (``fit``: within
+    ``fit.threshold_px`` of the epipolar line), counted among the winner's outliers. 0 when there are too few.
 
     With ``plane`` (the winner's map, 2x3 or 3x3, finer px -> coarser px), only the candidates
     it sends at most ``max_offset`` times the diagonal of the candidates' extent in the coarser
@@ -114,12 +119,12 @@ def off_plane(src: np.ndarray, dst: np.ndarray, inliers: np.ndarray, threshold_p
     (ratios 2-8), against 118 on the desk scene of ``../shared/data/ef/zoom`` (42 on its plane).
     """
     k = len(src)
-    if k < MIN_EPIPOLAR_CANDIDATES:
+    if k < fit.min_candidates:
         return 0
     cv2.setRNGSeed(int(seed))
     f, mask = cv2.findFundamentalMat(np.ascontiguousarray(src, np.float32),
                                      np.ascontiguousarray(dst, np.float32), cv2.FM_RANSAC,
-                                     float(threshold_px), EPIPOLAR_CONFIDENCE)
+                                     float(fit.threshold_px), float(fit.confidence))
     if f is None or mask is None:
         return 0
     fits = mask.ravel()[:k].astype(bool) & ~np.asarray(inliers, bool)

@@ -28,15 +28,11 @@ import numpy as np
 
 from ..geometry import apply, resize_map
 
-#: Camera blur, in pixels of the image it is measured in, assumed by the decimation (EVALUATION.md:
-#: low images are blurred by 0.5*sqrt(r^2-1) before shrinking by r, "so that after shrinking the
-#: camera blur is about 0.5 px").
-CAMERA_BLUR_PX = 0.5
-
-
-def antialias_sigma(d: float) -> float:
-    """Blur (full-resolution px) applied before decimating by ``d``: 0.5*sqrt(d^2 - 1)."""
-    return CAMERA_BLUR_PX * float(np.sqrt(max(d * d - 1.0, 0.0)))
+def antialias_sigma(d: float, camera_blur_px: float = 0.5) -> float:
+    """Blur (full-resolution px) applied before decimating by ``d``: ``camera_blur_px *
+    sqrt(d^2 - 1)``, so that the decimated copy carries a camera blur of ``camera_blur_px`` of
+    its own pixels (``HarrisParams.camera_blur_px``, 0.5: the camera model of EVALUATION.md)."""
+    return camera_blur_px * float(np.sqrt(max(d * d - 1.0, 0.0)))
 
 
 @dataclass(frozen=True)
@@ -100,7 +96,8 @@ def decimation_for(s: float, sigma: float, min_level_sigma: float) -> float:
 
 
 def scale_space(image: np.ndarray, scales: Sequence[float], sigma: float = 1.0,
-                min_level_sigma: float = 1.0, decimate: bool = True) -> Iterator[Level]:
+                min_level_sigma: float = 1.0, decimate: bool = True,
+                camera_blur_px: float = 0.5) -> Iterator[Level]:
     """Yield one :class:`Level` per scale, in the order of ``scales`` (a cascade when increasing).
 
     Parameters
@@ -115,13 +112,15 @@ def scale_space(image: np.ndarray, scales: Sequence[float], sigma: float = 1.0,
         Smallest derivation std, in level px, allowed when choosing the decimation.
     decimate : bool
         False computes every scale at full resolution (the paper, literally; for checks).
+    camera_blur_px : float
+        Blur each decimated copy carries, in its own px (:func:`antialias_sigma`).
     """
     base = as_float_image(image)
     current = Level(s=1.0, d=1.0, blur=0.0, image=base)
     for s in scales:
         d = decimation_for(float(s), sigma, min_level_sigma) if decimate else 1.0
         source = current if d >= current.d else Level(1.0, 1.0, 0.0, base)
-        target_blur = antialias_sigma(d)
+        target_blur = antialias_sigma(d, camera_blur_px)
         extra = np.sqrt(max(target_blur ** 2 - source.blur ** 2, 0.0)) / source.d
         img = resample(gaussian_blur(source.image, extra), d / source.d)
         current = Level(s=float(s), d=d, blur=max(target_blur, source.blur), image=img)

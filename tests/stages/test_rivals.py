@@ -8,8 +8,12 @@ import numpy as np
 
 from scalematch.geometry import apply, similarity_matrix
 from scalematch.stages.estimator import RansacParams
-from scalematch.stages.rivals import off_plane, same_scale_and_angle, second_transform
+from scalematch.stages.rivals import (EpipolarFit, off_plane, same_scale_and_angle,
+                                     second_transform)
 
+
+#: the decision's parallax fit: 1.5 px from the epipolar line (DecisionParams' default)
+FIT = EpipolarFit(1.5)
 
 def _copies(shift, n=80, seed=0):
     """Candidates of a facade matched half on its place, half on a copy ``shift`` px away."""
@@ -56,13 +60,13 @@ def _two_views(n_plane, n_off, seed=0):
 
 def test_matches_off_the_plane_that_an_epipolar_geometry_explains_show_parallax():
     src, dst, on_plane = _two_views(40, 60)
-    assert off_plane(src, dst, on_plane, 1.5) >= 50
+    assert off_plane(src, dst, on_plane, FIT) >= 50
     # a flat scene leaves nothing off its plane: the rest are chance candidates
     rng = np.random.default_rng(2)
     flat_dst = dst.copy()
     flat_dst[40:] = rng.uniform(0, 640, (60, 2))
-    assert off_plane(src, flat_dst, on_plane, 1.5) <= 10
-    assert off_plane(src[:10], dst[:10], on_plane[:10], 1.5) == 0  # too few to tell
+    assert off_plane(src, flat_dst, on_plane, FIT) <= 10
+    assert off_plane(src[:10], dst[:10], on_plane[:10], FIT) == 0  # too few to tell
 
 
 def test_false_matches_sliding_one_way_on_a_flat_scene_are_not_parallax():
@@ -75,8 +79,8 @@ def test_false_matches_sliding_one_way_on_a_flat_scene_are_not_parallax():
     dst = apply(t, src)
     on_plane = np.arange(120) < 80
     dst[80:] += np.column_stack([rng.uniform(130.0, 200.0, 40), np.zeros(40)])  # slid along x
-    assert off_plane(src, dst, on_plane, 1.5) >= 30  # an epipolar geometry explains them
-    assert off_plane(src, dst, on_plane, 1.5, plane=t, max_offset=0.25) <= 2
+    assert off_plane(src, dst, on_plane, FIT) >= 30  # an epipolar geometry explains them
+    assert off_plane(src, dst, on_plane, FIT, plane=t, max_offset=0.25) <= 2
     src3, dst3, on3 = _two_views(40, 60)
     plane3, _ = cv2.findHomography(src3[on3], dst3[on3])
-    assert off_plane(src3, dst3, on3, 1.5, plane=plane3, max_offset=0.25) >= 50
+    assert off_plane(src3, dst3, on3, FIT, plane=plane3, max_offset=0.25) >= 50
