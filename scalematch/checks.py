@@ -1,9 +1,10 @@
 """Checks of parameter values: one message form, so the library refuses what the command line
 refuses and says it the same way (``ValueError``; the CLI prints it as ``Error: ...``, exit 2).
 
-Each ``*Params`` dataclass calls these from its ``__post_init__``: a configuration that cannot
-mean anything (a negative RANSAC threshold, a ratio test above 1) is refused when it is made,
-not deep inside a match. ``owner`` is the ``Config`` field that holds the parameters
+Each ``*Params`` dataclass declares the range of each of its numbers once, in a class-level
+table (``BOUNDS``: field name -> :class:`Bounds`), which its ``__post_init__`` checks with
+:func:`check_bounds`: a configuration that cannot mean anything (a negative RANSAC threshold, a
+ratio test above 1) is refused when it is made, not deep inside a match. ``owner`` is the ``Config`` field that holds the parameters
 (``"ransac"``; ``""`` for ``Config``'s own fields), so the message names the value as
 ``--set`` does.
 
@@ -30,7 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from numbers import Integral, Real
-from typing import Any, Iterable, Optional
+from typing import Any, Iterable, Mapping, Optional
 
 
 def _path(owner: str, name: str) -> str:
@@ -53,6 +54,9 @@ class Bounds:
     hi: Optional[float] = None
     lo_open: bool = False
     hi_open: bool = False
+    integer: bool = False  #: whole numbers only
+    allow_inf: bool = False  #: infinity passes (within the range)
+    optional: bool = False  #: None passes (the field's "not set")
 
     def rule(self) -> str:
         """The range in words, as the error message says it."""
@@ -82,11 +86,14 @@ def _number(v: Optional[float]) -> str:
 
 def in_range(owner: str, name: str, value: Any, bounds: Bounds = Bounds(), *,
              integer: bool = False, allow_inf: bool = False) -> None:
-    """Raise ``ValueError`` unless ``value`` is a number (an integer with ``integer``) within
-    ``bounds``.
+    """Raise ``ValueError`` unless ``value`` is a number (an integer with ``integer`` or
+    ``bounds.integer``) within ``bounds``.
 
-    NaN is always refused; infinity only passes with ``allow_inf`` (and the bounds).
+    NaN is always refused; infinity only passes with ``allow_inf`` or ``bounds.allow_inf``
+    (and the range).
     """
+    integer = integer or bounds.integer
+    allow_inf = allow_inf or bounds.allow_inf
     rule = bounds.rule()
     number = isinstance(value, Real) and not isinstance(value, bool)
     ok = number and (isinstance(value, Integral) or not integer)
@@ -115,3 +122,39 @@ def one_of(owner: str, name: str, value: Any, choices: Iterable[Any]) -> None:
     choices = tuple(choices)
     if value not in choices:
         raise ValueError(f"{_path(owner, name)} must be one of {choices}, got {value!r}")
+
+
+#: The ranges most parameters take, by what they are.
+POSITIVE = Bounds(lo=0, lo_open=True)  #: a length, a std, a factor that must not vanish
+NON_NEGATIVE = Bounds(lo=0)
+COUNT = Bounds(lo=0, integer=True)  #: how many (0: none, or off where the field says so)
+AT_LEAST_ONE = Bounds(lo=1, integer=True)
+SHARE = Bounds(lo=0, hi=1)  #: a fraction
+PROBABILITY = Bounds(lo=0, hi=1, lo_open=True, hi_open=True)  #: a RANSAC confidence
+FACTOR = Bounds(lo=1)  #: a ratio between two sizes, >= 1
+CORRELATION = Bounds(lo=-1, hi=1)  #: a ZNCC
+MARGIN = Bounds(lo=-2, hi=2)  #: a difference of two correlations
+ANGLE = Bounds(lo=0, hi=180)  #: a tolerance on an angle, degrees
+FINITE = Bounds()  #: any finite number (a log10 NFA)
+
+
+def check_bounds(owner: str, params: Any, table: Mapping[str, Bounds]) -> None:
+    """Check each field of ``params`` that ``table`` names against its :class:`Bounds`: the
+    one place a ``*Params`` declares its ranges (``BOUNDS``, a class-level table).
+
+    >>> from dataclasses import dataclass
+    >>> @dataclass(frozen=True)
+    ... class P:
+    ...     radius: float = 2.0
+    ...     rounds: int = 3
+    >>> check_bounds("p", P(rounds=0), {"radius": POSITIVE, "rounds": AT_LEAST_ONE})
+    Traceback (most recent call last):
+    ...
+    ValueError: p.rounds must be an integer >= 1, got 0
+    """
+    for name, bounds in table.items():
+        value = getattr(params, name)
+        if value is None and bounds.optional:
+            continue
+        in_range(owner, name, value, bounds)
+

@@ -7,9 +7,9 @@ gathers them and is recorded with every result (``MatchResult.config``, the JSON
 from __future__ import annotations
 
 from dataclasses import MISSING, dataclass, field, fields, replace
-from typing import Any, Callable, Dict, Optional, Tuple
+from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Tuple
 
-from .checks import Bounds, in_range, one_of
+from .checks import FACTOR, NON_NEGATIVE, Bounds, check_bounds, in_range, one_of
 from .stages.constraints import OrientationParams, SemiLocalParams
 from .stages.decision import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
@@ -150,6 +150,17 @@ class Config:
     #: measure what a 1 s budget saves on the null set and what it costs on tilted pairs
     time_budget_s: Optional[float] = None
 
+    #: each number's range, checked when the configuration is made (``checks.check_bounds``;
+    #: each parameter group declares its own)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "seed": Bounds(lo=0, hi=MAX_SEED, integer=True),
+        # None: always full size
+        "low_max_side": Bounds(lo=MIN_WORKING_SIDE_PX, integer=True, optional=True),
+        "high_max_side": Bounds(lo=MIN_WORKING_SIDE_PX, integer=True, optional=True),
+        "min_footprint_px": NON_NEGATIVE,
+        "time_budget_s": Bounds(lo=0, lo_open=True, optional=True),
+    }
+
     def __post_init__(self) -> None:
         for name, kind in _groups().items():  # Config(ransac=3) would fail only in match
             value = getattr(self, name)
@@ -163,18 +174,11 @@ class Config:
         one_of("", "order", self.order, ORDERS)
         one_of("", "mode", self.mode, MODES)
         one_of("", "model", self.model, MODELS)
-        in_range("", "seed", self.seed, Bounds(lo=0, hi=MAX_SEED), integer=True)
-        for name in ("low_max_side", "high_max_side"):
-            side = getattr(self, name)
-            if side is not None:  # None: always full size
-                in_range("", name, side, Bounds(lo=MIN_WORKING_SIDE_PX), integer=True)
+        check_bounds("", self, self.BOUNDS)
         if len(self.scales) == 0:
             raise ValueError("scales must hold at least one scale (>= 1)")
         for s in self.scales:  # the high-resolution image is never enlarged
-            in_range("", "scales", s, Bounds(lo=1))
-        in_range("", "min_footprint_px", self.min_footprint_px, Bounds(lo=0))
-        if self.time_budget_s is not None:
-            in_range("", "time_budget_s", self.time_budget_s, Bounds(lo=0, lo_open=True))
+            in_range("", "scales", s, FACTOR)
         if self.mode == "paper" and self.guided.use_orientation:
             # the jets carry no orientation: guided growth compares descriptors alone, and the
             # configuration says so (it is recorded with every result)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import pytest
 
 from scalematch.config import MODES, PRESETS, Config, ProbeParams
@@ -132,3 +134,18 @@ def test_a_config_shows_only_what_differs_from_the_default():
     assert "probe=ProbeParams(enabled=False" in repr(Config.paper())
     signature = str(inspect.signature(scalematch.match))
     assert "config: 'Config' = Config()," in signature and len(signature) < 300
+
+
+def test_every_number_of_every_parameter_group_has_its_range_declared_once():
+    """Each group's ``BOUNDS`` table names every numeric field it holds, and only those: a new
+    parameter cannot be added without its range, nor a range left for a field that went."""
+    from scalematch.config import _groups
+
+    groups = dict(_groups(), config=Config)
+    for owner, kind in groups.items():
+        numbers = {f.name for f in fields(kind)
+                   if isinstance(getattr(kind(), f.name), (int, float))
+                   and not isinstance(getattr(kind(), f.name), bool)}
+        optional = {name for name, b in kind.BOUNDS.items() if b.optional}
+        assert numbers <= set(kind.BOUNDS), (owner, numbers - set(kind.BOUNDS))
+        assert set(kind.BOUNDS) - optional <= numbers, (owner, set(kind.BOUNDS) - numbers)

@@ -17,12 +17,12 @@ one-dimensional Hough transform, Lowe 2004 section 7.3).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List
+from typing import ClassVar, List, Mapping
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, CORRELATION, COUNT, FACTOR, POSITIVE, SHARE, check_bounds
 from .scalespace import Level
 
 # --------------------------------------------------------------- orientation consistency (default)
@@ -35,12 +35,16 @@ class OrientationParams:
     second_peak: float = 0.5  #: a second peak at least this fraction of the first is also tried
     max_peaks: int = 2  #: peaks tried at most
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "bins": AT_LEAST_ONE,
+        "tolerance_deg": Bounds(lo=0, hi=180, lo_open=True),
+        "second_peak": SHARE,
+        "max_peaks": AT_LEAST_ONE,
+    }
+
     def __post_init__(self) -> None:
-        in_range("orientation", "bins", self.bins, Bounds(lo=1), integer=True)
-        in_range("orientation", "tolerance_deg", self.tolerance_deg,
-                 Bounds(lo=0, hi=180, lo_open=True))
-        in_range("orientation", "second_peak", self.second_peak, Bounds(lo=0, hi=1))
-        in_range("orientation", "max_peaks", self.max_peaks, Bounds(lo=1), integer=True)
+        check_bounds("orientation", self, self.BOUNDS)
 
 
 def orientation_groups(dtheta: np.ndarray, params: OrientationParams = OrientationParams()
@@ -95,13 +99,19 @@ class SemiLocalParams:
     correlation_min: float = 0.5
     patch_radius_px: float = 6.0  #: half-size of the correlation patches, low px
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "radius_px": POSITIVE,
+        "tolerance_px": POSITIVE,
+        "patch_radius_px": POSITIVE,
+        "max_neighbours": AT_LEAST_ONE,
+        "scale_tolerance": FACTOR,
+        "min_support": COUNT,
+        "correlation_min": CORRELATION,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("radius_px", "tolerance_px", "patch_radius_px"):
-            in_range("semi_local", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        in_range("semi_local", "max_neighbours", self.max_neighbours, Bounds(lo=1), integer=True)
-        in_range("semi_local", "scale_tolerance", self.scale_tolerance, Bounds(lo=1))
-        in_range("semi_local", "min_support", self.min_support, Bounds(lo=0), integer=True)
-        in_range("semi_local", "correlation_min", self.correlation_min, Bounds(lo=-1, hi=1))
+        check_bounds("semi_local", self, self.BOUNDS)
 
 
 def semi_local_support(p: np.ndarray, q: np.ndarray, s: float,

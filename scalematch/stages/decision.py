@@ -32,11 +32,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Dict, Optional, Sequence, Tuple
+from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
 from ..geometry import apply, epipolar_distances, footprint, grid
 from ..result import Evidence, build_evidence
 from .constraints import OrientationParams
@@ -213,48 +213,45 @@ class DecisionParams:
     #: into an affine map or a homography where the scene asks for one
     plane_model: str = "similarity"
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "min_inliers": COUNT,
+        "min_agreeing_scales": COUNT,
+        "max_log_nfa": FINITE,
+        "max_log_nfa_alone": FINITE,
+        "scale_agreement": FACTOR,
+        "min_inside": SHARE,
+        "agreement_px": POSITIVE,
+        "min_area_px": NON_NEGATIVE,
+        "look_min_inliers": COUNT,
+        "few_min_inliers": COUNT,
+        "few_min_grown": COUNT,
+        "few_max_log_nfa": FINITE,
+        "few_min_margin": MARGIN,
+        "few_clear_margin": MARGIN,
+        "min_unique_ratio": NON_NEGATIVE,
+        "min_window_agreement": SHARE,
+        "min_window_ratio": NON_NEGATIVE,
+        "min_windows": AT_LEAST_ONE,
+        "min_final_margin": MARGIN,
+        "max_log_nfa_geometry": FINITE,
+        "unconfirmed_min_unique_ratio": NON_NEGATIVE,
+        "second_share": NON_NEGATIVE,
+        "second_scale_factor": FACTOR,
+        "second_angle_deg": NON_NEGATIVE,
+        "second_min_shift": NON_NEGATIVE,
+        "parallax_min_points": COUNT,
+        "parallax_share": NON_NEGATIVE,
+        "parallax_max_offset": Bounds(lo=0, allow_inf=True),
+        "parallax_threshold_px": POSITIVE,
+        "parallax_min_candidates": Bounds(lo=8, integer=True),
+        "parallax_confidence": PROBABILITY,
+        "min_plane_on_lines": SHARE,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("min_inliers", "min_agreeing_scales"):
-            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
-        for name in ("max_log_nfa", "max_log_nfa_alone"):
-            in_range("decision", name, getattr(self, name))
-        in_range("decision", "scale_agreement", self.scale_agreement, Bounds(lo=1))
-        in_range("decision", "min_inside", self.min_inside, Bounds(lo=0, hi=1))
-        in_range("decision", "agreement_px", self.agreement_px, Bounds(lo=0, lo_open=True))
-        in_range("decision", "min_area_px", self.min_area_px, Bounds(lo=0))
-        for name in ("look_min_inliers", "few_min_inliers", "few_min_grown"):
-            in_range("decision", name, getattr(self, name), Bounds(lo=0), integer=True)
-        in_range("decision", "few_max_log_nfa", self.few_max_log_nfa)
-        in_range("decision", "few_min_margin", self.few_min_margin, Bounds(lo=-2, hi=2))
-        in_range("decision", "few_clear_margin", self.few_clear_margin, Bounds(lo=-2, hi=2))
-        in_range("decision", "min_unique_ratio", self.min_unique_ratio, Bounds(lo=0))
-        in_range("decision", "min_window_agreement", self.min_window_agreement,
-                 Bounds(lo=0, hi=1))
-        in_range("decision", "min_window_ratio", self.min_window_ratio, Bounds(lo=0))
-        in_range("decision", "min_windows", self.min_windows, Bounds(lo=1), integer=True)
-        in_range("decision", "min_final_margin", self.min_final_margin, Bounds(lo=-2, hi=2))
-        in_range("decision", "max_log_nfa_geometry", self.max_log_nfa_geometry)
-        in_range("decision", "unconfirmed_min_unique_ratio", self.unconfirmed_min_unique_ratio,
-                 Bounds(lo=0))
-        in_range("decision", "second_share", self.second_share, Bounds(lo=0))
-        in_range("decision", "second_scale_factor", self.second_scale_factor, Bounds(lo=1))
-        in_range("decision", "second_angle_deg", self.second_angle_deg, Bounds(lo=0))
-        in_range("decision", "second_min_shift", self.second_min_shift, Bounds(lo=0))
-        in_range("decision", "parallax_min_points", self.parallax_min_points, Bounds(lo=0),
-                 integer=True)
-        in_range("decision", "parallax_share", self.parallax_share, Bounds(lo=0))
-        in_range("decision", "parallax_max_offset", self.parallax_max_offset, Bounds(lo=0),
-                 allow_inf=True)
-        in_range("decision", "parallax_threshold_px", self.parallax_threshold_px,
-                 Bounds(lo=0, lo_open=True))
-        in_range("decision", "parallax_min_candidates", self.parallax_min_candidates,
-                 Bounds(lo=8), integer=True)
-        in_range("decision", "parallax_confidence", self.parallax_confidence,
-                 Bounds(lo=0, hi=1, lo_open=True, hi_open=True))
-        in_range("decision", "min_plane_on_lines", self.min_plane_on_lines, Bounds(lo=0, hi=1))
-        if self.plane_model not in ("similarity", "affine", "homography"):
-            raise ValueError(f"decision.plane_model must be one of ('similarity', 'affine', "
-                             f"'homography'), got {self.plane_model!r}")
+        check_bounds("decision", self, self.BOUNDS)
+        one_of("decision", "plane_model", self.plane_model, ("similarity", "affine", "homography"))
 
 
 @dataclass(frozen=True)

@@ -38,13 +38,15 @@ s, the same pixel size as the low image at s = 1, so one window size serves both
 
 from __future__ import annotations
 
+from typing import ClassVar, Mapping
+
 import functools
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, NON_NEGATIVE, POSITIVE, SHARE, check_bounds
 from .filters import gaussian_derivative
 from .scalespace import Level, gaussian_blur
 
@@ -62,9 +64,14 @@ class JetParams:
     #: point with a vanishing gradient from blowing its invariants up.
     min_gradient: float = 0.5
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "scale_factor": POSITIVE,
+        "min_gradient": POSITIVE,
+    }
+
     def __post_init__(self) -> None:
-        in_range("jets", "scale_factor", self.scale_factor, Bounds(lo=0, lo_open=True))
-        in_range("jets", "min_gradient", self.min_gradient, Bounds(lo=0, lo_open=True))
+        check_bounds("jets", self, self.BOUNDS)
 
 
 #: Number of local-jet invariants in the descriptor (v2..v8).
@@ -161,14 +168,23 @@ class GradientParams:
     presmooth_px: float = 1.0  #: blur before sampling the window every cell_px/2 px (anti-alias)
     orientation_step_px: int = 2  #: the orientation window is sampled every this many px
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "cell_px": POSITIVE,
+        "orientation_radius_px": POSITIVE,
+        "orientation_sigma_px": POSITIVE,
+        "clip": POSITIVE,
+        "grid": AT_LEAST_ONE,
+        "bins": AT_LEAST_ONE,
+        "samples_per_cell": AT_LEAST_ONE,
+        "orientation_bins": AT_LEAST_ONE,
+        "orientation_step_px": AT_LEAST_ONE,
+        "secondary_peak": SHARE,
+        "presmooth_px": NON_NEGATIVE,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("cell_px", "orientation_radius_px", "orientation_sigma_px", "clip"):
-            in_range("gradients", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        for name in ("grid", "bins", "samples_per_cell", "orientation_bins",
-                     "orientation_step_px"):
-            in_range("gradients", name, getattr(self, name), Bounds(lo=1), integer=True)
-        in_range("gradients", "secondary_peak", self.secondary_peak, Bounds(lo=0, hi=1))
-        in_range("gradients", "presmooth_px", self.presmooth_px, Bounds(lo=0))
+        check_bounds("gradients", self, self.BOUNDS)
 
 
 @dataclass(frozen=True)

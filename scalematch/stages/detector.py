@@ -35,12 +35,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, NamedTuple, Optional, Sequence
+from typing import ClassVar, List, Mapping, NamedTuple, Optional, Sequence
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, COUNT, NON_NEGATIVE, POSITIVE, check_bounds
 from .filters import gaussian_derivative
 from .nodata import away_from
 from .scalespace import Level, as_float_image, gaussian_blur, scale_space
@@ -119,26 +119,31 @@ class HarrisParams:
         """True when detection needs the image's :class:`Contrast`."""
         return self.contrast_relative or self.min_points > 0
 
-    def __post_init__(self) -> None:
-        for name in ("sigma", "sigma_tilde", "min_level_sigma"):
-            in_range("harris", name, getattr(self, name), Bounds(lo=0, lo_open=True))
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "sigma": POSITIVE,
+        "sigma_tilde": POSITIVE,
+        "min_level_sigma": POSITIVE,
         # alpha >= 0.25 makes every cornerness negative (det <= tr^2 / 4)
-        in_range("harris", "alpha", self.alpha, Bounds(lo=0, hi=0.25, hi_open=True))
-        for name in ("threshold", "nms_radius", "border"):
-            in_range("harris", name, getattr(self, name), Bounds(lo=0))
-        in_range("harris", "max_points", self.max_points, Bounds(lo=0), integer=True)
-        in_range("harris", "contrast_cap", self.contrast_cap, Bounds(lo=0, lo_open=True),
-                 allow_inf=True)
-        in_range("harris", "min_points", self.min_points, Bounds(lo=0), integer=True)
-        in_range("harris", "contrast_percentile", self.contrast_percentile, Bounds(lo=0, hi=100))
-        in_range("harris", "contrast_sample_step", self.contrast_sample_step, Bounds(lo=1),
-                 integer=True)
-        for name in ("reference_contrast", "noise_response_per_std4"):
-            in_range("harris", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        for name in ("noise_scale_exponent", "noise_margin", "camera_blur_px"):
-            in_range("harris", name, getattr(self, name), Bounds(lo=0))
-        in_range("harris", "min_level_side_px", self.min_level_side_px, Bounds(lo=1),
-                 integer=True)
+        "alpha": Bounds(lo=0, hi=0.25, hi_open=True),
+        "threshold": NON_NEGATIVE,
+        "nms_radius": NON_NEGATIVE,
+        "border": NON_NEGATIVE,
+        "max_points": COUNT,
+        "contrast_cap": Bounds(lo=0, lo_open=True, allow_inf=True),
+        "min_points": COUNT,
+        "contrast_percentile": Bounds(lo=0, hi=100),
+        "contrast_sample_step": AT_LEAST_ONE,
+        "reference_contrast": POSITIVE,
+        "noise_response_per_std4": POSITIVE,
+        "noise_scale_exponent": NON_NEGATIVE,
+        "noise_margin": NON_NEGATIVE,
+        "camera_blur_px": NON_NEGATIVE,
+        "min_level_side_px": AT_LEAST_ONE,
+    }
+
+    def __post_init__(self) -> None:
+        check_bounds("harris", self, self.BOUNDS)
 
 
 @dataclass(frozen=True)

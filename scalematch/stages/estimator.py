@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, ClassVar, Dict, Mapping, Optional, Tuple
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, COUNT, POSITIVE, PROBABILITY, check_bounds
 from ..geometry import epipolar_distances, transfer_error
 
 @dataclass(frozen=True)
@@ -38,14 +38,17 @@ class RansacParams:
     #: 0.93 and 1.30 px. The inliers are still counted at ``threshold_px``
     magsac_threshold_px: float = 1.0
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "threshold_px": POSITIVE,
+        "magsac_threshold_px": POSITIVE,
+        "confidence": PROBABILITY,
+        "max_iters": AT_LEAST_ONE,
+        "refine_iters": COUNT,
+    }
+
     def __post_init__(self) -> None:
-        in_range("ransac", "threshold_px", self.threshold_px, Bounds(lo=0, lo_open=True))
-        in_range("ransac", "magsac_threshold_px", self.magsac_threshold_px,
-                 Bounds(lo=0, lo_open=True))
-        in_range("ransac", "confidence", self.confidence,
-                 Bounds(lo=0, hi=1, lo_open=True, hi_open=True))
-        in_range("ransac", "max_iters", self.max_iters, Bounds(lo=1), integer=True)
-        in_range("ransac", "refine_iters", self.refine_iters, Bounds(lo=0), integer=True)
+        check_bounds("ransac", self, self.BOUNDS)
 
 
 @dataclass(frozen=True)

@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Callable, ClassVar, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import ANGLE, AT_LEAST_ONE, Bounds, COUNT, POSITIVE, check_bounds
 from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
 from .estimator import RansacParams, model_of, refine
@@ -73,16 +73,20 @@ class GuidedParams:
     #: (a mean: the full 256 x 12,000 table, 1.5 GB at 128 dimensions, is not needed to know it)
     chance_sample_low: int = 2048
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "radius_px": POSITIVE,
+        "max_distance": POSITIVE,
+        "threshold_px": Bounds(lo=0, lo_open=True, optional=True),
+        "grow_below_inliers": COUNT,
+        "angle_tolerance_deg": ANGLE,
+        "max_rounds": AT_LEAST_ONE,
+        "chance_sample_high": AT_LEAST_ONE,
+        "chance_sample_low": AT_LEAST_ONE,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("radius_px", "max_distance"):
-            in_range("guided", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        if self.threshold_px is not None:
-            in_range("guided", "threshold_px", self.threshold_px, Bounds(lo=0, lo_open=True))
-        in_range("guided", "grow_below_inliers", self.grow_below_inliers, Bounds(lo=0),
-                 integer=True)
-        in_range("guided", "angle_tolerance_deg", self.angle_tolerance_deg, Bounds(lo=0, hi=180))
-        for name in ("max_rounds", "chance_sample_high", "chance_sample_low"):
-            in_range("guided", name, getattr(self, name), Bounds(lo=1), integer=True)
+        check_bounds("guided", self, self.BOUNDS)
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,11 @@ How candidates are selected is the named parameter ``MatcherParams.selection``:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Tuple
+from typing import ClassVar, Mapping, Tuple
 
 import numpy as np
 
-from ..checks import Bounds, in_range, one_of
+from ..checks import AT_LEAST_ONE, Bounds, check_bounds, one_of
 from .threads import thread_map
 
 SELECTIONS = ("nn", "knn", "threshold", "ratio")
@@ -41,12 +41,16 @@ class MatcherParams:
     max_distance: float = float("inf")  #: absolute distance limit (descriptor units)
     mutual: bool = False  #: keep only matches that are also nearest the other way round
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "k": AT_LEAST_ONE,
+        "ratio": Bounds(lo=0, hi=1, lo_open=True),
+        "max_distance": Bounds(lo=0, lo_open=True, allow_inf=True),
+    }
+
     def __post_init__(self) -> None:
+        check_bounds("matcher", self, self.BOUNDS)
         one_of("matcher", "selection", self.selection, SELECTIONS)
-        in_range("matcher", "k", self.k, Bounds(lo=1), integer=True)
-        in_range("matcher", "ratio", self.ratio, Bounds(lo=0, hi=1, lo_open=True))
-        in_range("matcher", "max_distance", self.max_distance, Bounds(lo=0, lo_open=True),
-                 allow_inf=True)
 
 
 @dataclass(frozen=True)

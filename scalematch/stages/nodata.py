@@ -34,12 +34,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from numbers import Real
-from typing import Optional, Tuple, Union
+from typing import ClassVar, Mapping, Optional, Tuple, Union
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, NON_NEGATIVE, POSITIVE, SHARE, check_bounds
 
 #: The rules a ``NoDataParams.rule`` may name besides a declared grey level
 RULES = ("auto", "none")
@@ -75,7 +75,19 @@ class NoDataParams:
     #: rotation of a degree leaves canvas slivers whose edges drift 13 px over a 768 px side
     oblique_deg: float = 0.5
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "tolerance": NON_NEGATIVE,
+        "min_share": SHARE,
+        "core_px": AT_LEAST_ONE,
+        "edge_probe_px": POSITIVE,
+        "support_share": SHARE,
+        "min_edge_px": NON_NEGATIVE,
+        "oblique_deg": Bounds(lo=0, hi=45),
+    }
+
     def __post_init__(self) -> None:
+        check_bounds("nodata", self, self.BOUNDS)
         rule = self.rule
         if isinstance(rule, str):  # "auto", "none", or a grey level written out ("--set")
             try:
@@ -86,13 +98,6 @@ class NoDataParams:
         elif not (isinstance(rule, Real) and not isinstance(rule, bool)
                   and math.isfinite(float(rule))):
             raise ValueError(f"nodata.rule must be 'auto', 'none' or a grey level, got {rule!r}")
-        in_range("nodata", "tolerance", self.tolerance, Bounds(lo=0))
-        in_range("nodata", "min_share", self.min_share, Bounds(lo=0, hi=1))
-        in_range("nodata", "core_px", self.core_px, Bounds(lo=1), integer=True)
-        in_range("nodata", "edge_probe_px", self.edge_probe_px, Bounds(lo=0, lo_open=True))
-        in_range("nodata", "support_share", self.support_share, Bounds(lo=0, hi=1))
-        in_range("nodata", "min_edge_px", self.min_edge_px, Bounds(lo=0))
-        in_range("nodata", "oblique_deg", self.oblique_deg, Bounds(lo=0, hi=45))
 
     @property
     def declared(self) -> Optional[float]:

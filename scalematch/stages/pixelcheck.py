@@ -34,12 +34,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple, Optional, Tuple, Union
+from typing import ClassVar, Mapping, NamedTuple, Optional, Tuple, Union
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import ANGLE, AT_LEAST_ONE, Bounds, CORRELATION, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds
 from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
 
 
@@ -100,18 +100,25 @@ class PixelParams:
     #: the camera model of EVALUATION.md, as ``HarrisParams.camera_blur_px``)
     camera_blur_px: float = 0.5
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "shift_fraction": POSITIVE,
+        "max_side_px": POSITIVE,
+        "unique_side_px": POSITIVE,
+        "vouch_radius": POSITIVE,
+        "rotation_deg": ANGLE,
+        "scale_step": FACTOR,
+        "camera_blur_px": NON_NEGATIVE,
+        "min_overlap_px": AT_LEAST_ONE,
+        "min_std": NON_NEGATIVE,
+        "edge_px": COUNT,
+        "window_px": Bounds(lo=2, integer=True),
+        "window_ncc": CORRELATION,
+        "unique_exclusion": NON_NEGATIVE,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("shift_fraction", "max_side_px", "unique_side_px", "vouch_radius"):
-            in_range("pixel", name, getattr(self, name), Bounds(lo=0, lo_open=True))
-        in_range("pixel", "rotation_deg", self.rotation_deg, Bounds(lo=0, hi=180))
-        in_range("pixel", "scale_step", self.scale_step, Bounds(lo=1))
-        in_range("pixel", "camera_blur_px", self.camera_blur_px, Bounds(lo=0))
-        in_range("pixel", "min_overlap_px", self.min_overlap_px, Bounds(lo=1), integer=True)
-        in_range("pixel", "min_std", self.min_std, Bounds(lo=0))
-        in_range("pixel", "edge_px", self.edge_px, Bounds(lo=0), integer=True)
-        in_range("pixel", "window_px", self.window_px, Bounds(lo=2), integer=True)
-        in_range("pixel", "window_ncc", self.window_ncc, Bounds(lo=-1, hi=1))
-        in_range("pixel", "unique_exclusion", self.unique_exclusion, Bounds(lo=0))
+        check_bounds("pixel", self, self.BOUNDS)
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import List, Optional, Sequence
+from typing import ClassVar, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..checks import Bounds, in_range
+from ..checks import AT_LEAST_ONE, Bounds, check_bounds
 from ..geometry import similarity_parts
 from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
@@ -36,9 +36,15 @@ class ProbeParams:
     #: with 99.9 % confidence down to an inlier fraction of 12 %
     ransac_iters: int = 500
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "points": AT_LEAST_ONE,
+        "keep": AT_LEAST_ONE,
+        "ransac_iters": AT_LEAST_ONE,
+    }
+
     def __post_init__(self) -> None:
-        for name in ("points", "keep", "ransac_iters"):
-            in_range("probe", name, getattr(self, name), Bounds(lo=1), integer=True)
+        check_bounds("probe", self, self.BOUNDS)
 
 
 def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams, *,

@@ -28,11 +28,11 @@ itself) has its ``dst`` in that view's pixels: each function maps them back firs
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence, Tuple
+from typing import ClassVar, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import Bounds, in_range, one_of
+from ..checks import Bounds, COUNT, FACTOR, check_bounds, one_of
 from ..geometry import compose, invert
 from .decision import Decision, folded
 from .descriptors import Described
@@ -76,11 +76,16 @@ class ModelCheckParams:
         """
         return n >= self.min_gain * k and n - k >= self.min_extra
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "min_gain": FACTOR,
+        "min_extra": COUNT,
+    }
+
     def __post_init__(self) -> None:
+        check_bounds("model_check", self, self.BOUNDS)
         for name in self.models:
             one_of("model_check", "models", name, MODELS)
-        in_range("model_check", "min_gain", self.min_gain, Bounds(lo=1))
-        in_range("model_check", "min_extra", self.min_extra, Bounds(lo=0), integer=True)
 
 
 Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)

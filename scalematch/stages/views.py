@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import ClassVar, List, Mapping, Optional, Tuple
 
 import cv2
 import numpy as np
 
-from ..checks import Bounds, in_range, one_of
+from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds, in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
 from .nodata import away_from, distance_inside
 
@@ -107,24 +107,28 @@ class ViewParams:
     #: scored)
     first_look_min_score: float = 0.0
 
+    #: each number's range, checked when the parameters are made (``checks.check_bounds``)
+    BOUNDS: ClassVar[Mapping[str, Bounds]] = {
+        "longitude_step_deg": POSITIVE,
+        "antialias_c": NON_NEGATIVE,
+        "min_probe_score": NON_NEGATIVE,
+        "edge_margin_px": NON_NEGATIVE,
+        "full_searches": AT_LEAST_ONE,
+        "first_look_short_px": NON_NEGATIVE,
+        "first_look_min_score": NON_NEGATIVE,
+        "first_look_max_factor": FACTOR,
+        "first_look_min_factor": FACTOR,
+        "first_look_follow": AT_LEAST_ONE,
+        "probe_every": AT_LEAST_ONE,
+        "confirm_below_inliers": COUNT,
+    }
+
     def __post_init__(self) -> None:
+        check_bounds("views", self, self.BOUNDS)
         for tilts in self.passes:
             for t in tilts:
-                in_range("views", "passes", t, Bounds(lo=1))
+                in_range("views", "passes", t, FACTOR)
         one_of("views", "coarser_directions", self.coarser_directions, COARSER_DIRECTIONS)
-        in_range("views", "longitude_step_deg", self.longitude_step_deg, Bounds(lo=0, lo_open=True))
-        for name in ("antialias_c", "min_probe_score", "edge_margin_px"):
-            in_range("views", name, getattr(self, name), Bounds(lo=0))
-        in_range("views", "full_searches", self.full_searches, Bounds(lo=1), integer=True)
-        for name in ("first_look_short_px", "first_look_min_score"):
-            in_range("views", name, getattr(self, name), Bounds(lo=0))
-        for name in ("first_look_max_factor", "first_look_min_factor"):
-            in_range("views", name, getattr(self, name), Bounds(lo=1))
-        in_range("views", "first_look_follow", self.first_look_follow, Bounds(lo=1),
-                 integer=True)
-        in_range("views", "probe_every", self.probe_every, Bounds(lo=1), integer=True)
-        in_range("views", "confirm_below_inliers", self.confirm_below_inliers, Bounds(lo=0),
-                 integer=True)
 
 
 @dataclass(frozen=True)
