@@ -32,6 +32,7 @@ A benchmark, not a test: times are reported against the baseline's, never assert
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import json
 import math
@@ -337,9 +338,21 @@ def cases(shared: Path, kinds: Sequence[str] = KINDS) -> Iterator[Case]:
 _MATCH: Dict[str, Any] = {}
 
 
-def _init_worker(tree: Optional[str]) -> None:
+def configured(method: str, config_class: Any, set_path: Callable[..., Any]) -> Any:
+    """The Config of ``method``: a preset's name, then any ``+path=value`` settings as
+    ``--set`` takes them (``first-look+views.first_look_short_px=500``)."""
+    name, *settings = method.split("+")
+    config = config_class.preset(name)
+    for item in settings:
+        path, _, value = item.partition("=")
+        config = set_path(config, path, value)
+    return config
+
+
+def _init_worker(tree: Optional[str], preset: str = "default") -> None:
     """Import ``scalematch`` from ``tree`` (None: as installed) in this worker, one OpenCV
-    thread (the workers share the cores)."""
+    thread (the workers share the cores); the configuration of every similarity run is
+    ``preset`` (:func:`configured`)."""
     import importlib
 
     import cv2
@@ -352,6 +365,8 @@ def _init_worker(tree: Optional[str]) -> None:
         sys.path.insert(0, tree)
     _MATCH["match"] = importlib.import_module("scalematch.pipeline").match
     _MATCH["Config"] = importlib.import_module("scalematch.config").Config
+    _MATCH["config"] = _MATCH["Config"]() if preset == "default" else configured(
+        preset, _MATCH["Config"], importlib.import_module("scalematch.cli").set_path)
     if tree:
         sys.modules[__name__] = this
     _MATCH["source"] = str(Path(importlib.import_module("scalematch").__file__).parent.parent)
@@ -360,7 +375,9 @@ def _init_worker(tree: Optional[str]) -> None:
 def _run(job: Tuple[str, np.ndarray, np.ndarray, str]) -> Dict[str, Any]:
     """One match: its answer as plain values (the judge runs in the parent)."""
     case_id, low, high, model = job
-    config = _MATCH["Config"]() if model == "similarity" else _MATCH["Config"](model=model)
+    config = _MATCH["config"]
+    if model != config.model:
+        config = dataclasses.replace(config, model=model)
     t0 = time.perf_counter()
     try:
         r = _MATCH["match"](low, high, config)
@@ -403,9 +420,11 @@ def judge(case: Case, answer: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def run_cases(all_cases: Iterable[Case], jobs: int = 2, tree: Optional[str] = None,
-              log: Callable[[str], None] = lambda s: None) -> Tuple[List[Dict[str, Any]], str]:
-    """Run every case on ``jobs`` worker processes importing scalematch from ``tree``; the
-    rows (in the cases' order) and the source folder the workers imported."""
+              log: Callable[[str], None] = lambda s: None,
+              preset: str = "default") -> Tuple[List[Dict[str, Any]], str]:
+    """Run every case on ``jobs`` worker processes importing scalematch from ``tree``, with
+    the configuration ``preset`` (:func:`configured`); the rows (in the cases' order) and the
+    source folder the workers imported."""
     ctx = mp.get_context("spawn")  # not fork: a forked OpenCV thread pool can hang
     by_id: Dict[str, Case] = {}
 
@@ -418,7 +437,7 @@ def run_cases(all_cases: Iterable[Case], jobs: int = 2, tree: Optional[str] = No
     order: List[str] = []
     source = ""
     t0 = time.perf_counter()
-    with ctx.Pool(jobs, initializer=_init_worker, initargs=(tree,)) as pool:
+    with ctx.Pool(jobs, initializer=_init_worker, initargs=(tree, preset)) as pool:
         for answer in pool.imap_unordered(_run, jobs_of()):
             case = by_id.pop(answer["id"])
             source = answer["source"]
@@ -611,11 +630,15 @@ def _git(tree: Path, *args: str) -> str:
               help="Worker processes (one OpenCV thread each).")
 @click.option("--if-shared", is_flag=True,
               help="Without the shared folder, say so and exit 0 (for CI runs elsewhere).")
+@click.option("--preset", default="default", show_default=True,
+              help="The configuration: a Config preset, with values set as +path=value "
+                   "(first-look+views.first_look_short_px=500): a design's gate against "
+                   "the default's baseline.")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path),
               help="With --update: write the new baseline's table into this Markdown file "
                    "(its regress section; make regress UPDATE=1 writes docs/REGRESS.md).")
 def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_path, jobs,
-                    if_shared, write_doc):
+                    if_shared, preset, write_doc):
     """The regression gate: a fixed sample of every kind of pair, both orders, against the
     committed baseline. Exit 1 on any run lost or new wrong claim.
 
@@ -633,6 +656,14 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
             if k not in KINDS:
                 raise click.BadParameter(f"unknown kind {k!r}; one of {', '.join(KINDS)}",
                                          param_hint="--kinds")
+    if preset != "default":  # a preset or a setting that does not exist: said before the run
+        from ..cli import set_path
+        from ..config import Config
+
+        try:
+            configured(preset, Config, set_path)
+        except (KeyError, ValueError, TypeError, click.ClickException) as exc:
+            raise click.BadParameter(str(exc), param_hint="--preset") from None
     shared = shared or find_shared()
     if shared is None or not (Path(shared) / "data" / "photos").is_dir():
         msg = "the shared folder (../shared or $SCALEMATCH_SHARED) is absent: the gate needs it"
@@ -648,8 +679,9 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
     dirty = bool(_git(src, "status", "--porcelain", "--untracked-files=no"))
     t0 = time.perf_counter()
     log(f"regress: {', '.join(wanted)}; {jobs} workers; matcher from "
-        f"{tree or 'the installed scalematch'}")
-    rows, source = run_cases(cases(Path(shared), wanted), jobs, str(tree) if tree else None, log)
+        f"{tree or 'the installed scalematch'}; configuration {preset}")
+    rows, source = run_cases(cases(Path(shared), wanted), jobs, str(tree) if tree else None, log,
+                             preset)
     wall = time.perf_counter() - t0
     reports = compare(rows, baseline)
     click.echo(f"\nregress: {len(rows)} runs in {wall / 60:.1f} min, matcher {commit or '?'}"

@@ -4,6 +4,7 @@ baseline and the command's exits, on known answers."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -144,3 +145,18 @@ def test_every_kind_is_made_in_both_orders_with_unique_ids(shared_dir):
         else:
             assert first[0].truth.shape == (3, 3)
         assert first[0].low.dtype == np.float32 and first[0].low.max() <= 255
+
+
+def test_a_preset_with_settings_is_the_configuration_of_every_run():
+    """``--preset first-look+views.first_look_short_px=500`` runs the first-look preset with
+    that value; an unknown preset or parameter is refused before the run (exit 2)."""
+    from scalematch.cli import set_path
+    from scalematch.config import Config
+
+    config = regress.configured("first-look+views.first_look_short_px=500", Config, set_path)
+    base = Config.preset("first-look")
+    assert config == replace(base, views=replace(base.views, first_look_short_px=500))
+    runner = CliRunner()
+    for bad in ("nope", "first-look+views.bogus=1"):
+        out = runner.invoke(regress.regress_command, ["--preset", bad, "--kinds", "zoom"])
+        assert out.exit_code == 2 and "--preset" in out.output, out.output
