@@ -127,8 +127,10 @@ def one_of(owner: str, name: str, value: Any, choices: Iterable[Any]) -> None:
 #: The ranges most parameters take, by what they are.
 POSITIVE = Bounds(lo=0, lo_open=True)  #: a length, a std, a factor that must not vanish
 NON_NEGATIVE = Bounds(lo=0)
-COUNT = Bounds(lo=0, integer=True)  #: how many (0: none, or off where the field says so)
-AT_LEAST_ONE = Bounds(lo=1, integer=True)
+#: The largest count: OpenCV takes its counts (RANSAC iterations, points) as C ints
+MAX_COUNT = 2**31 - 1
+COUNT = Bounds(lo=0, hi=MAX_COUNT, integer=True)  #: how many (0: none, or off where it says so)
+AT_LEAST_ONE = Bounds(lo=1, hi=MAX_COUNT, integer=True)
 SHARE = Bounds(lo=0, hi=1)  #: a fraction
 PROBABILITY = Bounds(lo=0, hi=1, lo_open=True, hi_open=True)  #: a RANSAC confidence
 FACTOR = Bounds(lo=1)  #: a ratio between two sizes, >= 1
@@ -150,7 +152,7 @@ def check_bounds(owner: str, params: Any, table: Mapping[str, Bounds]) -> None:
     >>> check_bounds("p", P(rounds=0), {"radius": POSITIVE, "rounds": AT_LEAST_ONE})
     Traceback (most recent call last):
     ...
-    ValueError: p.rounds must be an integer >= 1, got 0
+    ValueError: p.rounds must be an integer in [1, 2147483647], got 0
     """
     for name, bounds in table.items():
         value = getattr(params, name)
