@@ -1,7 +1,7 @@
 """The regression gate: a fixed sample of every kind of pair, in both orders, against a baseline.
 
 A change that helps one kind of pair can cost another that nobody ran (EVALUATION.md, "Every
-kind at once"). The gate runs, in one command and within about 20 minutes on 2 cores, a fixed
+kind at once"). The gate runs, in one command and within 7 minutes on 2 quiet cores, a fixed
 and stratified sample of every kind of pair the lab knows, and compares each answer with the
 baseline committed in ``tests/regress/baseline.json``:
 
@@ -644,8 +644,8 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
 
     \b
     Examples:
-      make regress                      # every kind, about 20 minutes
-      make regress SLICE=ci             # the zoom pairs, about 3 minutes
+      make regress                      # every kind, 7 minutes on 2 quiet cores
+      make regress SLICE=ci             # the zoom pairs, 1 to 3 minutes
       make regress UPDATE=1             # accept this run as the new baseline
       git worktree add /tmp/old 333305c && scalematch lab regress --tree /tmp/old
     """
