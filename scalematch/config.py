@@ -269,9 +269,11 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
-    # the default with the first look (ViewParams.first_look_short_px): the views of a pass
-    # ranked on both images shrunk, only the best probed at full resolution
-    "first-look": lambda: Config(views=ViewParams(first_look_short_px=300.0)),
+    # the first look at a smaller size and from K = 1.5 (the default's is 500 px, from K = 2):
+    # the views of 1 MP images ranked on copies of 300 px too (docs/design/SPEED.md, "The
+    # first look": it loses steep pairs)
+    "first-look": lambda: Config(views=ViewParams(first_look_short_px=300.0,
+                                                  first_look_min_factor=1.5)),
     # the default searching for a homography (``--model homography``: Oxford, perspective
     # pairs), so that the null set can be run with it (docs/NULLS.md, "Mode homography")
     "homography": lambda: Config(model="homography"),

@@ -751,7 +751,8 @@ def test_the_first_look_hands_on_only_its_best_views_and_the_pair_is_still_match
     photo = cv2.resize(raccoon, (2048, 1536), interpolation=cv2.INTER_AREA)
     pair = make_tilted_pair(photo, 2.0, 4.0, np.random.default_rng(1))
     config = Config.preset("first-look", views=replace(
-        Config().views, first_look_short_px=300.0, first_look_follow=2))
+        Config().views, first_look_short_px=300.0, first_look_min_factor=1.5,
+        first_look_follow=2))
     search = _search(config, pair.low, pair.high)
     assert pipeline.look_factor(pair.low.shape, config.views) == pytest.approx(
         min(pair.low.shape) / 300.0, abs=1e-3)
@@ -769,3 +770,14 @@ def test_the_first_look_hands_on_only_its_best_views_and_the_pair_is_still_match
     assert err < 3.0
     views = {(s.direction, s.view_pass, s.side): len(s.views) for s in plan}
     assert all(rec.views == views[rec.direction, rec.view_pass, rec.side] for rec in r.search)
+
+
+def test_by_default_the_first_look_shrinks_camera_size_images_only():
+    """The default first look ranks views on copies whose shorter side is 500 px, and only when
+    that shrinks by 2 or more: a 1 MP coarser image (1024x768) is searched at full resolution
+    alone, a 12 MP photo at the working size (2048x1536) is looked at shrunk by 3."""
+    views = Config().views
+    assert pipeline.look_factor((768, 1024), views) == 1.0
+    assert pipeline.look_factor((1000, 1500), views) == 2.0
+    assert pipeline.look_factor((1536, 2048), views) == 3.0
+

@@ -97,10 +97,16 @@ class ViewParams:
     #: pass is probed on copies of both images shrunk by a factor K, and only the views it
     #: ranks best are probed and matched at full resolution. K makes the coarser image's
     #: shorter side this many px (0: no first look), at most ``first_look_max_factor``; below
-    #: ``first_look_min_factor`` the images are searched at full resolution only
-    first_look_short_px: float = 0.0
+    #: ``first_look_min_factor`` the images are searched at full resolution only. The shrunk
+    #: probe ranks the views where the coarser image keeps 500 px (on steep pairs the winning
+    #: view ranks 1st at K = 1.5 with 512 px, 3rd to 5th at K = 2.56 with 300 px), and it pays
+    #: only where K is 2 or more: camera-size photos, whose "no" it makes 1.85x sooner (two
+    #: unrelated 12-16 MP photos: 8.6 s against 16.0 s in process) with 84 tilted and oblique
+    #: pairs of such photos solved as before; a 1 MP image is searched as without it
+    #: (docs/design/SPEED.md, "The first look")
+    first_look_short_px: float = 500.0
     first_look_max_factor: float = 3.0
-    first_look_min_factor: float = 1.5
+    first_look_min_factor: float = 2.0
     #: views of a step that the first look hands on to the full-resolution probe, at most ...
     first_look_follow: int = 3
     #: ... and only those whose first-look score reaches this (0: the best ones, whatever they
