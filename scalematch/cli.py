@@ -72,7 +72,7 @@ EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 #: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':
 #: medians, the two searches alternately on one 2-core machine): said in these words in
 #: --help, the slow "no"'s hint, README.md and docs/GUIDE.md (tests/test_docs.py)
-NO_VIEWS_SPEEDUP = "about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP photos"
+NO_VIEWS_SPEEDUP = "about 11 times sooner on 1 MP images, 3 times on 12-16 MP photos"
 
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
 #: 78 columns less the help's indent of 2
@@ -955,9 +955,9 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
-#: what answers sooner; a "no" on two unrelated 12 and 16 MP photos takes 11.3-11.5 s as a
-#: whole process on a quiet 2-core machine, twice that when other jobs share it
-#: (docs/design/SPEED.md), on 1 MP images a median 2-5 s
+#: what answers sooner; a "no" on unrelated 12 and 16 MP photos takes 6.6-8.2 s as a whole
+#: process on a quiet 2-core machine, twice that when other jobs share it
+#: (docs/design/SPEED.md), on 1 MP images a median of about 2 s
 SLOW_NO_HINT_S = 10.0
 
 
@@ -1033,7 +1033,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     the same: a file holding results made with other options is refused (exit 2), never mixed.
 
     An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
-    --no-views a "no" comes about 11 times sooner on 1 MP images, 5 to 7 times on 12-16 MP
+    --no-views a "no" comes about 11 times sooner on 1 MP images, 3 times on 12-16 MP
     photos (docs/design/SPEED.md), but oblique pairs that only a tilted view solves are missed.
 
     \b
