@@ -36,9 +36,8 @@ from scalematch.lab.evaluation import is_success  # noqa: E402
 from scalematch.lab.realpairs import Pair, canonical, pair_error  # noqa: E402
 from scalematch.lab.synthetic import OBLIQUE_CASES, make_oblique_pair, make_tilted_pair  # noqa: E402,E501
 
-#: the first look on the coarser images it can rank (a shorter side of 500 px once shrunk,
-#: SPEED.md) and only where it shrinks by at least 2
-METHODS = ("default", "first-look+views.first_look_short_px=500+views.first_look_min_factor=2")
+#: the search without the first look, then the default (which looks at 500 px, from K = 2)
+METHODS = ("default+views.first_look_short_px=0", "default")
 #: the finer crop, px: a telephoto frame of about 1.2 MP
 HIGH_SIZE = (1280, 960)
 #: the largest coarser image, px: the warped photo whole
