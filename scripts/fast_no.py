@@ -74,15 +74,11 @@ def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity
 
 def configured(method: str) -> Config:
     """The Config of a method: a preset, and with "+path=value" the values of ``--set`` on it
-    (``first-look+views.first_look_follow=2``)."""
+    (``first-look+views.first_look_follow=2``; ``scalematch.lab.regress.configured``)."""
     from scalematch.cli import set_path
+    from scalematch.lab.regress import configured as preset_with
 
-    name, *settings = method.split("+")
-    config = Config.preset(name)
-    for item in settings:
-        path, _, value = item.partition("=")
-        config = set_path(config, path, value)
-    return config
+    return preset_with(method, Config, set_path)
 
 
 def alternate(items, judge, methods=METHODS):
