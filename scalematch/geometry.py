@@ -20,6 +20,10 @@ GRID_POINTS = 21
 #: 1e12 px away instead of to a division by zero (the estimator's residuals of a degenerate fit)
 W_MIN = 1e-12
 
+#: an epipole farther than this many px from an image's origin is reported at infinity, as a
+#: direction: at 10^8 px the epipolar lines across a 10^4 px image turn by under 10^-4 rad
+EPIPOLE_FAR = 1e8
+
 
 def similarity_matrix(scale: float, angle_deg: float, tx: float = 0.0, ty: float = 0.0) -> np.ndarray:
     """2x3 matrix of x' = scale * R(angle) x + t (angle counter-clockwise on screen is negative).
@@ -244,6 +248,31 @@ def epipolar_distances(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.nd
         d_dst = residual / np.hypot(line_dst[:, 0], line_dst[:, 1])
         d_src = residual / np.hypot(line_src[:, 0], line_src[:, 1])
     return np.nan_to_num(np.stack([d_dst, d_src], axis=1), nan=np.inf)
+
+
+def epipoles(f: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """The epipoles of an epipolar geometry ``x_coarser^T F x_finer = 0``: (finer, coarser),
+    each homogeneous, ``[x, y, 1]`` in its image's px, or a unit ``[dx, dy, 0]`` when it lies
+    at infinity (the epipolar lines are then parallel, along that direction). The finer
+    image's is F's right null vector, the coarser image's its left one.
+
+    >>> f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
+    >>> [e.tolist() for e in epipoles(f)]
+    [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    """
+    u, _, vt = np.linalg.svd(np.asarray(f, np.float64))
+    return _homogeneous_point(vt[-1]), _homogeneous_point(u[:, -1])
+
+
+def _homogeneous_point(e: np.ndarray) -> np.ndarray:
+    """``e`` as ``[x, y, 1]``, or as a unit direction ``[dx, dy, 0]`` beyond ``EPIPOLE_FAR``
+    (signs fixed: the first non-zero of dx, dy positive)."""
+    if abs(e[2]) * EPIPOLE_FAR > np.hypot(e[0], e[1]):
+        return e / e[2]
+    d = e[:2] / np.hypot(e[0], e[1])
+    if d[0] < 0 or (d[0] == 0 and d[1] < 0):
+        d = -d
+    return np.array([d[0] + 0.0, d[1] + 0.0, 0.0])
 
 
 def resize_map(fx: float, fy: Optional[float] = None) -> np.ndarray:

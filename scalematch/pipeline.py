@@ -32,7 +32,8 @@ from .sharing import Leaders, Measured, Memo, Meter
 from .search import (Attempt, ScaleOutcome, Step, ViewKey, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
-                              final_checks, look_again, on_lines, unique_threshold)
+                              final_checks, look_again, on_lines, plane_parallax,
+                              unique_threshold)
 from .stages.descriptors import Described
 from .stages.detector import (Contrast, Gradients, Keypoints, detect_on_level)
 from .stages.estimator import Estimate, FitSpec, estimate, model_of, residuals
@@ -91,8 +92,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # 6. In the images' own pixels, with what each showed of no-data
     result = replace(in_original(result, work, config),
                      nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
-    # 7. A fundamental matrix is claimed only with a plane map that lies on it
-    if result.matched and not model_of(config.model).has_ratio:
+    # 7. A fundamental matrix that shows no parallax of its own is claimed only with a plane
+    #    map that lies on it (stages/decision.py, plane_parallax)
+    if result.matched and not model_of(config.model).has_ratio and not result.evidence.parallax:
         result = anchored(result, low, high, config, decoded_factors)
     return result
 
@@ -117,12 +119,14 @@ def nodata_seen(nodata: NoData) -> NoDataSeen:
 
 def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
              decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
-    """A matched fundamental matrix ``result``, kept only where a plane map of the same pair
+    """A matched fundamental matrix ``result`` that shows no parallax of its own
+    (``stages.decision.plane_parallax``), kept only where a plane map of the same pair
     passes the decision and lies on it (``DecisionParams.min_plane_on_lines``); refused
     otherwise, with the matrix shown as ``rejected`` (test "plane").
 
-    A 3-D scene seen from two places has a dominant plane, and the default search finds its
-    map (``evidence.parallax``). That map faces the tests an epipolar geometry cannot: a
+    A scene with little depth, or a repeated structure matched to its copy, gives an epipolar
+    geometry whose inliers off the dominant plane are too few to tell it from chance. The
+    default search finds that plane's map, which faces the tests an epipolar geometry cannot: a
     plausible scale and footprint, no repeated structure, the pixels. The plane map is
     searched as the default would search it (``config`` with ``decision.plane_model``); its inliers
     must lie within the inlier threshold of the matrix's epipolar lines.
@@ -144,15 +148,17 @@ def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Con
     limit = config.decision.min_plane_on_lines
     if plane.matched and share >= limit:
         return replace(result, evidence=evidence, timings=timings)
+    flat = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
+            f"beyond chance ({e.parallax_points} off its dominant plane, log10 NFA "
+            f"{e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g})")
     if plane.matched:
-        reason = (f"the plane map found ({plane.n_inliers} inliers) is off this epipolar "
-                  f"geometry: {share:.0%} of its inliers lie on its lines, at least "
-                  f"{limit:.0%} needed")
+        reason = (f"{flat}, and the plane map found ({plane.n_inliers} inliers) is off it: "
+                  f"{share:.0%} of its inliers lie on its lines, at least {limit:.0%} needed")
     else:
-        reason = (f"an epipolar geometry fits {result.n_inliers} inliers, but no plane map of "
-                  f"the scene passes the decision ({plane.reason}); a fundamental matrix is "
-                  f"claimed only with one, since a repeated structure or points along a line "
-                  f"fit an epipolar geometry too")
+        reason = (f"{flat}, and no plane map of the scene passes the decision "
+                  f"({plane.reason}); without parallax, a fundamental matrix is claimed only "
+                  f"with one, since a repeated structure or points along a line fit an "
+                  f"epipolar geometry too")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
                         figures("plane", evidence, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,
@@ -1002,7 +1008,8 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit,
     its ratio, angle and translation, and its evidence with the answer's parallax."""
     t, inliers, model = fit
     has_ratio = model_of(model).has_ratio
-    seen = answer_parallax(winner, t, model, search.config) if has_ratio else {}
+    seen = answer_parallax(winner, t, model, search.config) if has_ratio else plane_parallax(
+        inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (

@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
-from typing import Dict, Sequence, Tuple, Union
+from typing import Dict, Optional, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
@@ -41,6 +41,9 @@ DRAWN_CAMERA_BLUR_PX = 0.5
 OUTLINE = (0, 215, 255)  # amber
 INLIER_LINE = (60, 200, 60)  # green
 INLIER_DOT = (0, 215, 255)
+#: the fundamental matrix's picture: the epipolar lines of this many inliers, in this colour
+EPIPOLAR_LINES_DRAWN = 8
+EPIPOLAR_LINE = (255, 160, 0)
 #: A "no"'s refused candidate: its footprint dashed in red, its inliers greyed (BGR)
 REJECTED = (60, 60, 255)
 REJECTED_LINE = (150, 150, 150)
@@ -218,9 +221,15 @@ def evidence_line(result: MatchResult) -> str:
         parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
-    if result.matched and e.parallax:
+    if result.matched and e.parallax and not model_of(result.model).has_ratio:
+        parts.append(f"parallax: {e.parallax_points} inliers off the dominant plane, log10 "
+                     f"NFA {e.parallax_log10_nfa:.1f}")
+    elif result.matched and e.parallax:
         parts.append(f"{e.parallax_points} matches off its plane fit an epipolar geometry "
                      f"(--model fundamental gives it)")
+    elif result.matched and not model_of(result.model).has_ratio and e.plane_inliers:
+        parts.append(f"no parallax beyond chance: its plane map ({e.plane_inliers} inliers) "
+                     f"lies on its lines")
     return "; ".join(parts)
 
 
@@ -372,11 +381,41 @@ def _draw_rejected(out: np.ndarray, result: MatchResult, high_shape) -> str:
 
 def _draw_inlier_dots(out: np.ndarray, result: MatchResult) -> str:
     """Circle the inliers in the low image on ``out`` (a model with no overlay, the fundamental
-    matrix); the caption line that says so."""
-    for x, y in result.inliers[:, 2:4]:
+    matrix), and draw the epipolar lines of ``EPIPOLAR_LINES_DRAWN`` of them, spread over
+    the list; the caption line that says so."""
+    pairs = np.asarray(result.inliers, np.float64).reshape(-1, 4)
+    for x, y in pairs[:, 2:4]:
         cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
                    cv2.LINE_AA, shift=4)
-    return f"dots = inliers in the low image (a {result.model} matrix has no overlay)"
+    shown = np.unique(np.linspace(0, len(pairs) - 1, EPIPOLAR_LINES_DRAWN).round().astype(int))
+    lines = 0
+    for x, y in pairs[shown, :2] if len(pairs) else ():
+        ends = line_ends(np.asarray(result.transform, np.float64) @ (x, y, 1.0),
+                         (out.shape[1], out.shape[0]))
+        if ends is not None:
+            cv2.line(out, ends[0], ends[1], EPIPOLAR_LINE, 1, cv2.LINE_AA)
+            lines += 1
+    return (f"dots = inliers in the low image, lines = the epipolar lines of {lines} of them "
+            f"(a {result.model} matrix has no overlay)")
+
+
+def line_ends(line: np.ndarray, size: Tuple[int, int]) -> Optional[Tuple[Tuple[int, int], ...]]:
+    """The two ends, whole px, of the part of ``line`` (a, b, c: ax + by + c = 0) inside an
+    image of ``size`` (W, H); None when it misses the image.
+
+    >>> line_ends(np.array([0.0, 1, -5]), (10, 10))   # y = 5
+    ((0, 5), (9, 5))
+    """
+    a, b, c = (float(v) for v in line)
+    w, h = size
+    big = 4.0 * (w + h)
+    if abs(b) >= abs(a):
+        p, q = (-big, (-c + a * big) / b), (big, (-c - a * big) / b)
+    else:
+        p, q = ((-c + b * big) / a, -big), ((-c - b * big) / a, big)
+    ok, p1, p2 = cv2.clipLine((0, 0, w, h), tuple(int(round(v)) for v in p),
+                              tuple(int(round(v)) for v in q))
+    return (tuple(p1), tuple(p2)) if ok else None
 
 
 def _captioned(out: np.ndarray, lines: Sequence[str], footer: Sequence[str],

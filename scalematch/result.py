@@ -16,6 +16,9 @@ from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .geometry import epipoles
+from .stages.estimator import model_of
+
 
 class Direction(str, enum.Enum):
     """Which of the two images given is the coarser one: the one way the order is told.
@@ -102,8 +105,13 @@ class Evidence:
     #: transform that of its dominant plane (``--model fundamental`` gives the epipolar geometry)
     parallax_points: int = 0
     parallax: bool = False
-    #: a fundamental matrix is claimed only where a plane map of the same pair passes the
-    #: decision, on its epipolar lines (``pipeline.anchored``): that map's distinct inliers
+    #: ``--model fundamental``: the log10 NFA of the epipolar geometry's inliers off the
+    #: dominant plane among the candidates off it (``stages.decision.plane_parallax``); at
+    #: most ``max_log_nfa``, the geometry shows parallax by itself (nan: not measured)
+    parallax_log10_nfa: float = math.nan
+    #: a fundamental matrix that shows no parallax is claimed only where a plane map of the
+    #: same pair passes the decision, on its epipolar lines (``pipeline.anchored``): that
+    #: map's distinct inliers
     #: (0: no plane map passed), and the share of them within the inlier threshold of the
     #: matrix's epipolar lines (nan: not measured)
     plane_inliers: int = 0
@@ -267,8 +275,7 @@ class MatchResult:
         """The documented JSON object of this match (README.md, "Output"; docs/GUIDE.md, "JSON"):
         plain types only.
 
-        ``low``/``high`` describe the coarser and the finer image as found: with ``order``
-        "swapped" the first image given is the finer one, and they are exchanged.
+        ``low``/``high``: the coarser and the finer image as found (exchanged when swapped).
 
         Parameters
         ----------
@@ -305,6 +312,7 @@ class MatchResult:
             "resolution_ratio": to_jsonable(float(self.resolution_ratio)),
             "rotation_deg": to_jsonable(float(self.rotation_deg)),
             "translation": to_jsonable(list(self.translation)),
+            "epipoles": self._epipoles(),
             "best_scale": to_jsonable(float(self.best_scale)),
             "n_inliers": self.n_inliers,
             "inliers": self.n_inliers,  # the count under its old name, until version 1.0
@@ -321,6 +329,16 @@ class MatchResult:
             "low": _image_record(low_path, low_shape, nd_low),
             "high": _image_record(high_path, high_shape, nd_high),
         }
+
+    def _epipoles(self) -> Optional[Dict[str, list]]:
+        """A matched fundamental matrix's epipoles by image, "low" and "high"
+        (:func:`scalematch.geometry.epipoles`: ``[x, y, 1]`` px, or ``[dx, dy, 0]`` at
+        infinity); None for other answers."""
+        if not self.matched or self.transform is None or model_of(self.model).has_ratio:
+            return None
+        finer, coarser = (np.round(e, 3).tolist() for e in epipoles(self.transform))
+        low, high = (finer, coarser) if self.order == Direction.SWAPPED else (coarser, finer)
+        return {"low": low, "high": high}
 
     def to_json(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
                 low_shape: Optional[Sequence[int]] = None,

@@ -370,3 +370,22 @@ def test_a_no_draws_its_refused_candidate_dashed_and_its_inliers_grey(pair):
     m = matches_image(low, high, no)
     grey = np.all(np.abs(m.astype(int) - np.array(REJECTED_DOT)) <= 8, axis=2)
     assert grey.sum() > 40  # the refused inliers' dots
+
+
+def test_a_fundamental_matrix_is_drawn_with_the_epipolar_lines_of_some_inliers(pair):
+    """A rectified pair's matrix (y' = y): its inliers' epipolar lines are rows of the low
+    image, drawn in their colour across its width, one per inlier drawn."""
+    from scalematch.render import EPIPOLAR_LINE, EPIPOLAR_LINES_DRAWN
+
+    low, high, _ = pair
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
+    res = make_result(f, model="fundamental")
+    out = overlay(low, high, res)
+    picture = out[-low.shape[0]:]
+    # anti-aliased: a line's pixels are near its colour over the rows it crosses
+    lined = np.abs(picture.astype(int) - EPIPOLAR_LINE).sum(axis=2) < 120
+    rows = np.nonzero(lined.sum(axis=1) > 0.9 * low.shape[1])[0]
+    drawn = np.linspace(0, len(res.inliers) - 1, EPIPOLAR_LINES_DRAWN).round().astype(int)
+    expected = np.round(res.inliers[drawn, 1]).astype(int)
+    assert len(rows) >= EPIPOLAR_LINES_DRAWN - 1  # two lines may share a row
+    assert all(np.min(np.abs(rows - y)) <= 1 for y in expected)

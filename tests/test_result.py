@@ -81,3 +81,25 @@ def test_to_dict_without_paths_or_sizes_writes_null_there():
     assert d["low"] == d["high"] == {"path": None, "width": None, "height": None,
                                      "nodata": {"value": None, "share": 0.0}}
     assert json.loads(r.to_json())["matched"] is False
+
+
+def test_the_json_of_a_fundamental_matrix_gives_its_epipoles_by_image():
+    """A matrix whose finer epipole is (100, 50) and coarser one is at infinity along x: the
+    JSON names them by image, as the order says which is the coarser; other answers give null."""
+    from scalematch.geometry import epipoles
+    from scalematch.result import Direction
+
+    e_fine = np.array([100.0, 50.0, 1.0])
+    skew = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # [(1, 0, 0)]_x
+    a = np.array([[0.01, 0, 0], [0, 1, -50], [-0.01, 0, 1]])  # a e_fine = (1, 0, 0)
+    f = skew @ a  # F e_fine = 0 and (1, 0, 0) F = 0
+    assert np.allclose(f @ e_fine, 0)
+    fine, coarse = epipoles(f)
+    assert np.allclose(fine, e_fine) and np.allclose(coarse, [1, 0, 0])
+    given = MatchResult(matched=True, model="fundamental", transform=f, inliers=np.zeros((0, 4)))
+    assert given.to_dict()["epipoles"] == {"low": [1.0, 0.0, 0.0], "high": [100.0, 50.0, 1.0]}
+    swapped = dataclasses.replace(given, order=Direction.SWAPPED)
+    assert swapped.to_dict()["epipoles"] == {"low": [100.0, 50.0, 1.0], "high": [1.0, 0.0, 0.0]}
+    plane = MatchResult(matched=True, model="similarity",
+                        transform=np.array([[0.5, 0, 0], [0, 0.5, 0]]), inliers=np.zeros((0, 4)))
+    assert plane.to_dict()["epipoles"] is None

@@ -47,6 +47,7 @@ import click
 import cv2
 import numpy as np
 
+from ..render import line_ends
 from .datasets import list_photos, scene_of, shared_option, shared_subfolder
 from .efpairs import (MAGSAC_CONFIDENCE, MAGSAC_ITERATIONS, SOLVED_PX, WRONG_PX, EfPair, Run,
                       run_orders, symmetric_epipolar_error)
@@ -945,25 +946,6 @@ DRAW_LINES = 8
 DRAW_CROP = 80
 DRAW_CROP_ZOOM = 1
 DRAW_CROPS_PER_ROW = 6
-
-
-def line_ends(line: np.ndarray, size: Tuple[int, int]) -> Optional[Tuple[Tuple[int, int], ...]]:
-    """The two ends, whole px, of the part of ``line`` (a, b, c: ax + by + c = 0) inside an
-    image of ``size`` (W, H); None when it misses the image.
-
-    >>> line_ends(np.array([0.0, 1, -5]), (10, 10))   # y = 5
-    ((0, 5), (9, 5))
-    """
-    a, b, c = (float(v) for v in line)
-    w, h = size
-    big = 4.0 * (w + h)
-    if abs(b) >= abs(a):
-        p, q = (-big, (-c + a * big) / b), (big, (-c - a * big) / b)
-    else:
-        p, q = ((-c + b * big) / a, -big), ((-c - b * big) / a, big)
-    ok, p1, p2 = cv2.clipLine((0, 0, w, h), tuple(int(round(v)) for v in p),
-                              tuple(int(round(v)) for v in q))
-    return (tuple(p1), tuple(p2)) if ok else None
 
 
 def _colour(k: int) -> Tuple[int, int, int]:

@@ -41,7 +41,7 @@ from ..geometry import apply, epipolar_distances, footprint, grid
 from ..result import Evidence, build_evidence
 from .constraints import OrientationParams
 from .descriptors import Described
-from .estimator import FitSpec, model_of
+from .estimator import FitSpec, estimate, model_of
 from .guided import GuidedParams, grow
 from .pixelcheck import (Agreement, PixelParams, agreement_of, pixel_check, unique_template,
                          uniqueness_of)
@@ -198,7 +198,16 @@ class DecisionParams:
     #: matches sliding along a flat scene's edges lined up at offsets of 0.2 to 1.1
     #: (``stages.rivals.off_plane``)
     parallax_max_offset: float = 0.25
-    #: a fundamental matrix is claimed only where a plane map of the same pair passes this
+    #: an epipolar geometry's inliers that share a point count once (:func:`one_to_one`): two
+    #: inliers share one when their finer points, or their coarser points, lie within this
+    #: many px of each other. Many finer points matched to one coarser point lie on every
+    #: epipolar line through it, so with the epipole there they all fit: on the null set, the
+    #: 7 pairs whose matrix reached the plane test had 19 to 46 inliers, 3 to 25 of them such
+    #: copies; counted once, a bus's panels fell from 29 to 7 inliers, a snowfield from 19 to
+    #: 4, and a facade's log10 NFA from -56 to -2.3 (docs/design/DECISION.md)
+    same_point_px: float = 1.0
+    #: where no parallax is seen off the dominant plane (:func:`plane_parallax`), a fundamental
+    #: matrix is claimed only where a plane map of the same pair passes this
     #: decision with at least this share of its inliers on the matrix's epipolar lines
     #: (:func:`on_lines`; ``pipeline.anchored``). An epipolar geometry has room for what a
     #: plane map does not: a repeated structure matched to its shifted copy, or points
@@ -218,6 +227,7 @@ class DecisionParams:
         "min_inliers": COUNT,
         "min_agreeing_scales": COUNT,
         "max_log_nfa": FINITE,
+        "same_point_px": NON_NEGATIVE,
         "max_log_nfa_alone": FINITE,
         "scale_agreement": FACTOR,
         "min_inside": SHARE,
@@ -549,7 +559,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     if not plausible:
         return _implausible(with_t, context.shown_scale)
     best = min(plausible, key=lambda o: (-o.row.inliers, _closeness(o), o.row.s))
-    winner = _counted(best, outcomes, coarser_shape, context)
+    winner = _counted(best, outcomes, coarser_shape, context, params.same_point_px)
     return _tested(winner, with_t, (coarser_shape, finer_shape), params, context, look)
 
 
@@ -565,11 +575,16 @@ def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
                     best.row.s, None, np.zeros((0, 4)), build_evidence())
 
 
-def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext) -> Winner:
-    """The winning outcome ``best`` with its a-contrario count over all of ``outcomes``."""
+def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext,
+             same_point_px: float) -> Winner:
+    """The winning outcome ``best`` with its a-contrario count over all of ``outcomes``; an
+    epipolar geometry's inliers counted one to one (:func:`one_to_one`, ``same_point_px``)."""
     orientation = context.orientation
     model = context.fit.model
     k = best.row.inliers
+    if not model_of(model).has_ratio:  # a point matched many times lies on every line through it
+        k = len(one_to_one(np.hstack([best.src[best.estimate.inliers],
+                                      best.dst[best.estimate.inliers]]), same_point_px))
     n = max(best.candidates, k)
     m = model_of(model).min_sample
     oriented = orientation is not None
@@ -748,6 +763,79 @@ def on_lines(f: np.ndarray, pairs: np.ndarray, threshold_px: float) -> float:
         return math.nan
     d = epipolar_distances(f, pairs[:, :2], pairs[:, 2:]).max(axis=1)
     return float(np.mean(d <= threshold_px))
+
+
+def one_to_one(pairs: np.ndarray, same_point_px: float) -> np.ndarray:
+    """Row indices of ``pairs`` ((N, 4): x, y finer; x, y coarser) that share no point with an
+    earlier row kept: a row is dropped when its finer point, or its coarser point, lies within
+    ``same_point_px`` of a kept row's (0: the same position only). In first order.
+
+    An epipolar geometry maps a point to a line, so many points matched to one point all fit
+    any geometry whose epipole lies on it: counted once, they are one inlier.
+
+    >>> one_to_one(np.array([[0, 0, 5, 5], [9, 9, 5.4, 5], [20, 0, 30, 0], [20.5, 0, 40, 0],
+    ...                      [50, 50, 60, 60]], float), 1.0).tolist()
+    [0, 2, 4]
+    """
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    cell = max(float(same_point_px), 1e-3)
+    seen: Tuple[Dict[Tuple[int, int], list], Dict[Tuple[int, int], list]] = ({}, {})
+    keep = []
+    for i, row in enumerate(pairs):
+        points = (row[:2], row[2:])
+        if any(_near(table, xy, cell) for table, xy in zip(seen, points)):
+            continue
+        keep.append(i)
+        for table, xy in zip(seen, points):
+            table.setdefault(_cell(xy, cell), []).append(xy)
+    return np.asarray(keep, int)
+
+
+def _cell(xy: np.ndarray, cell: float) -> Tuple[int, int]:
+    return int(math.floor(xy[0] / cell)), int(math.floor(xy[1] / cell))
+
+
+def _near(table: Dict[Tuple[int, int], list], xy: np.ndarray, cell: float) -> bool:
+    """Whether a point of ``table`` (points by grid cell of side ``cell``) is within ``cell``."""
+    cx, cy = _cell(xy, cell)
+    return any(np.hypot(*(q - xy)) <= cell for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+               for q in table.get((cx + dx, cy + dy), ()))
+
+
+def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
+                   params: DecisionParams) -> Dict[str, Any]:
+    """Whether an epipolar geometry's inliers ``pairs`` ((N, 4) x, y finer; x, y coarser, the
+    search's working px) show parallax by themselves: the figures ``parallax_points``,
+    ``parallax_log10_nfa`` and ``parallax`` of the evidence.
+
+    The inliers a homography explains (RANSAC at the inlier threshold of ``fit``) are the
+    scene's dominant plane; the rest are off it. A scene with no depth, or a repeated structure
+    matched to its shifted copy, leaves few off the plane, and those few fit an epipolar
+    geometry as chance points would; a 3-D scene leaves many that fit it. So the inliers off the
+    plane, counted one to one (:func:`one_to_one`), face the a-contrario test of the winner
+    (``counted``: its candidates ``n``, one-to-one inliers ``k``, chance ``p`` and log10 NFA,
+    from which the number of tests is recovered) among the candidates off the plane:
+
+        log10 NFA_off = log10 tests + log10 C(n - k_plane, k_off) + log10 C(k_off, m)
+                        + (k_off - m) log10 p
+
+    and parallax is seen when it is at most ``params.max_log_nfa``, the bound of any claim.
+    This is the test of DEGENSAC (Chum, Werner & Matas, "Two-view geometry estimation
+    unaffected by a dominant plane", CVPR 2005) made a-contrario.
+    """
+    m = model_of(fit.model).min_sample
+    n, k, p = int(counted.candidates), int(counted.inliers), float(counted.chance_p)
+    log10_tests = counted.log10_nfa - log10_nfa(n, k, m, p, 1.0)
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    pairs = pairs[one_to_one(pairs, params.same_point_px)]
+    plane = estimate("homography", pairs[:, :2], pairs[:, 2:], fit.ransac, seed=fit.seed)
+    on_plane = int(plane.n_inliers)
+    k_off = len(pairs) - on_plane
+    lnfa = log10_nfa(max(n - on_plane, k_off), k_off, m, p, 1.0)
+    if math.isfinite(lnfa) and math.isfinite(log10_tests):
+        lnfa += max(log10_tests, 0.0)
+    return {"parallax_points": k_off, "parallax_log10_nfa": lnfa,
+            "parallax": bool(lnfa <= params.max_log_nfa)}
 
 
 def windows_agree(a: Agreement, params: DecisionParams) -> bool:

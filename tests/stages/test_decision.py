@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from scalematch.geometry import similarity_matrix
-from scalematch.stages.decision import (chance_probability, log10_binom, log10_nfa,
+from scalematch.stages.decision import (chance_probability, log10_binom, log10_nfa, one_to_one,
                                        mean_transfer_gap, on_lines)
 
 
@@ -298,3 +298,70 @@ def test_on_lines_counts_the_pairs_on_both_epipolar_lines():
     assert on_lines(f, np.vstack([on[:30], off[:10]]), 1.0) == 0.75
     assert math.isnan(on_lines(f, np.zeros((0, 4)), 1.0))
 
+
+
+def test_points_matched_many_times_count_once_for_an_epipolar_geometry():
+    """Twelve finer points matched to one coarser point (all on any line through it) and two
+    coarser points matched to one finer point count as one inlier each; distinct pairs count."""
+    rng = np.random.default_rng(0)
+    distinct = np.hstack([rng.uniform(0, 400, (10, 2)), rng.uniform(0, 400, (10, 2))])
+    to_one = np.hstack([rng.uniform(0, 400, (12, 2)), np.tile([[200.0, 150.0]], (12, 1))])
+    to_one[:, 2:] += rng.uniform(-0.3, 0.3, (12, 2))  # the same point, localised again
+    from_one = np.array([[50.0, 60, 10, 10], [50.2, 60, 300, 250]])
+    pairs = np.vstack([distinct, to_one, from_one])
+    assert len(one_to_one(pairs, 1.0)) == 10 + 1 + 1
+    assert len(one_to_one(distinct, 1.0)) == 10
+
+
+def _two_views(depths: np.ndarray, rng) -> np.ndarray:
+    """(N, 4) finer, coarser px of scene points seen by two pinhole cameras: the finer camera
+    at the origin (focal 800 px, 640x480), the coarser one moved sideways and forward, turned
+    by 5 degrees and with half the focal length (a zoom ratio of 2); points spread over the
+    finer image at the given depths."""
+    xy = rng.uniform((40, 40), (600, 440), (len(depths), 2))
+    rays = np.hstack([(xy - (320, 240)) / 800.0, np.ones((len(xy), 1))])
+    world = rays * depths[:, None]
+    a = math.radians(5.0)
+    turn = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    cam = (world - (1.5, 0.2, -1.0)) @ turn.T
+    coarser = 400.0 * cam[:, :2] / cam[:, 2:] + (320, 240)
+    return np.hstack([xy, coarser])
+
+
+def _counted_f(pairs: np.ndarray, candidates: int):
+    """The evidence of an epipolar geometry with ``pairs`` as its inliers among
+    ``candidates``, counted as the decision counts it (one test per subset size)."""
+    from scalematch.result import Evidence
+
+    p = chance_probability(3.0, (480, 640), "fundamental", False, 0.0)
+    k = len(pairs)
+    return Evidence(inliers=k, candidates=candidates, chance_p=p,
+                    log10_nfa=log10_nfa(candidates, k, 8, p, candidates - 8))
+
+
+def test_a_3d_scene_shows_parallax_off_its_plane_and_a_flat_one_does_not():
+    """A wall at 10 m with 60 points and 40 points at 4-30 m, among 150 candidates: the 40
+    are off the wall's homography and fit the epipolar geometry far beyond chance. The same wall with 4 points off
+    it, or with a shifted copy of 12 of its points (a repeated structure matched to its copy),
+    shows no parallax: the plane map must then vouch for the matrix."""
+    from scalematch.stages.decision import DecisionParams, plane_parallax
+    from scalematch.stages.estimator import FitSpec
+
+    rng = np.random.default_rng(1)
+    fit, params = FitSpec("fundamental"), DecisionParams()
+    wall = _two_views(np.full(60, 10.0), rng)
+    deep = _two_views(rng.uniform(4.0, 30.0, 40), rng)
+    scene = np.vstack([wall, deep])
+    seen = plane_parallax(scene, _counted_f(scene, 150), fit, params)
+    assert seen["parallax"] and seen["parallax_points"] >= 35
+    assert seen["parallax_log10_nfa"] < -15
+
+    flat = np.vstack([wall, deep[:4]])
+    seen = plane_parallax(flat, _counted_f(flat, 150), fit, params)
+    assert not seen["parallax"] and seen["parallax_points"] <= 4
+
+    copy = _two_views(np.full(12, 10.0), rng)  # more of the wall's points ...
+    copy[:, 2:] += (37.0, 0.0)  # ... matched to their copies one period away
+    repeated = np.vstack([wall, copy])
+    seen = plane_parallax(repeated, _counted_f(repeated, 150), fit, params)
+    assert not seen["parallax"] and seen["parallax_points"] == 12
