@@ -32,7 +32,7 @@ from .sharing import Leaders, Measured, Memo, Meter
 from .search import (Attempt, ScaleOutcome, Step, ViewKey, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
-                              final_checks, look_again, on_lines, plane_parallax,
+                              final_checks, look_again, plane_parallax,
                               unique_threshold)
 from .stages.descriptors import Described
 from .stages.detector import (Contrast, Gradients, Keypoints, detect_on_level)
@@ -92,10 +92,10 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # 6. In the images' own pixels, with what each showed of no-data
     result = replace(in_original(result, work, config),
                      nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
-    # 7. A fundamental matrix that shows no parallax of its own is claimed only with a plane
-    #    map that lies on it (stages/decision.py, plane_parallax)
+    # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole: the
+    #    plane map answers instead (stages/decision.py, plane_parallax)
     if result.matched and not model_of(config.model).has_ratio and not result.evidence.parallax:
-        result = anchored(result, low, high, config, decoded_factors)
+        result = without_parallax(result, low, high, config, decoded_factors)
     return result
 
 
@@ -117,48 +117,38 @@ def nodata_seen(nodata: NoData) -> NoDataSeen:
     return NoDataSeen(nodata.value, nodata.share)
 
 
-def anchored(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
-             decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
-    """A matched fundamental matrix ``result`` that shows no parallax of its own
-    (``stages.decision.plane_parallax``), kept only where a plane map of the same pair
-    passes the decision and lies on it (``DecisionParams.min_plane_on_lines``); refused
-    otherwise, with the matrix shown as ``rejected`` (test "plane").
+def without_parallax(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
+                     decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
+    """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
+    of their own (``stages.decision.plane_parallax``): the plane map of the same pair where
+    one passes the decision, with the matrix's figures in its evidence; otherwise "no", with
+    the matrix shown as ``rejected`` (test "plane").
 
-    A scene with little depth, or a repeated structure matched to its copy, gives an epipolar
-    geometry whose inliers off the dominant plane are too few to tell it from chance. The
-    default search finds that plane's map, which faces the tests an epipolar geometry cannot: a
-    plausible scale and footprint, no repeated structure, the pixels. The plane map is
-    searched as the default would search it (``config`` with ``decision.plane_model``); its inliers
-    must lie within the inlier threshold of the matrix's epipolar lines.
+    Without parallax the inliers do not fix the epipole: a scene with little depth fits every
+    epipolar geometry through its plane's map, and a repeated structure matched to its shifted
+    copy fits one too. The plane map faces the tests an epipolar geometry cannot (a plausible
+    scale and footprint, no repeated structure, the pixels), and it is what the inliers do
+    determine. It is searched as the default would search it (``config`` with
+    ``decision.plane_model``, which the model check may turn into an affine map or a
+    homography); ``model`` then says which it is.
     """
-    t0 = time.perf_counter()
     plane = match(low, high, replace(config, model=config.decision.plane_model),
                   decoded_factors=decoded_factors)
-    pairs = np.asarray(plane.inliers, np.float64).reshape(-1, 4)
-    if plane.matched and plane.order != result.order:  # the other image taken as the coarser
-        pairs = pairs[:, [2, 3, 0, 1]]
     e = result.evidence
-    f_coarser = e.low_working_factor if result.order is Direction.GIVEN else e.high_working_factor
-    share = on_lines(result.transform, pairs, config.ransac.threshold_px * f_coarser) \
-        if plane.matched else math.nan
-    evidence = build_evidence(asdict(e), dict(
-        plane_inliers=plane.n_inliers if plane.matched else 0, plane_on_lines=share))
-    timings = dict(result.timings, plane=time.perf_counter() - t0)
-    timings["total"] = result.seconds + timings["plane"]
-    limit = config.decision.min_plane_on_lines
-    if plane.matched and share >= limit:
-        return replace(result, evidence=evidence, timings=timings)
-    flat = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
-            f"beyond chance ({e.parallax_points} off its dominant plane, log10 NFA "
-            f"{e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g})")
+    figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
+                parallax_log10_nfa=e.parallax_log10_nfa)
+    timings = dict(plane.timings, epipolar=result.seconds,
+                   total=result.seconds + plane.seconds)
     if plane.matched:
-        reason = (f"{flat}, and the plane map found ({plane.n_inliers} inliers) is off it: "
-                  f"{share:.0%} of its inliers lie on its lines, at least {limit:.0%} needed")
-    else:
-        reason = (f"{flat}, and no plane map of the scene passes the decision "
-                  f"({plane.reason}); without parallax, a fundamental matrix is claimed only "
-                  f"with one, since a repeated structure or points along a line fit an "
-                  f"epipolar geometry too")
+        return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
+                       timings=timings, config=result.config)
+    evidence = build_evidence(asdict(e), figs)
+    count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
+             if math.isfinite(e.parallax_log10_nfa) else "too few to count")
+    reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
+              f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
+              f"do not fix its epipole, and no plane map of the scene passes the decision "
+              f"({plane.reason})")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
                         figures("plane", evidence, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,

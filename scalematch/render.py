@@ -227,9 +227,10 @@ def evidence_line(result: MatchResult) -> str:
     elif result.matched and e.parallax:
         parts.append(f"{e.parallax_points} matches off its plane fit an epipolar geometry "
                      f"(--model fundamental gives it)")
-    elif result.matched and not model_of(result.model).has_ratio and e.plane_inliers:
-        parts.append(f"no parallax beyond chance: its plane map ({e.plane_inliers} inliers) "
-                     f"lies on its lines")
+    if result.matched and model_of(result.model).has_ratio and \
+            not np.isnan(e.parallax_log10_nfa):
+        parts.append("a fundamental matrix was asked for, but its inliers show no parallax: "
+                     "the plane map answers")
     return "; ".join(parts)
 
 

@@ -109,13 +109,9 @@ class Evidence:
     #: dominant plane among the candidates off it (``stages.decision.plane_parallax``); at
     #: most ``max_log_nfa``, the geometry shows parallax by itself (nan: not measured)
     parallax_log10_nfa: float = math.nan
-    #: a fundamental matrix that shows no parallax is claimed only where a plane map of the
-    #: same pair passes the decision, on its epipolar lines (``pipeline.anchored``): that
-    #: map's distinct inliers
-    #: (0: no plane map passed), and the share of them within the inlier threshold of the
-    #: matrix's epipolar lines (nan: not measured)
+    #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
+    #: answers instead (``pipeline.without_parallax``; 0: no plane map passed)
     plane_inliers: int = 0
-    plane_on_lines: float = math.nan
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

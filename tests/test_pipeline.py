@@ -129,16 +129,37 @@ def test_other_models_recover_the_transform(raccoon, model):
     assert err < ERROR_TOL_PX
 
 
-def test_fundamental_matrix_is_consistent_with_the_inliers(raccoon):
-    pair = _pair(raccoon, 2.0, 0)
+def test_a_3d_scene_is_answered_with_its_epipolar_geometry(raccoon):
+    """Two planes at 5 and 8 depth units, seen from two places at a ratio of 2: the inliers off
+    the dominant plane show parallax, the matrix is claimed on its own (no plane map searched),
+    the scene's points lie within 0.5 px of its lines, and the JSON gives its epipoles."""
+    from scalematch.geometry import epipolar_distances, epipoles
+    from scalematch.lab.synthetic import make_two_plane_pair
+
+    pair = make_two_plane_pair(raccoon[100:580, 200:840])
     r = match(pair.low, pair.high, Config(model="fundamental"))
     assert r.matched, r.reason
-    f = r.transform
-    x1 = np.hstack([r.inliers[:, :2], np.ones((r.n_inliers, 1))])
-    x2 = np.hstack([r.inliers[:, 2:], np.ones((r.n_inliers, 1))])
-    lines = x1 @ f.T  # epipolar lines in the low image
-    dist = np.abs(np.einsum("ij,ij->i", x2, lines)) / np.hypot(lines[:, 0], lines[:, 1])
-    assert np.median(dist) < 2.0
+    assert r.model == "fundamental" and r.order == "given"
+    assert r.evidence.parallax and r.evidence.parallax_log10_nfa < -20
+    assert "plane" not in r.timings
+    xy = np.random.default_rng(0).uniform((20, 20), (620, 460), (200, 2))
+    assert np.median(epipolar_distances(r.transform, xy, pair.low_point(xy)).max(axis=1)) < 0.5
+    # the inliers it reports lie on its lines too
+    assert np.median(epipolar_distances(r.transform, r.inliers[:, :2], r.inliers[:, 2:])) < 1.0
+    # the epipoles lie far off both images (the camera moved sideways): the line from each
+    # image's centre towards its epipole is the truth's within 1 degree
+    for found, truth, image in zip((r.to_dict()["epipoles"][k] for k in ("high", "low")),
+                                   epipoles(pair.fundamental), (pair.high, pair.low)):
+        assert _epipole_bearing(found, image.shape) == pytest.approx(
+            _epipole_bearing(truth, image.shape), abs=1.0)
+
+
+def _epipole_bearing(e, shape) -> float:
+    """The direction, degrees modulo 180, from the centre of an image of ``shape`` towards the
+    homogeneous epipole ``e`` (a direction itself when at infinity)."""
+    e = np.asarray(e, float)
+    d = e[:2] - e[2] * np.array([shape[1] / 2, shape[0] / 2])
+    return math.degrees(math.atan2(d[1], d[0])) % 180.0
 
 
 def test_the_answer_is_grown_by_guided_matching(raccoon):
@@ -156,42 +177,39 @@ def test_the_answer_is_grown_by_guided_matching(raccoon):
     assert np.all(moved <= Config().ransac.threshold_px + 1e-6)
 
 
-def test_fundamental_matrix_is_claimed_with_its_plane_map(raccoon):
-    """The plane map of the same pair passes the decision and lies on the matrix's lines."""
+def test_a_flat_scene_asked_for_a_fundamental_matrix_is_answered_with_its_plane_map(raccoon):
+    """A zoom pair is a plane: an epipolar geometry fits its inliers with none off the plane,
+    which leaves the epipole free, so the plane map answers, within the known answer's
+    tolerances, and the evidence says why."""
     pair = _pair(raccoon, 2.0, 0)
     r = match(pair.low, pair.high, Config(model="fundamental"))
-    assert r.matched, r.reason
-    assert r.evidence.plane_inliers >= Config().decision.min_inliers
-    assert r.evidence.plane_on_lines >= Config().decision.min_plane_on_lines
-    assert "plane" in r.timings
+    _check_known_answer(r, pair)
+    assert r.model != "fundamental" and not math.isnan(r.evidence.parallax_log10_nfa)
+    assert r.evidence.parallax_log10_nfa > Config().decision.max_log_nfa
+    assert r.evidence.plane_inliers == r.n_inliers
+    assert r.config.model == "fundamental"
+    assert {"epipolar", "total"} <= set(r.timings)
 
 
 def _claimed_f(f):
-    """A matched fundamental matrix ``f`` as the search would report it (inliers: none)."""
+    """A matched fundamental matrix ``f`` with no parallax, as the search would report it."""
     return MatchResult(matched=True, model="fundamental", transform=f, inliers=np.zeros((0, 4)),
-                       timings={"total": 0.1}, evidence=Evidence(inliers=30, log10_nfa=-20.0))
+                       timings={"total": 0.1},
+                       evidence=Evidence(inliers=30, log10_nfa=-20.0, parallax_points=4,
+                                         parallax_log10_nfa=math.inf))
 
 
-def test_fundamental_matrix_without_a_plane_map_is_refused(raccoon):
-    """Two halves of one photo: nothing in common, so no plane map passes; any F is refused."""
+def test_a_fundamental_matrix_without_parallax_or_plane_map_is_refused(raccoon):
+    """Two halves of one photo: nothing in common, so no plane map passes; an F whose inliers
+    show no parallax is refused, and the reason says both."""
     left, right = raccoon[:, :480], raccoon[:, 544:]
     f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
-    r = pipeline.anchored(_claimed_f(f), left[:240, :320], right[:240, :320],
-                          Config(model="fundamental", views=ViewParams(enabled=False)))
+    r = pipeline.without_parallax(_claimed_f(f), left[:240, :320], right[:240, :320],
+                                  Config(model="fundamental", views=ViewParams(enabled=False)))
     assert not r.matched and r.transform is None
     assert r.rejected.test == "plane" and r.rejected.transform is not None
-    assert r.evidence.plane_inliers == 0 and "no plane map" in r.reason
-
-
-def test_fundamental_matrix_off_its_plane_map_is_refused(raccoon):
-    """A zoom pair turned by its angle: the plane map passes, but the lines y' = y miss it."""
-    pair = _pair(raccoon, 2.0, 0)
-    assert abs(similarity_parts(pair.truth)[1]) > 5  # the pair is turned: y' = y cannot hold
-    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
-    r = pipeline.anchored(_claimed_f(f), pair.low, pair.high, Config(model="fundamental"))
-    assert not r.matched and r.rejected.test == "plane"
-    assert r.evidence.plane_inliers > 0
-    assert r.evidence.plane_on_lines < Config().decision.min_plane_on_lines
+    assert r.evidence.plane_inliers == 0
+    assert "no parallax" in r.reason and "no plane map" in r.reason
 
 
 def test_paper_mode_matches_a_ratio_3_pair(raccoon):

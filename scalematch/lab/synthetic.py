@@ -893,3 +893,72 @@ def make_flat_pair(photo: np.ndarray, ratio: float, kind: str, rng: np.random.Ge
     share = float(rng.uniform(*FLAT_SHARE_RANGE))
     flat = flatten(photo, flat_field(photo.shape, crop, share, rng), kind, rng)
     return zoom_pair_from_crop(flat, crop, ratio, rng, low_max, source)
+
+
+# --------------------------------------------------------------------------------------------
+# A 3-D scene: two planes at two depths, seen from two places
+# --------------------------------------------------------------------------------------------
+
+#: the finer camera's focal length, px (a 640 px wide image: a 50 degree field of view)
+TWO_PLANES_FOCAL_PX = 700.0
+#: the coarser camera's frame, beyond the finer image's footprint, px (width, height)
+TWO_PLANES_MARGIN_PX = (80, 60)
+
+
+@dataclass(frozen=True, eq=False)
+class TwoPlanePair:
+    """A 3-D pair with exact ground truth: ``high`` shows two fronto-parallel planes side by side
+    (its left half at the first depth, its right half at the second); ``low`` is the scene from
+    a camera moved by ``baseline`` (depth units) and turned, with ``ratio`` times the focal
+    length's resolution less."""
+
+    low: np.ndarray = field(repr=False)
+    high: np.ndarray = field(repr=False)
+    #: x_low^T F x_high = 0 (px of each image)
+    fundamental: np.ndarray = field(repr=False)
+    #: each plane's map, high px -> low px (left half, right half)
+    homographies: Tuple[np.ndarray, np.ndarray] = field(repr=False)
+
+    def low_point(self, xy_high: np.ndarray) -> np.ndarray:
+        """Where the scene points seen at ``xy_high`` ((N, 2) high px) appear in ``low``."""
+        xy = np.asarray(xy_high, np.float64).reshape(-1, 2)
+        left = xy[:, 0] < self.high.shape[1] / 2
+        return np.where(left[:, None], apply(self.homographies[0], xy),
+                        apply(self.homographies[1], xy))
+
+
+def make_two_plane_pair(high: np.ndarray, ratio: float = 2.0, baseline: float = 0.6,
+                        depths: Tuple[float, float] = (5.0, 8.0),
+                        turn_deg: float = 4.0) -> TwoPlanePair:
+    """A 3-D pair cut from one grey image ``high`` (its texture painted on two planes at
+    ``depths``, the left and right halves): the low camera moved sideways by ``baseline``
+    (and a twentieth of it down), turned by ``turn_deg`` about the vertical, its focal length
+    ``ratio`` times shorter; ``low`` blurred by the camera model before it is sampled.
+
+    Each plane maps high px to low px by ``K_low (R + t n^T / d) K_high^-1`` and the pair's
+    epipolar geometry is ``F = K_low^-T [t]_x R K_high^-1`` (Hartley & Zisserman, 13.1 and
+    9.2.2)."""
+    high = np.asarray(high, np.float32)
+    h, w = high.shape
+    k_high = np.array([[TWO_PLANES_FOCAL_PX, 0, w / 2], [0, TWO_PLANES_FOCAL_PX, h / 2],
+                       [0, 0, 1]])
+    lw, lh = int(w / ratio) + TWO_PLANES_MARGIN_PX[0], int(h / ratio) + TWO_PLANES_MARGIN_PX[1]
+    k_low = np.array([[TWO_PLANES_FOCAL_PX / ratio, 0, lw / 2],
+                      [0, TWO_PLANES_FOCAL_PX / ratio, lh / 2], [0, 0, 1]])
+    a = math.radians(turn_deg)
+    r = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    t = np.array([baseline, baseline / 20.0, 0.0])
+    blurred = cv2.GaussianBlur(high, (0, 0), CAMERA_BLUR_PX * math.sqrt(ratio ** 2 - 1))
+    low = np.zeros((lh, lw), np.float32)
+    maps = []
+    for i, depth in enumerate(depths):
+        hm = k_low @ (r + np.outer(t, (0.0, 0.0, 1.0)) / depth) @ np.linalg.inv(k_high)
+        half = np.zeros((h, w), np.float32)
+        half[:, i * w // 2:(i + 1) * w // 2] = 1.0
+        seen = cv2.warpPerspective(half, hm, (lw, lh), flags=cv2.INTER_LINEAR) > 0.5
+        low = np.where(seen, cv2.warpPerspective(blurred, hm, (lw, lh), flags=cv2.INTER_AREA),
+                       low)
+        maps.append(hm / hm[2, 2])
+    cross = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    f = np.linalg.inv(k_low).T @ cross @ r @ np.linalg.inv(k_high)
+    return TwoPlanePair(low, high, f / np.linalg.norm(f), (maps[0], maps[1]))

@@ -37,7 +37,7 @@ from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Sequence, T
 import numpy as np
 
 from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
-from ..geometry import apply, epipolar_distances, footprint, grid
+from ..geometry import apply, footprint, grid
 from ..result import Evidence, build_evidence
 from .constraints import OrientationParams
 from .descriptors import Described
@@ -206,20 +206,10 @@ class DecisionParams:
     #: copies; counted once, a bus's panels fell from 29 to 7 inliers, a snowfield from 19 to
     #: 4, and a facade's log10 NFA from -56 to -2.3 (docs/design/DECISION.md)
     same_point_px: float = 1.0
-    #: where no parallax is seen off the dominant plane (:func:`plane_parallax`), a fundamental
-    #: matrix is claimed only where a plane map of the same pair passes this
-    #: decision with at least this share of its inliers on the matrix's epipolar lines
-    #: (:func:`on_lines`; ``pipeline.anchored``). An epipolar geometry has room for what a
-    #: plane map does not: a repeated structure matched to its shifted copy, or points
-    #: clustered along a line, fit one (600 null runs: 16 claims with 20 to 40 inliers, log10
-    #: NFA down to -42; docs/NULLS.md, "Mode fundamental"), and the plane map's tests of
-    #: scale, footprint, repeated structure and pixels refuse them. On the 3-D pairs of
-    #: ../shared/data/ef, both orders, 84 to 100 % of the plane map's inliers lie within 1.5 px
-    #: of the right F's lines and 98 to 100 % within 3 px; a plane map unrelated to F would
-    #: put about ``chance_p`` (0.1-0.2 %) there
-    min_plane_on_lines: float = 0.5
-    #: the model that plane map is searched with: the default's, which the model check turns
-    #: into an affine map or a homography where the scene asks for one
+    #: a fundamental matrix whose inliers show no parallax (:func:`plane_parallax`) gives way
+    #: to the plane map of the same pair (``pipeline.without_parallax``), searched with this
+    #: model: the default's, which the model check turns into an affine map or a homography
+    #: where the scene asks for one
     plane_model: str = "similarity"
 
     #: each number's range, checked when the parameters are made (``checks.check_bounds``)
@@ -256,7 +246,6 @@ class DecisionParams:
         "parallax_threshold_px": POSITIVE,
         "parallax_min_candidates": Bounds(lo=8, integer=True),
         "parallax_confidence": PROBABILITY,
-        "min_plane_on_lines": SHARE,
     }
 
     def __post_init__(self) -> None:
@@ -295,7 +284,8 @@ TESTS = {
                    "unique_windows", "windows_agreeing", "windows_elsewhere",
                    "min_window_agreement", "log10_nfa", "max_log_nfa_geometry"),
     "pixels": ("final_margin", "min_final_margin", "log10_nfa", "max_log_nfa_geometry"),
-    "plane": ("inliers", "log10_nfa", "plane_inliers", "plane_on_lines", "min_plane_on_lines"),
+    "plane": ("inliers", "log10_nfa", "parallax_points", "parallax_log10_nfa", "max_log_nfa",
+              "plane_inliers"),
 }
 
 
@@ -746,23 +736,6 @@ class Claim:
     #: a plain match of few inliers that no pass of views confirmed: its pixels must show it
     #: unique by ``DecisionParams.unconfirmed_min_unique_ratio``
     unconfirmed: bool = False
-
-
-def on_lines(f: np.ndarray, pairs: np.ndarray, threshold_px: float) -> float:
-    """The share of the point pairs ``pairs`` ((N, 4) x, y finer; x, y coarser) within
-    ``threshold_px`` of the epipolar geometry ``x_coarser^T F x_finer = 0`` on both sides (the
-    estimator's inlier distance), nan when there are none: how much of a plane map's support a
-    fundamental matrix explains (``DecisionParams.min_plane_on_lines``).
-
-    >>> f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
-    >>> on_lines(f, np.array([[10.0, 20, 30, 20], [5, 5, 50, 7], [1, 1, 9, 1.5]]), 1.0)
-    0.6666666666666666
-    """
-    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
-    if len(pairs) == 0:
-        return math.nan
-    d = epipolar_distances(f, pairs[:, :2], pairs[:, 2:]).max(axis=1)
-    return float(np.mean(d <= threshold_px))
 
 
 def one_to_one(pairs: np.ndarray, same_point_px: float) -> np.ndarray:
