@@ -232,9 +232,13 @@ def run_scalematch(pair: EfPair, a_first: bool, seed: int = 0) -> Run:
     t0 = time.perf_counter()
     r = match(*_ordered(pair, a_first), Config(model="fundamental", seed=seed))
     seconds = time.perf_counter() - t0
-    f = a_to_b(r.transform, r.order, a_first) if r.matched else None
-    return Run("scalematch", f, r.matched, r.n_inliers, seconds, model=r.model,
-               coarser=coarser_of(r.order, a_first), reason=r.reason)
+    # without parallax the plane map answers: no epipolar geometry is claimed
+    claimed = r.matched and r.model == "fundamental"
+    f = a_to_b(r.transform, r.order, a_first) if claimed else None
+    reason = r.reason if not r.matched else "" if claimed else \
+        f"no parallax: answered with its plane map ({r.model}, {r.n_inliers} inliers)"
+    return Run("scalematch", f, claimed, r.n_inliers if claimed else 0, seconds, model=r.model,
+               coarser=coarser_of(r.order, a_first), reason=reason)
 
 
 def run_plane(pair: EfPair, a_first: bool, seed: int = 0) -> Run:

@@ -397,7 +397,9 @@ def judge(case: Case, answer: Dict[str, Any]) -> Dict[str, Any]:
     from .evaluation import reprojection_error
     from .realpairs import Pair, canonical
 
-    claimed = bool(answer["matched"])
+    # a 3-D pair answered with a plane map (no parallax seen) claims no epipolar geometry
+    claimed = bool(answer["matched"]) and (case.points is None
+                                           or answer.get("model") == "fundamental")
     err = math.nan
     if claimed and case.points is not None:
         f = a_to_b(np.asarray(answer["transform"]), answer["order"], case.order == "given")
