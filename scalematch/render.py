@@ -203,6 +203,9 @@ def verdict(result: MatchResult) -> str:
                  ", order swapped (the transform maps the first image into the second)")
     plane = (", parallax: the map of the scene's dominant plane" if result.evidence.parallax
              else "")
+    if not np.isnan(result.evidence.parallax_log10_nfa):  # a fundamental matrix was asked for
+        plane = (", no parallax: the plane map answers (an epipolar geometry's epipole is not "
+                 "fixed by its inliers)")
     return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}"
             f"{plane}")
@@ -227,10 +230,6 @@ def evidence_line(result: MatchResult) -> str:
     elif result.matched and e.parallax:
         parts.append(f"{e.parallax_points} matches off its plane fit an epipolar geometry "
                      f"(--model fundamental gives it)")
-    if result.matched and model_of(result.model).has_ratio and \
-            not np.isnan(e.parallax_log10_nfa):
-        parts.append("a fundamental matrix was asked for, but its inliers show no parallax: "
-                     "the plane map answers")
     return "; ".join(parts)
 
 

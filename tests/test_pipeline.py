@@ -189,6 +189,8 @@ def test_a_flat_scene_asked_for_a_fundamental_matrix_is_answered_with_its_plane_
     assert r.evidence.plane_inliers == r.n_inliers
     assert r.config.model == "fundamental"
     assert {"epipolar", "total"} <= set(r.timings)
+    from scalematch.render import verdict
+    assert "no parallax: the plane map answers" in verdict(r)
 
 
 def _claimed_f(f):
