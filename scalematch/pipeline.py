@@ -35,6 +35,7 @@ from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, de
                               final_checks, look_again, plane_parallax,
                               unique_threshold)
 from .stages.descriptors import Described
+from .stages.epipolar import refine_fundamental
 from .stages.detector import (Contrast, Gradients, Keypoints, detect_on_level)
 from .stages.estimator import Estimate, FitSpec, estimate, model_of, residuals
 from .stages.matcher import distinct_pairs, match_descriptors
@@ -1000,6 +1001,8 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit,
     has_ratio = model_of(model).has_ratio
     seen = answer_parallax(winner, t, model, search.config) if has_ratio else plane_parallax(
         inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
+    if not has_ratio and len(inliers) >= model_of(model).min_sample:
+        t = refine_fundamental(t, inliers[:, :2], inliers[:, 2:])  # LM on the Sampson error
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            has_ratio)
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (

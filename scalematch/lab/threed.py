@@ -48,6 +48,8 @@ import cv2
 import numpy as np
 
 from ..render import line_ends
+from ..stages.epipolar import (homogeneous, refine_fundamental,
+                               sampson_residuals)
 from .datasets import list_photos, scene_of, shared_option, shared_subfolder
 from .efpairs import (MAGSAC_CONFIDENCE, MAGSAC_ITERATIONS, SOLVED_PX, WRONG_PX, EfPair, Run,
                       run_orders, symmetric_epipolar_error)
@@ -121,15 +123,6 @@ MIN_REFERENCE_INLIERS = 40
 #: too, which costs a few points and no wrong one
 NEIGHBOURS = 8
 LOCAL_TOLERANCE = 0.3
-#: Levenberg-Marquardt: iterations at most, the first damping relative to the mean diagonal of
-#: J^T J, and the relative decrease of the cost under which it stops (Hartley & Zisserman,
-#: "Multiple View Geometry", 2nd ed., A6.2)
-LM_ITERATIONS = 100
-LM_DAMPING = 1e-3
-LM_TOLERANCE = 1e-10
-#: Step of the forward differences of the Jacobian, in the units of the parameters (radians of
-#: the rotations, the singular-value ratio): about sqrt of the float64 epsilon
-LM_STEP = 1e-7
 #: The reference's sample of its inliers: one per cell of a grid over photo A (columns, rows),
 #: the inlier of least Sampson distance in each, so the score weighs the whole overlap and
 #: not its most textured corner
@@ -228,142 +221,6 @@ def third_views(pair: Tuple[str, str], pairs: Sequence[Tuple[str, str]]) -> List
 # Epipolar geometry over numpy arrays (x_B^T F x_A = 0)
 # --------------------------------------------------------------------------------------------
 
-def _homogeneous(xy: np.ndarray) -> np.ndarray:
-    xy = np.asarray(xy, np.float64).reshape(-1, 2)
-    return np.hstack([xy, np.ones((len(xy), 1))])
-
-
-def sampson_residuals(f: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray) -> np.ndarray:
-    """(N,) signed Sampson distances, px, of the pairs (x_A, x_B) to ``x_B^T F x_A = 0``: the
-    first-order distance of the 4-vector (x_A, y_A, x_B, y_B) to the variety F defines
-    (Hartley & Zisserman, eq. 11.9). Their squares sum to the Sampson error.
-
-    >>> f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y_B = y_A
-    >>> sampson_residuals(f, np.array([[0.0, 0], [0, 0]]), np.array([[5.0, 0], [5, 2]])).round(6).tolist()
-    [0.0, -1.414214]
-    """
-    f = np.asarray(f, np.float64)
-    xa, xb = _homogeneous(pts_a), _homogeneous(pts_b)
-    fxa, ftxb = xa @ f.T, xb @ f
-    num = np.einsum("ij,ij->i", xb, fxa)
-    den = np.sqrt(fxa[:, 0] ** 2 + fxa[:, 1] ** 2 + ftxb[:, 0] ** 2 + ftxb[:, 1] ** 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, num / den, np.inf)
-
-
-def normalising_transform(xy: np.ndarray) -> np.ndarray:
-    """3x3 similarity taking points to their centroid at 0 and mean distance sqrt(2) from it
-    (Hartley, "In defense of the eight-point algorithm", PAMI 1997).
-
-    >>> t = normalising_transform(np.array([[0.0, 0], [2, 0]]))
-    >>> (_homogeneous([[0.0, 0], [2, 0]]) @ t.T)[:, :2].round(6).tolist()
-    [[-1.414214, 0.0], [1.414214, 0.0]]
-    """
-    xy = np.asarray(xy, np.float64).reshape(-1, 2)
-    c = xy.mean(axis=0)
-    d = float(np.mean(np.linalg.norm(xy - c, axis=1)))
-    s = math.sqrt(2.0) / d if d > 0 else 1.0
-    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
-
-
-def rotation(w: np.ndarray) -> np.ndarray:
-    """3x3 rotation of the axis-angle vector ``w`` (Rodrigues' formula).
-
-    >>> rotation(np.array([0.0, 0.0, math.pi / 2])).round(12).tolist()
-    [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
-    """
-    w = np.asarray(w, np.float64)
-    theta = float(np.linalg.norm(w))
-    if theta < 1e-300:
-        return np.eye(3)
-    k = w / theta
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(theta) * kx + (1.0 - math.cos(theta)) * (kx @ kx)
-
-
-def _orthonormal(f: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:
-    """(U, V, sigma) of the rank-2 F = U diag(1, sigma, 0) V^T, U and V rotations (Bartoli &
-    Sturm, "Nonlinear estimation of the fundamental matrix with minimal parameters", PAMI
-    2004): seven parameters for F's seven degrees of freedom."""
-    u, s, vt = np.linalg.svd(np.asarray(f, np.float64))
-    u = u * np.sign(np.linalg.det(u))
-    v = vt.T * np.sign(np.linalg.det(vt))
-    return u, v, float(s[1] / s[0]) if s[0] > 0 else 0.0
-
-
-def _compose(u: np.ndarray, v: np.ndarray, sigma: float) -> np.ndarray:
-    return u @ np.diag([1.0, sigma, 0.0]) @ v.T
-
-
-def refine_fundamental(f: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray,
-                       iterations: int = LM_ITERATIONS) -> np.ndarray:
-    """F refined by Levenberg-Marquardt on the Sampson error of the pairs (x_A, x_B), rank 2
-    kept by its orthonormal representation; unit Frobenius norm. The pairs are the inliers of
-    F: the Sampson error has no robust loss here.
-
-    Parameters
-    ----------
-    f : (3, 3) array
-        The F to start from, ``x_B^T F x_A = 0``.
-    pts_a, pts_b : (N, 2) arrays
-        The pairs, px; N >= 8.
-    iterations : int
-        Iterations at most (``LM_ITERATIONS``).
-
-    Returns
-    -------
-    (3, 3) float64 array
-        Of rank 2; its Sampson error is at most that of ``f`` made rank 2.
-    """
-    pts_a = np.asarray(pts_a, np.float64).reshape(-1, 2)
-    pts_b = np.asarray(pts_b, np.float64).reshape(-1, 2)
-    if len(pts_a) < 8:
-        raise ValueError(f"refine_fundamental needs at least 8 pairs, got {len(pts_a)}")
-    # conditioning: the parameters act on F of normalised points, the error stays in px
-    t_a, t_b = normalising_transform(pts_a), normalising_transform(pts_b)
-    inv_a, inv_b = np.linalg.inv(t_a), np.linalg.inv(t_b)
-
-    def to_px(fn: np.ndarray) -> np.ndarray:
-        return t_b.T @ fn @ t_a
-
-    def residuals(u, v, sigma, p):
-        fn = _compose(u @ rotation(p[:3]), v @ rotation(p[3:6]), sigma + p[6])
-        return sampson_residuals(to_px(fn), pts_a, pts_b)
-
-    u, v, sigma = _orthonormal(inv_b.T @ np.asarray(f, np.float64) @ inv_a)
-    zero = np.zeros(7)
-    r = residuals(u, v, sigma, zero)
-    cost = float(r @ r)
-    lam = None
-    for _ in range(iterations):
-        jac = np.empty((len(r), 7))
-        for k in range(7):
-            step = zero.copy()
-            step[k] = LM_STEP
-            jac[:, k] = (residuals(u, v, sigma, step) - r) / LM_STEP
-        a, g = jac.T @ jac, jac.T @ r
-        if lam is None:
-            lam = LM_DAMPING * float(np.mean(np.diag(a)))
-        improved = False
-        for _ in range(20):  # damping raised until a step lowers the cost
-            delta = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-300), -g)
-            r_new = residuals(u, v, sigma, delta)
-            cost_new = float(r_new @ r_new)
-            if cost_new < cost:
-                improved = True
-                break
-            lam *= 10.0
-        if not improved:
-            break
-        u, v, sigma = u @ rotation(delta[:3]), v @ rotation(delta[3:6]), sigma + delta[6]
-        done = cost - cost_new <= LM_TOLERANCE * cost
-        r, cost, lam = r_new, cost_new, lam / 10.0
-        if done:
-            break
-    out = to_px(_compose(u, v, sigma))
-    return out / np.linalg.norm(out)
-
-
 def correct_onto(f: np.ndarray, points: np.ndarray, passes: int = CORRECTION_PASSES) -> np.ndarray:
     """(N, 4) points (x_A, y_A, x_B, y_B) moved onto ``x_B^T F x_A = 0`` by the first-order
     (Sampson) correction, repeated ``passes`` times (Hartley & Zisserman, 12.4): the nearest
@@ -376,7 +233,7 @@ def correct_onto(f: np.ndarray, points: np.ndarray, passes: int = CORRECTION_PAS
     f = np.asarray(f, np.float64)
     p = np.asarray(points, np.float64).reshape(-1, 4).copy()
     for _ in range(passes):
-        xa, xb = _homogeneous(p[:, :2]), _homogeneous(p[:, 2:])
+        xa, xb = homogeneous(p[:, :2]), homogeneous(p[:, 2:])
         fxa, ftxb = xa @ f.T, xb @ f
         num = np.einsum("ij,ij->i", xb, fxa)
         grad = np.stack([ftxb[:, 0], ftxb[:, 1], fxa[:, 0], fxa[:, 1]], axis=1)
@@ -434,7 +291,7 @@ def transfer_errors(f_ab: np.ndarray, f_ac: np.ndarray, f_bc: np.ndarray, tracks
         The distances of the crossings kept (in B, then in A).
     """
     t = np.asarray(tracks, np.float64).reshape(-1, 6)
-    xa, xb, xc = _homogeneous(t[:, :2]), _homogeneous(t[:, 2:4]), _homogeneous(t[:, 4:])
+    xa, xb, xc = homogeneous(t[:, :2]), homogeneous(t[:, 2:4]), homogeneous(t[:, 4:])
     f_ab, f_ac, f_bc = (np.asarray(m, np.float64) for m in (f_ab, f_ac, f_bc))
     in_b, sin_b = _cross_points(xa @ f_ab.T, xc @ f_bc)  # F_AB x_A and F_CB x_C = F_BC^T x_C
     in_a, sin_a = _cross_points(xb @ f_ab, xc @ f_ac)  # F_AB^T x_B and F_CA x_C = F_AC^T x_C
@@ -522,7 +379,7 @@ def points_given(points: np.ndarray, map_a: np.ndarray, map_b: np.ndarray) -> np
     """
     p = np.asarray(points, np.float64).copy()
     for cols, m in ((slice(0, 2), map_a), (slice(2, 4), map_b)):
-        p[:, cols] = _homogeneous(p[:, cols]) @ np.asarray(m, np.float64)[:2].T
+        p[:, cols] = homogeneous(p[:, cols]) @ np.asarray(m, np.float64)[:2].T
     return p
 
 

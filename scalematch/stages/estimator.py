@@ -5,7 +5,9 @@ RANSAC through OpenCV for the four models of the paper: similarity (default,
 (``cv2.findHomography``) and fundamental matrix (``cv2.findFundamentalMat`` with MAGSAC++,
 OpenCV's USAC). The winner is refined on all its inliers (OpenCV's Levenberg-Marquardt for the
 affine kinds; least squares on the inliers for the homography; MAGSAC++'s own weighted fit is
-kept for the fundamental matrix), then the inliers are recounted with the refined model.
+kept for the fundamental matrix, and the answer's is refined by Levenberg-Marquardt on the
+Sampson error of its inliers, ``stages/epipolar.py``), then the inliers are recounted with the
+refined model.
 OpenCV objects never leave this module: arrays in, arrays out.
 """
 
