@@ -238,7 +238,10 @@ def _paper() -> Config:
                   # "In practice we run the latter algorithm at all scales" (section 5)
                   probe=ProbeParams(enabled=False),
                   # the jets carry no orientation to compare
-                  guided=GuidedParams(use_orientation=False))
+                  guided=GuidedParams(use_orientation=False),
+                  # the paper's detector keeps what passes the threshold: no point budget
+                  harris=HarrisParams(min_points=0),
+                  harris_low=HarrisParams(max_points=12000, min_points=0))
 
 
 #: Named configurations: the two modes, and the steps between them that the lab's ablation

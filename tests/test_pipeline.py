@@ -594,8 +594,9 @@ def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
         assert low.max() < 16.0
     else:
         low, high = np.floor(np.clip(pair.low, 0, 255) / 8), np.floor(np.clip(pair.high, 0, 255) / 8)
-    absolute = replace(Config(), harris=HarrisParams(contrast_relative=False),
-                       harris_low=HarrisParams(contrast_relative=False, max_points=12000))
+    absolute = replace(Config(), harris=HarrisParams(contrast_relative=False, min_points=0),
+                       harris_low=HarrisParams(contrast_relative=False, max_points=12000,
+                                               min_points=0))
     assert not match(low, high, absolute).matched  # the absolute threshold sees nothing
     r = match(low, high)
     assert r.matched and _error(r, pair) < 3.0

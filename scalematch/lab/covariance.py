@@ -23,7 +23,7 @@ from ..stages.scalespace import Level
 
 #: The detector the packaged covariance was estimated with: the absolute threshold (the product's
 #: detector, ``HarrisParams()``, follows the image's contrast)
-ABSOLUTE = HarrisParams(contrast_relative=False)
+ABSOLUTE = HarrisParams(contrast_relative=False, min_points=0)
 
 
 @dataclass(frozen=True)

@@ -164,7 +164,7 @@ def measure_photo(photo: np.ndarray, name: str, seed: int,
     offset = float(rng.uniform(*params.offset))
     copy, a = changed_copy(crop, angle, gain, offset, params.noise_std, rng)
 
-    harris = HarrisParams(contrast_relative=False)  # the absolute threshold, as measured
+    harris = HarrisParams(contrast_relative=False, min_points=0)  # the absolute threshold, as measured
     k0 = detect_one(crop, 1.0, harris).xy
     k1 = detect_one(copy, 1.0, harris).xy
     mapped = apply(a, k0)

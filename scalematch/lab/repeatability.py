@@ -91,7 +91,8 @@ class StudyParams:
     angle_deg: Optional[float] = None  #: rotation of ``low``; None = uniform in [-180, 180)
     #: same for every detection: the paper's absolute threshold (``HarrisParams()`` follows the
     #: image's contrast)
-    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=False))
+    harris: HarrisParams = field(default_factory=lambda: HarrisParams(contrast_relative=False,
+                                                                          min_points=0))
 
     def __post_init__(self) -> None:
         if self.crop_w < 64 or self.crop_h < 64:

@@ -106,8 +106,10 @@ from scalematch.stages.detector import (Contrast, detect_on_level,  # noqa: E402
 from scalematch.stages.scalespace import scale_space  # noqa: E402
 from scalematch.lab.synthetic import smooth_scene  # noqa: E402
 
-ADAPTIVE = HarrisParams(contrast_relative=True)
-ABSOLUTE = HarrisParams(contrast_relative=False)  # the paper's threshold, whatever the contrast
+#: the threshold that follows the contrast, and the paper's whatever the contrast; neither with
+#: the point budget, whose floor would hide what the threshold alone finds
+ADAPTIVE = HarrisParams(contrast_relative=True, min_points=0)
+ABSOLUTE = HarrisParams(contrast_relative=False, min_points=0)
 LOW_CONTRAST_SCALES = (1.0, 2.0, 4.0)
 
 
@@ -117,14 +119,14 @@ def _twelve_bit(img):
 
 
 def test_the_default_detector_is_the_matchers(raccoon):
-    """``HarrisParams()`` is ``Config``'s detector (relative to the contrast, capped at 1, no
-    point budget), so ``detect`` and ``match`` agree."""
+    """``HarrisParams()`` is ``Config``'s detector (relative to the contrast, capped at 1, a
+    budget of 40 points a scale), so ``detect`` and ``match`` agree."""
     from dataclasses import replace
 
     from scalematch.config import Config
 
     p = HarrisParams()
-    assert p.contrast_relative and p.contrast_cap == 1.0 and p.min_points == 0 and p.adaptive
+    assert p.contrast_relative and p.contrast_cap == 1.0 and p.min_points == 40 and p.adaptive
     assert p == Config().harris and replace(p, max_points=12000) == Config().harris_low
     img = raccoon[:400, :500]
     a = detect(img, (1.0, 3.0), ABSOLUTE)

@@ -17,7 +17,7 @@ from scalematch.stages.scalespace import Level, scale_space
 
 RATIO = 6.0
 #: the detector these tests were measured with: the absolute threshold (no contrast needed at s = 6)
-ABSOLUTE = HarrisParams(contrast_relative=False)
+ABSOLUTE = HarrisParams(contrast_relative=False, min_points=0)
 
 
 @pytest.fixture(scope="module")
