@@ -91,6 +91,12 @@ class Evidence:
     #: of the search's: the map reported, an affine map or a homography where the view is tilted
     final_ncc: float = math.nan
     final_margin: float = math.nan
+    #: the same by windows (``stages.pixelcheck.near_windows``), measured only when the margin
+    #: above refuses: windows compared, the share that agrees at the claim, the highest share
+    #: at a nearby placement
+    near_windows: int = 0
+    near_windows_agreeing: float = math.nan
+    near_windows_nearby: float = math.nan
     #: what judged the match unique: "geometry" (log10 NFA beyond
     #: ``decision.max_log_nfa_geometry``, no second transform) or "pixels" (the tests above)
     judged_by: str = ""

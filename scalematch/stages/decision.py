@@ -43,8 +43,8 @@ from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import FitSpec, estimate, model_of
 from .guided import GuidedParams, grow
-from .pixelcheck import (Agreement, PixelParams, agreement_of, pixel_check, unique_template,
-                         uniqueness_of)
+from .pixelcheck import (Agreement, NearWindows, PixelParams, agreement_of, near_windows,
+                         pixel_check, unique_template, uniqueness_of)
 from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
 from .threads import thread_map
 
@@ -149,6 +149,15 @@ class DecisionParams:
     #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
     #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
     min_final_margin: float = 0.0
+    #: ... or, where that one ZNCC refuses, compared window by window
+    #: (``stages.pixelcheck.near_windows``: at least ``min_windows`` windows over the whole
+    #: footprint) at least this share agree at the claim, and ``min_window_ratio`` times the
+    #: share at the best nearby placement. An occluder loses only the windows it covers.
+    #: Measured (docs/design/DECISION.md, "Nearby placements, window by window"): the
+    #: occluded true claims this margin refused agree at 0.36 to 0.54 of their windows, their
+    #: nearby placements at 0.03 at most; the null claims that reach the final tests (the
+    #: halves of one facade, 6 to 13 inliers) at 0.04 to 0.10 where their margin refuses
+    min_near_windows: float = 0.3
     #: a transform this far beyond chance (log10 NFA) is judged unique by the geometry alone:
     #: the pixel tests above are measured and recorded, not decisive, unless a second transform
     #: (``second_share``) shows a repeated structure. The pixels of a real pair are broken by
@@ -234,6 +243,7 @@ class DecisionParams:
         "min_window_ratio": NON_NEGATIVE,
         "min_windows": AT_LEAST_ONE,
         "min_final_margin": MARGIN,
+        "min_near_windows": SHARE,
         "max_log_nfa_geometry": FINITE,
         "unconfirmed_min_unique_ratio": NON_NEGATIVE,
         "second_share": NON_NEGATIVE,
@@ -283,7 +293,8 @@ TESTS = {
     "uniqueness": ("unique_ratio", "min_unique_ratio", "unique_claimed", "unique_elsewhere",
                    "unique_windows", "windows_agreeing", "windows_elsewhere",
                    "min_window_agreement", "log10_nfa", "max_log_nfa_geometry"),
-    "pixels": ("final_margin", "min_final_margin", "log10_nfa", "max_log_nfa_geometry"),
+    "pixels": ("final_margin", "min_final_margin", "near_windows", "near_windows_agreeing",
+               "near_windows_nearby", "min_near_windows", "log10_nfa", "max_log_nfa_geometry"),
     "plane": ("inliers", "log10_nfa", "parallax_points", "parallax_log10_nfa", "max_log_nfa",
               "plane_inliers"),
 }
@@ -304,6 +315,11 @@ class FinalFigures:
     unique_windows: int = 0  #: windows compared
     windows_agreeing: float = math.nan  #: share of them that agree at the claim
     windows_elsewhere: float = math.nan  #: the highest share anywhere else
+    #: the nearby placements by windows, measured when the final margin refuses (0 and nan:
+    #: not measured)
+    near_windows: int = 0  #: windows compared
+    near_windows_agreeing: float = math.nan  #: share of them that agree at the claim
+    near_windows_nearby: float = math.nan  #: the highest share at a nearby placement
 
 
 def figures(test: str, evidence: Evidence, params: DecisionParams,
@@ -888,7 +904,35 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
                            f"{u.claimed:.2f} at the transform found{windows}; log10 NFA "
                            f"{log10_nfa:.1f})"), "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
-        return final, (f"the pixels do not confirm it: the transform found fits the low "
-                       f"image no better than nearby wrong placements (ZNCC margin "
-                       f"{near.margin:+.2f})"), "pixels"
+        return _nearby_windows(coarser, finer, t, final, params, pixel)
     return final, "", ""
+
+
+def _nearby_windows(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, final: FinalFigures,
+                    params: DecisionParams, pixel: PixelParams):
+    """(figures, reason, test) of a final map whose margin refuses it: the nearby placements
+    compared window by window (:func:`near_windows_agree`) decide."""
+    w = near_windows(coarser, finer, t, pixel)
+    final = replace(final, near_windows=w.windows, near_windows_agreeing=w.claimed,
+                    near_windows_nearby=w.nearby)
+    if near_windows_agree(w, params):
+        return final, "", ""
+    windows = (f"; {w.claimed:.0%} of its windows agree there, {w.nearby:.0%} at the best "
+               f"nearby placement" if w.windows else "")
+    return final, (f"the pixels do not confirm it: the transform found fits the low image no "
+                   f"better than nearby wrong placements (ZNCC margin "
+                   f"{final.final_margin:+.2f}{windows})"), "pixels"
+
+
+def near_windows_agree(w: NearWindows, params: DecisionParams) -> bool:
+    """Whether a claim's windows (:func:`scalematch.stages.pixelcheck.near_windows`) fit it
+    better than its nearby wrong placements: enough of them, ``min_near_windows`` agreeing at
+    the claim, ``min_window_ratio`` times the share at the best nearby placement.
+
+    >>> p = DecisionParams()
+    >>> [near_windows_agree(NearWindows(n, at, near), p)
+    ...  for n, at, near in ((40, 0.45, 0.02), (40, 0.1, 0.0), (40, 0.45, 0.3), (9, 0.9, 0.0))]
+    [True, False, False, False]
+    """
+    return (w.windows >= params.min_windows and w.claimed >= params.min_near_windows
+            and w.claimed >= params.min_window_ratio * w.nearby)

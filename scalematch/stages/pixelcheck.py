@@ -390,15 +390,41 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
     from_small = _small_to_high(k)
     crop_shown = np.isfinite(crop)
 
-    def score(m3: np.ndarray) -> Tuple[float, int]:
+    def score(m3: np.ndarray, windows: int = 0) -> Tuple[float, int]:
         img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
         mask &= crop_shown & np.isfinite(img)
+        if windows:  # (share of the windows that agree, windows compared)
+            return _windows_agreeing(img, crop, mask, windows, params.window_ncc)
         n = int(mask.sum())
         if n < params.min_overlap_px:
             return float("nan"), n
         return zncc(img[mask], crop[mask], params.min_std), n
 
     return score
+
+
+#: A window whose grey levels vary less than this (std, grey levels) in either image is flat:
+#: its correlation means nothing, and it is not counted (as ``agreement_map``'s default)
+WINDOW_MIN_STD = 1.0
+
+
+def _windows_agreeing(img: np.ndarray, crop: np.ndarray, mask: np.ndarray, side: int,
+                      least: float) -> Tuple[float, int]:
+    """(share, n): of the ``n`` windows of ``side`` px tiling ``mask`` (wholly inside it, in
+    neither image flat), the share whose ZNCC between ``img`` and ``crop`` is at least
+    ``least`` (nan for none)."""
+    agree = n = 0
+    h, w = mask.shape
+    for y in range(0, h - side + 1, side):
+        for x in range(0, w - side + 1, side):
+            if not mask[y:y + side, x:x + side].all():
+                continue
+            a, b = img[y:y + side, x:x + side], crop[y:y + side, x:x + side]
+            if float(a.std()) <= WINDOW_MIN_STD or float(b.std()) <= WINDOW_MIN_STD:
+                continue
+            n += 1
+            agree += zncc(a.ravel(), b.ravel()) >= least
+    return (agree / n if n else float("nan")), n
 
 
 def _against_perturbed(ncc: float, pert: np.ndarray, n: int, fraction: float) -> PixelCheck:
@@ -413,6 +439,54 @@ def _against_perturbed(ncc: float, pert: np.ndarray, n: int, fraction: float) ->
     return PixelCheck(ncc=ncc, best_perturbed=best, margin=ncc - best, z=float(z),
                       perturbed=tuple(float(v) for v in pert), overlap_px=n,
                       overlap_fraction=float(fraction))
+
+
+class NearWindows(NamedTuple):
+    """The nearby-placement check by windows (:func:`near_windows`)."""
+
+    windows: int  #: windows compared at the claimed placement
+    claimed: float  #: share of them that agree there (ZNCC at least ``window_ncc``)
+    nearby: float  #: the highest share at a nearby wrong placement
+
+
+def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
+                 params: PixelParams = PixelParams()) -> NearWindows:
+    """:func:`pixel_check` window by window: the high image placed by ``t`` and by its nearby
+    wrong placements (:func:`perturbations`), cut into windows of the same share of the
+    footprint as the uniqueness test's (``window_px`` of ``unique_side_px``), each compared
+    with the low image on its own (ZNCC at least ``window_ncc``).
+
+    One ZNCC over the footprint counts an occluder (another object in front of the scene in
+    the finer image) against the map over all of its area, at the claim as at its neighbours;
+    a share of windows loses only the windows it covers. nan shares (0 windows): cannot tell.
+
+    >>> rng = np.random.default_rng(0)
+    >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
+    >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
+    >>> high[:120, :160] = 128 + 60 * np.sign(np.sin(np.arange(160) / 5.0))  # an occluder
+    >>> w = near_windows(low, high, np.array([[0.25, 0, 30 - 0.375], [0, 0.25, 20 - 0.375]]))
+    >>> w.windows >= 16, w.claimed > 0.5, w.nearby < 0.2
+    (True, True, True)
+    """
+    nan = float("nan")
+    low = np.asarray(low, np.float32)
+    high = np.asarray(high, np.float32)
+    placed = _placed(low, high.shape, t, params)
+    if isinstance(placed, str):
+        return NearWindows(0, nan, nan)
+    low, t3, ratio, corners, area = placed
+    others = perturbations(t3, high.shape, params)
+    box = _common_box(low.shape, [corners] + [footprint(m, high.shape) for m in others])
+    if box is None:
+        return NearWindows(0, nan, nan)
+    side = max(int(round(math.sqrt(area) * params.window_px / params.unique_side_px)), 2)
+    score = _scorer(low, high, ratio, box, params)
+    claimed, n = score(t3, side)
+    if n == 0:
+        return NearWindows(0, nan, nan)
+    nearby = [score(m, side)[0] for m in others]
+    good = [v for v in nearby if math.isfinite(v)]
+    return NearWindows(n, claimed, max(good) if good else nan)
 
 
 # --------------------------------------------------------------------------- uniqueness

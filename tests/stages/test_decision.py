@@ -352,3 +352,34 @@ def test_a_3d_scene_shows_parallax_off_its_plane_and_a_flat_one_does_not():
     repeated = np.vstack([wall, copy])
     seen = plane_parallax(repeated, _counted_f(repeated, 150), fit, params)
     assert not seen["parallax"] and seen["parallax_points"] == 12
+
+
+def test_an_occluded_map_the_margin_refuses_is_confirmed_by_its_windows(raccoon):
+    """Where one ZNCC over the footprint refuses the final map (forced here: a margin no map
+    reaches), the windows decide (``min_near_windows``): the right map of a finer image a
+    third occluded passes, the same map turned by 10 degrees, whose neighbour is the truth,
+    is refused, and so is a map onto another part of the photo."""
+    from dataclasses import replace
+
+    import cv2
+
+    from scalematch.config import Config
+    from scalematch.geometry import compose
+    from scalematch.stages.decision import Claim, final_checks
+
+    base = raccoon[200:260, 300:380]
+    high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
+    high[:, :100] = 255.0 - cv2.resize(raccoon[20:80, 20:45], (100, 240))  # an occluder
+    low = raccoon[170:350, 260:500]
+    t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
+    params = replace(Config().decision, min_final_margin=0.99, min_unique_ratio=0.0)
+    final, reason, _ = final_checks(low, high, Claim(t, math.inf), params)
+    assert reason == "", reason
+    assert final.near_windows >= params.min_windows
+    assert final.near_windows_agreeing >= params.min_near_windows
+    turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)
+    final, reason, test = final_checks(low, high, Claim(compose(turn, t), math.inf), params)
+    assert test == "pixels" and "of its windows agree" in reason, reason
+    away = similarity_matrix(0.25, 0.0, 150 - 0.375, 110 - 0.375)
+    final, reason, test = final_checks(low, high, Claim(away, math.inf), params)
+    assert test == "pixels", reason

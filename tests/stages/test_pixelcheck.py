@@ -107,3 +107,31 @@ def test_zncc_is_invariant_to_gain_and_offset():
     assert zncc(a, b) == pytest.approx(zncc(a, 0.2 * b - 40.0), abs=1e-9)
     assert math.isnan(zncc(a, np.zeros(500)))
     assert PixelParams().scale_step == pytest.approx(2 ** (1 / 3))
+
+
+def test_windows_tell_an_occluded_truth_from_its_neighbours(zoom, raccoon):
+    """An occluder (a third of the finer image replaced by other texture) lowers one ZNCC over
+    the footprint at the truth as at its nearby placements; window by window it loses only the
+    windows it covers: most of the rest agree at the truth, almost none nearby."""
+    from scalematch.stages.pixelcheck import near_windows
+
+    high = zoom.high.copy()
+    h, w = high.shape
+    other = np.asarray(raccoon, np.float32)[:h, -w // 3:]  # another part of the photo
+    high[:, : w // 3] = other[:, : w // 3] * 1.5  # stronger contrast than the scene
+    whole = near_windows(zoom.low, zoom.high, zoom.truth)
+    occluded = near_windows(zoom.low, high, zoom.truth)
+    # measured (ratio 4 / 8): 1.0 of 44 windows at the truth, 0.15 at most nearby (a scale
+    # step keeps the centre's windows in place); occluded 0.6-0.7, nearby 0.1-0.15
+    assert whole.windows >= 16 and whole.claimed > 0.9 and whole.nearby < 0.3
+    # the occluder's third lost, the scene's windows still agree; nearby placements do not
+    assert occluded.windows >= 16
+    assert 0.3 < occluded.claimed < whole.claimed and occluded.nearby < occluded.claimed / 2
+
+
+def test_windows_of_a_wrong_placement_do_not_agree(zoom):
+    from scalematch.stages.pixelcheck import near_windows
+
+    for turn, at in ((90.0, (0.3, 0.3)), (180.0, (0.7, 0.6)), (35.0, (0.25, 0.75))):
+        w = near_windows(zoom.low, zoom.high, _elsewhere(zoom, turn, at))
+        assert not w.claimed > 0.1, (turn, at, w)
