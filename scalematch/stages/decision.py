@@ -68,7 +68,8 @@ class DecisionParams:
     #: fraction of the finer image's footprint inside the coarser one, required only when the
     #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
     #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
-    #: docs/DESIGN.md, "What real pairs need")
+    #: docs/DESIGN.md, "What real pairs need"), or when the second look's pixels confirm it
+    #: (:func:`pixels_confirm`; taken for this at any count of inliers)
     min_inside: float = 0.5
     #: another scale agrees when its transform maps the finer image within this many coarser
     #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
@@ -617,10 +618,12 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)),
                         build_evidence(figs), test, t, pairs)
 
-    # the second look decides only below min_inliers (the final map's pixel tests follow
-    # every match, final_checks): above, it would cost a tenth of a plain pair's time for nothing
-    second = look(t, best) if look is not None and spec.has_ratio and \
-        params.look_min_inliers <= k < params.min_inliers else None
+    # the second look decides only below min_inliers, or for a footprint mostly outside the
+    # coarser image (the final map's pixel tests follow every match, final_checks): elsewhere
+    # it would cost a tenth of a plain pair's time for nothing
+    second = look(t, best) if look is not None and spec.has_ratio and (
+        params.look_min_inliers <= k < params.min_inliers
+        or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)
     if k < params.min_inliers:
         if not _few_confirmed(w, second, params):
@@ -666,6 +669,15 @@ def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) ->
     return second is not None and w.k >= params.few_min_inliers and \
         pixels_confirm(w.log10_nfa, second.margin, params) and \
         len(second.inliers) >= params.few_min_grown
+
+
+def _outside_unproven(t: np.ndarray, shapes, lnfa: float, params: DecisionParams) -> bool:
+    """Whether the footprint test needs the second look's pixels to accept ``t``: less than
+    ``min_inside`` of its footprint inside the coarser image, its evidence beyond chance but
+    not overwhelming alone (a transform of 3 to 5 inliers gets the look anyway)."""
+    coarser_shape, finer_shape = shapes
+    return params.max_log_nfa_alone < lnfa <= params.max_log_nfa and \
+        _inside_fraction(t, finer_shape, coarser_shape) < params.min_inside
 
 
 #: A test's refusal: (reason, test), or None when it passes

@@ -383,3 +383,27 @@ def test_an_occluded_map_the_margin_refuses_is_confirmed_by_its_windows(raccoon)
     away = similarity_matrix(0.25, 0.0, 150 - 0.375, 110 - 0.375)
     final, reason, test = final_checks(low, high, Claim(away, math.inf), params)
     assert test == "pixels", reason
+
+
+def test_a_footprint_mostly_outside_is_confirmed_by_the_second_look_at_any_count():
+    """A transform of 6 inliers (``min_inliers``) whose footprint lies 38 % inside the coarser
+    image, beyond chance but not overwhelming (log10 NFA -8.3): refused without pixels, as one
+    of 4 or 5 inliers would be; the second look is taken for it too, and its pixels (a margin
+    of 0.3) confirm it, while a margin of 0 refuses it."""
+    from dataclasses import replace
+
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+
+    t, (best, _) = _outcomes(k=6, n=80)
+    neighbour = replace(best, row=replace(best.row, s=best.row.s * 1.26, inliers=4))
+    outcomes = (best, neighbour)
+    shapes = ((340, 1024), (480, 640))  # the footprint overhangs the coarser image's bottom
+    plain = decide(outcomes, *shapes, **_params(Config()))
+    assert not plain.matched and plain.test == "footprint inside", plain.reason
+    assert -10 < plain.evidence.log10_nfa < -2 and plain.evidence.footprint_inside < 0.5
+    good = decide(outcomes, *shapes, **_params(Config()), look=_look(grown=6, margin=0.3))
+    assert good.matched, good.reason
+    assert good.evidence.pixel_margin == 0.3
+    flat = decide(outcomes, *shapes, **_params(Config()), look=_look(grown=6, margin=0.0))
+    assert not flat.matched and flat.test == "footprint inside"
