@@ -479,6 +479,18 @@ def section_of(sets: Sequence[str]) -> str:
     return "realistic" if sets and all(s in REALISTIC_SETS for s in sets) else "real-pairs"
 
 
+def _nth(step: int) -> str:
+    """'2nd', '3rd', '4th' ... ('photo' for every one).
+
+    >>> [_nth(k) for k in (1, 2, 3, 4, 11, 12, 21)]
+    ['photo', '2nd', '3rd', '4th', '11th', '12th', '21st']
+    """
+    if step == 1:
+        return "photo"
+    suffix = "th" if 10 <= step % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(step % 10, "th")
+    return f"{step}{suffix}"
+
+
 def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]],
              section: str = "real-pairs") -> str:
     """The Markdown section: the runs whose rows it reports, the table per set, the tilt table."""
@@ -488,8 +500,8 @@ def markdown(summary, tilt_rows, runs: Sequence[Dict[str, Any]],
     for m in runs:
         lines.append(f"- `{m.get('command', '?')}`: {m.get('date', '?')}, {m.get('machine', '?')}, "
                      f"load average at start {m.get('load', '?')}, seed {m.get('seed', '?')}, "
-                     f"{m.get('photos', '?')} photos (every {PHOTO_STEP}rd of "
-                     f"../shared/data/photos)")
+                     f"{m.get('photos', '?')} photos "
+                     f"(every {_nth(m.get('photo_step', PHOTO_STEP))} of ../shared/data/photos)")
     lines += ["",
              "Success: grid error < 3 px in the coarser image, judged from the finer image to the "
              "coarser one whichever order the method answers in. \"wrong claims\" counts transforms "
@@ -613,7 +625,8 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
         pool["oxford"] = oxford_pairs(shared)
     meta = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "seed": seed,
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
-            "load": " ".join(f"{v:.1f}" for v in os.getloadavg()), "photos": len(paths)}
+            "load": " ".join(f"{v:.1f}" for v in os.getloadavg()), "photos": len(paths),
+            "photo_step": photo_step}
     rows = []
     out_dir.mkdir(parents=True, exist_ok=True)
     for s in wanted:
