@@ -220,8 +220,14 @@ def evidence_line(result: MatchResult) -> str:
         (e.pixel_ncc, e.pixel_margin)
     if np.isfinite(ncc):
         parts.append(f"pixels: ZNCC {ncc:.2f}, {margin:+.2f} against nearby placements")
+    if e.near_windows:  # the margin refused: the windows decided
+        parts.append(f"{e.near_windows_agreeing:.0%} of {e.near_windows} windows agree there, "
+                     f"{e.near_windows_nearby:.0%} nearby")
     if np.isfinite(e.unique_ratio):
         parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
+    if e.unique_windows:  # the ratio refused: the windows decided
+        parts.append(f"{e.windows_agreeing:.0%} of {e.unique_windows} windows agree at its "
+                     f"place, {e.windows_elsewhere:.0%} elsewhere")
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
     if result.matched and e.parallax and not model_of(result.model).has_ratio:

@@ -389,3 +389,24 @@ def test_a_fundamental_matrix_is_drawn_with_the_epipolar_lines_of_some_inliers(p
     expected = np.round(res.inliers[drawn, 1]).astype(int)
     assert len(rows) >= EPIPOLAR_LINES_DRAWN - 1  # two lines may share a row
     assert all(np.min(np.abs(rows - y)) <= 1 for y in expected)
+
+
+def test_the_evidence_line_says_when_windows_decided():
+    """A match the final margin refused and its windows accepted says so, with their shares;
+    one whose margin passed says nothing of windows."""
+    from dataclasses import replace
+
+    from scalematch.render import evidence_line
+    from scalematch.result import build_evidence
+
+    plain = dict(log10_nfa=-59.6, final_ncc=0.15, final_margin=-0.09, unique_ratio=0.69,
+                 judged_by="pixels")
+    by_windows = MatchResult(matched=True, model="similarity", evidence=build_evidence(
+        plain, dict(near_windows=38, near_windows_agreeing=0.5, near_windows_nearby=0.026,
+                    unique_windows=20, windows_agreeing=0.8, windows_elsewhere=0.2)))
+    line = evidence_line(by_windows)
+    assert "-0.09 against nearby placements" in line
+    assert "50% of 38 windows agree there, 3% nearby" in line
+    assert "80% of 20 windows agree at its place, 20% elsewhere" in line
+    margin_only = replace(by_windows, evidence=build_evidence(dict(plain, final_margin=0.3)))
+    assert "windows" not in evidence_line(margin_only)
