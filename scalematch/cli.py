@@ -814,7 +814,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
                                   factors)
     if not quiet:
         json_written = json_path if json_file is not None else None
-        for text in _match_report(result, written, json_written, verbose):
+        for text in _match_report(result, written, json_written, verbose,
+                                  (low_read.shape, high_read.shape)):
             click.echo(text, err=True)
     sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
 
@@ -913,9 +914,16 @@ def _match_images(low: np.ndarray, high: np.ndarray, config: Config,
 
 
 def _write_json(text: str, json_file: Optional[Path]) -> None:
-    """The result's JSON to ``json_file``, or to stdout when None (``--json -``)."""
+    """The result's JSON to ``json_file``, or to stdout when None (``--json -``); exit 2 when
+    it cannot be written (a full disk), as for a file (a closed pipe: ``closed_pipe_ends_quietly``).
+    """
     if json_file is None:
-        click.echo(text, nl=False)
+        try:
+            click.echo(text, nl=False)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise InputError(f"cannot write --json to stdout: {exc.strerror or exc}")
     else:
         write_text(json_file, text, "--json")
 
@@ -933,14 +941,18 @@ def _write_pictures(out_dir: Path, low: str, high: str, low_img: np.ndarray, hig
 
 
 def _match_report(result: MatchResult, written: Dict[str, Path], json_written: Optional[str],
-                  verbose: bool) -> List[str]:
+                  verbose: bool, shapes: Optional[Tuple[Sequence[int], Sequence[int]]] = None
+                  ) -> List[str]:
     """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
     the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
     path as given) when ``verbose``; without ``verbose``, where the files went, in one line.
-    A slow "no" of a search with views says how to get a quicker one (:func:`slow_no_hint`).
-    The verdict comes last."""
-    hint = slow_no_hint(result)
-    lines = [hint] if hint else []
+    A slow "no" of a search with views says how to get a quicker one (:func:`slow_no_hint`); a
+    "no" between images of ``shapes`` too different in size for the ratios searched says how to
+    search larger ones (:func:`larger_ratio_hint`), one in the given order only whose first
+    image is the larger, how to try the other (:func:`order_hint`). The verdict comes last."""
+    hints = [slow_no_hint(result)] + ([larger_ratio_hint(result, *shapes),
+                                        order_hint(result, *shapes)] if shapes else [])
+    lines = [hint for hint in hints if hint]
     if verbose:
         lines.append(scale_table(result))
         lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
@@ -969,6 +981,55 @@ def slow_no_hint(result: MatchResult) -> str:
     return (f"most of this \"no\" was spent on tilted views: with --no-views a \"no\" comes "
             f"{NO_VIEWS_SPEEDUP}, and only pairs that a tilted view alone solves are missed "
             f"(--time-budget S bounds it instead)")
+
+
+def larger_ratio_hint(result: MatchResult, low_shape: Sequence[int],
+                      high_shape: Sequence[int]) -> str:
+    """The hint a "no" prints when one image is more times the other's size (longer sides)
+    than the largest ratio searched, or "". A finer image whose footprint lies inside the
+    coarser one has a ratio of at least their size ratio, so the ratios searched could not
+    hold the answer; ``--scales`` from that size ratio to four times it searches them.
+
+    >>> from scalematch.result import ScaleRow
+    >>> rows = tuple(ScaleRow(s, s, 10, 0, 0, 0, 100.0) for s in (1.0, 4.0, 16.0))
+    >>> larger_ratio_hint(MatchResult(False, "similarity", scales=rows), (56, 100), (1400, 1800))
+    'the high image is 18 times the low one in size, and ratios up to 16 were searched: if it lies inside the low image, its ratio is at least 18 (--scales 18-72 searches 18 to 72)'
+    >>> larger_ratio_hint(MatchResult(False, "similarity", scales=rows), (480, 640), (480, 640))
+    ''
+    """
+    if result.matched or not result.scales:
+        return ""
+    top = max(row.s for row in result.scales)
+    low_side, high_side = max(low_shape[:2]), max(high_shape[:2])
+    size = max(low_side, high_side) / max(min(low_side, high_side), 1)
+    if size <= top:
+        return ""
+    larger = "high" if high_side >= low_side else "low"
+    smaller = "low" if larger == "high" else "high"
+    lo = int(math.floor(size))
+    return (f"the {larger} image is {size:.0f} times the {smaller} one in size, and ratios up "
+            f"to {top:g} were searched: if it lies inside the {smaller} image, its ratio is at "
+            f"least {lo} (--scales {lo}-{4 * lo} searches {lo} to {4 * lo})")
+
+
+def order_hint(result: MatchResult, low_shape: Sequence[int], high_shape: Sequence[int]) -> str:
+    """The hint a "no" searched in the given order only (``--order given``) prints when its
+    first image (LOW, taken as the coarser one) is the larger, or "": the images may be the
+    other way round.
+
+    >>> from scalematch.config import Config
+    >>> given = MatchResult(False, "similarity", config=Config(order="given"))
+    >>> order_hint(given, (1536, 2048), (512, 683))[:60]
+    'only the given order was searched (--order given), and LOW i'
+    >>> order_hint(given, (512, 683), (1536, 2048)), order_hint(
+    ...     MatchResult(False, "similarity", config=Config()), (1536, 2048), (512, 683))
+    ('', '')
+    """
+    if result.matched or result.config is None or result.config.order != "given" or \
+            max(low_shape[:2]) <= max(high_shape[:2]):
+        return ""
+    return ("only the given order was searched (--order given), and LOW is the larger image: if "
+            "LOW is the finer one, --order auto (the default) tries both")
 
 
 # --------------------------------------------------------------------------- batch

@@ -114,6 +114,19 @@ def test_python_dash_m_runs_the_command_line():
     assert out.returncode == 0 and out.stdout.strip() == f"scalematch {__version__}"
 
 
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (a full disk)")
+def test_json_to_a_full_stdout_is_an_input_error_as_to_a_full_file():
+    """``--json -`` to a stdout that cannot take it exits 2 with one line, as ``--json FILE``
+    does (it was an internal error, exit 4)."""
+    with open("/dev/full", "w") as full:
+        out = subprocess.run([sys.executable, "-m", "scalematch", str(DEMO_LOW), str(DEMO_HIGH),
+                              "--json", "-", "-q"], stdout=full, stderr=subprocess.PIPE,
+                             text=True, timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.strip().splitlines() == [
+        "Error: cannot write --json to stdout: No space left on device"]
+
+
 def test_set_takes_groups_of_tilts_for_the_view_passes():
     from scalematch.cli import build_config
 
@@ -151,6 +164,10 @@ def test_nodata_takes_auto_none_or_a_grey_level_and_the_json_records_it(tmp_path
     bad = run(DEMO_LOW, DEMO_HIGH, "--nodata", "black")
     assert bad.exit_code == 2
     assert_one_line_error(bad, "--nodata must be auto, none or a grey level")
+    for level in ("300", "-5"):  # the images are matched as 8-bit grey: 0 to 255
+        beyond = run(DEMO_LOW, DEMO_HIGH, "--nodata", level)
+        assert beyond.exit_code == 2
+        assert_one_line_error(beyond, "--nodata must be a grey level from 0 to 255")
     data = json.loads(run(DEMO_LOW, DEMO_HIGH, "--nodata", "none", "--json", "-", "-q").stdout)
     assert data["config"]["nodata"]["rule"] == "none" and data["matched"]
     assert data["low"]["nodata"] == data["high"]["nodata"] == {"value": None, "share": 0.0}
@@ -654,3 +671,26 @@ def test_a_slow_no_with_views_says_how_to_get_a_quicker_one():
     assert slow_no_hint(replace(slow, timings={"total": SLOW_NO_HINT_S / 4})) == ""
     assert slow_no_hint(replace(slow, search=(plain,))) == ""  # no views: nothing to drop
     assert slow_no_hint(replace(slow, matched=True, reason="")) == ""
+
+
+def test_a_no_beyond_the_ratios_searched_says_which_scales_would_search_it(raccoon, tmp_path):
+    """A 41x pair (the whole photo 100 px wide against a detail 1,800 px wide) is a "no" over
+    the default ratios, 1 to 16; the hint names a --scales range that holds the ratio, and that
+    range matches it (within 2 %)."""
+    width = raccoon.shape[1]
+    low = cv2.resize(raccoon, (100, round(100 * raccoon.shape[0] / width)),
+                     interpolation=cv2.INTER_AREA)
+    high = cv2.resize(raccoon[200:650, 300:750], (1800, 1800), interpolation=cv2.INTER_CUBIC)
+    ratio = 4.0 * width / 100
+    cv2.imwrite(str(tmp_path / "low.png"), np.clip(low, 0, 255).astype(np.uint8))
+    cv2.imwrite(str(tmp_path / "high.png"), np.clip(high, 0, 255).astype(np.uint8))
+    no = run(tmp_path / "low.png", tmp_path / "high.png", "--no-views")
+    assert no.exit_code == 1, no.output
+    hint = re.search(r"--scales (\d+)-(\d+) searches", no.stderr)
+    assert hint and "the high image is 18 times the low one" in no.stderr, no.stderr
+    lo, hi = int(hint.group(1)), int(hint.group(2))
+    assert lo <= ratio <= hi
+    yes = run(tmp_path / "low.png", tmp_path / "high.png", "--scales", f"{lo}-{hi}", "--json",
+              "-", "-q")
+    assert yes.exit_code == 0, yes.output
+    assert abs(json.loads(yes.stdout)["resolution_ratio"] / ratio - 1) < 0.02

@@ -44,6 +44,10 @@ from ..checks import AT_LEAST_ONE, Bounds, NON_NEGATIVE, POSITIVE, SHARE, check_
 #: The rules a ``NoDataParams.rule`` may name besides a declared grey level
 RULES = ("auto", "none")
 
+#: The highest grey level a declared no-data value may be: the images are matched as 8-bit
+#: grey (:mod:`scalematch.imageio` scales 16-bit images down), so levels run from 0 to 255
+MAX_GREY_LEVEL = 255.0
+
 
 @dataclass(frozen=True)
 class NoDataParams:
@@ -93,11 +97,12 @@ class NoDataParams:
             try:
                 object.__setattr__(self, "rule", parse_rule(rule))
             except ValueError:
-                raise ValueError(f"nodata.rule must be 'auto', 'none' or a grey level, "
-                                 f"got {rule!r}") from None
+                raise ValueError(f"nodata.rule must be 'auto', 'none' or a grey level from 0 "
+                                 f"to {MAX_GREY_LEVEL:g}, got {rule!r}") from None
         elif not (isinstance(rule, Real) and not isinstance(rule, bool)
-                  and math.isfinite(float(rule))):
-            raise ValueError(f"nodata.rule must be 'auto', 'none' or a grey level, got {rule!r}")
+                  and 0.0 <= float(rule) <= MAX_GREY_LEVEL):
+            raise ValueError(f"nodata.rule must be 'auto', 'none' or a grey level from 0 to "
+                             f"{MAX_GREY_LEVEL:g}, got {rule!r}")
 
     @property
     def declared(self) -> Optional[float]:
@@ -114,6 +119,10 @@ def parse_rule(text: str) -> Union[str, float]:
     Traceback (most recent call last):
     ...
     ValueError: --nodata must be auto, none or a grey level (a number), got 'black'
+    >>> parse_rule("300")
+    Traceback (most recent call last):
+    ...
+    ValueError: --nodata must be a grey level from 0 to 255 (the images' 8-bit levels), got 300
     """
     t = str(text).strip().lower()
     if t in RULES:
@@ -124,6 +133,9 @@ def parse_rule(text: str) -> Union[str, float]:
         v = math.nan
     if not math.isfinite(v):
         raise ValueError(f"--nodata must be auto, none or a grey level (a number), got {text!r}")
+    if not 0.0 <= v <= MAX_GREY_LEVEL:
+        raise ValueError(f"--nodata must be a grey level from 0 to {MAX_GREY_LEVEL:g} (the "
+                         f"images' 8-bit levels), got {v:g}")
     return v
 
 
