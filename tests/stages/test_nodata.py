@@ -131,9 +131,12 @@ def test_the_json_says_what_was_taken_as_no_data(raccoon):
 
 def test_the_rule_typed_by_a_user():
     assert parse_rule("auto") == "auto" and parse_rule("NONE") == "none"
-    assert parse_rule("0") == 0.0 and math.isclose(parse_rule("-9.5"), -9.5)
-    with pytest.raises(ValueError, match="--nodata"):
-        parse_rule("nan")
+    assert parse_rule("0") == 0.0 and math.isclose(parse_rule("254.5"), 254.5)
+    for beyond in ("nan", "-9.5", "256"):  # the images are matched as 8-bit grey: 0 to 255
+        with pytest.raises(ValueError, match="--nodata"):
+            parse_rule(beyond)
+    with pytest.raises(ValueError, match="nodata.rule"):
+        NoDataParams(rule=300.0)
     assert NoDataParams(rule="3").rule == 3.0  # as --set nodata.rule=3 gives it
     with pytest.raises(ValueError, match="nodata.rule"):
         NoDataParams(rule="black")
