@@ -755,10 +755,12 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
                          else work.valid(step.direction)[0])
 
-        def look(t, outcome, view=p.view, low_feats=low_feats, valid=coarser_shown) -> Look:
+        def look(t, outcome, windows_below, view=p.view, low_feats=low_feats,
+                 valid=coarser_shown) -> Look:
             return look_again(t, Seen(outcome.described, with_nan(view.image, valid_in(view))),
                               Seen(low_feats.described, with_nan(low_feats.image, valid)),
-                              fit=fit_spec(cfg), guided=mode.guided, pixel=cfg.pixel)
+                              fit=fit_spec(cfg), guided=mode.guided, pixel=cfg.pixel,
+                              windows_below=windows_below)
 
         context = SearchContext(fit_spec(cfg), mode.orientation, searches,
                                 shown_scale(work, step.direction))

@@ -216,13 +216,15 @@ def evidence_line(result: MatchResult) -> str:
     e = result.evidence
     parts = [f"log10 NFA {e.log10_nfa:.1f}"] if np.isfinite(e.log10_nfa) else []
     # the final map's check where there is one (a match), else the search's (few inliers)
-    ncc, margin = (e.final_ncc, e.final_margin) if np.isfinite(e.final_ncc) else \
-        (e.pixel_ncc, e.pixel_margin)
+    final = np.isfinite(e.final_ncc)
+    ncc, margin = (e.final_ncc, e.final_margin) if final else (e.pixel_ncc, e.pixel_margin)
+    windows, agreeing, nearby = (
+        (e.near_windows, e.near_windows_agreeing, e.near_windows_nearby) if final else
+        (e.pixel_windows, e.pixel_windows_agreeing, e.pixel_windows_nearby))
     if np.isfinite(ncc):
         parts.append(f"pixels: ZNCC {ncc:.2f}, {margin:+.2f} against nearby placements")
-    if e.near_windows:  # the margin refused: the windows decided
-        parts.append(f"{e.near_windows_agreeing:.0%} of {e.near_windows} windows agree there, "
-                     f"{e.near_windows_nearby:.0%} nearby")
+    if windows:  # the margin fell short: the windows decided
+        parts.append(f"{agreeing:.0%} of {windows} windows agree there, {nearby:.0%} nearby")
     if np.isfinite(e.unique_ratio):
         parts.append(f"fits its place {e.unique_ratio:.3g}x better than anywhere else")
     if e.unique_windows:  # the ratio refused: the windows decided

@@ -77,6 +77,13 @@ class Evidence:
     pixel_ncc: float = math.nan  #: ZNCC of the pixels under the grown map
     pixel_margin: float = math.nan  #: how much better than the nearby wrong placements
     pixel_z: float = math.nan  #: the same in standard deviations of the nearby placements
+    #: the same by windows (``stages.pixelcheck.near_windows``), measured only when the margin
+    #: above falls short of ``decision.few_min_margin`` at log10 NFA ``few_max_log_nfa`` or
+    #: below: windows compared, the share that agrees at the grown map, the highest share at a
+    #: nearby placement
+    pixel_windows: int = 0
+    pixel_windows_agreeing: float = math.nan
+    pixel_windows_nearby: float = math.nan
     #: a transform about to be accepted, against every other placement (``uniqueness``):
     unique_claimed: float = math.nan  #: ZNCC of the finer image at the claimed placement
     unique_elsewhere: float = math.nan  #: the best ZNCC anywhere half a footprint away

@@ -410,3 +410,9 @@ def test_the_evidence_line_says_when_windows_decided():
     assert "80% of 20 windows agree at its place, 20% elsewhere" in line
     margin_only = replace(by_windows, evidence=build_evidence(dict(plain, final_margin=0.3)))
     assert "windows" not in evidence_line(margin_only)
+    # a refused few-inlier map: the second look's margin, and its windows where measured
+    look = dict(log10_nfa=-10.0, pixel_ncc=0.2, pixel_margin=0.05, pixel_windows=37,
+                pixel_windows_agreeing=0.2, pixel_windows_nearby=0.03)
+    refused = MatchResult(matched=False, model="similarity", evidence=build_evidence(look))
+    assert "+0.05 against nearby placements; 20% of 37 windows agree there, 3% nearby" in \
+        evidence_line(refused)

@@ -22,7 +22,7 @@ show evidence that an unrelated pair cannot produce:
    not degenerate (folded over, or smaller than ``min_area_px``). A footprint that lies mostly
    outside the coarser image (a telephoto frame overhanging the wide one) is normal and accepted
    when the evidence is overwhelming (``max_log_nfa_alone``) or when the pixels of the part
-   inside confirm a few-inlier map (:func:`pixels_confirm`); with weaker evidence at least
+   inside confirm a few-inlier map (:func:`look_confirms`); with weaker evidence at least
    ``min_inside`` of it must lie inside.
 4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
    (nearly) the same transform, as the paper's Table 1 shows for a true match.
@@ -69,7 +69,7 @@ class DecisionParams:
     #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
     #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
     #: docs/DESIGN.md, "What real pairs need"), or when the second look's pixels confirm it
-    #: (:func:`pixels_confirm`; taken for this at any count of inliers)
+    #: (:func:`look_confirms`; taken for this at any count of inliers)
     min_inside: float = 0.5
     #: another scale agrees when its transform maps the finer image within this many coarser
     #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
@@ -99,7 +99,10 @@ class DecisionParams:
     #: ... and its pixel check beats every nearby wrong placement by this much ZNCC (true
     #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
     #: docs/design/DECISION.md, "The ground for each threshold" and "Guided growth and the
-    #: pixel check, alone"); the uniqueness check (``min_unique_ratio``) follows, as for all
+    #: pixel check, alone"); the uniqueness check (``min_unique_ratio``) follows, as for all.
+    #: Short of it, the nearby placements compared window by window may confirm instead
+    #: (:func:`look_confirms`: an occluder sinks the one ZNCC; docs/design/DECISION.md, "The
+    #: second look, window by window")
     few_min_margin: float = 0.1
     #: ... or, with a pixel margin of at least this, the plain a-contrario bound
     #: (``max_log_nfa``): the pixels then decide. The NFA counts every search made (202 for a
@@ -413,6 +416,9 @@ class Look:
     ncc: float  #: ZNCC of the pixels under the grown map (nan: cannot tell)
     margin: float  #: ncc minus the best of the nearby wrong placements (nan: cannot tell)
     z: float  #: ncc against the nearby placements' mean, in their standard deviations
+    #: the same window by window (:func:`scalematch.stages.pixelcheck.near_windows`), measured
+    #: only when asked and the margin falls short (0 windows: not measured)
+    windows: NearWindows = NearWindows(0, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -426,9 +432,11 @@ class Seen:
 
 
 def look_again(t: np.ndarray, finer: Seen, coarser: Seen, *, fit: FitSpec, guided: GuidedParams,
-               pixel: PixelParams) -> Look:
+               pixel: PixelParams, windows_below: float = math.nan) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
-    the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`).
+    the grown map with the pixels (:func:`scalematch.stages.pixelcheck.pixel_check`); where its
+    margin is below ``windows_below`` (nan: never), window by window too
+    (:func:`scalematch.stages.pixelcheck.near_windows`).
 
     ``finer``: every described point of the finer image at the hypothesis' scale, and its
     pixels; ``coarser``: the coarser image's points and pixels. ``fit``: the model searched for
@@ -439,7 +447,9 @@ def look_again(t: np.ndarray, finer: Seen, coarser: Seen, *, fit: FitSpec, guide
     growth = grow(t, finer.described, coarser.described, fit.model, guided, fit.ransac)
     grown = growth.transform if growth.n_inliers else np.asarray(t, np.float64)
     check = pixel_check(coarser.image, finer.image, grown, pixel)
-    return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z)
+    windows = near_windows(coarser.image, finer.image, grown, pixel) \
+        if check.margin < windows_below else NearWindows(0, math.nan, math.nan)
+    return Look(grown, growth.inliers, growth.chance, check.ncc, check.margin, check.z, windows)
 
 
 def repeats(second: Second, second_nfa: float, k: int, area: float, winner: np.ndarray,
@@ -482,6 +492,26 @@ def pixels_confirm(log10_nfa: float, margin: float, params: DecisionParams) -> b
     tiers = ((params.few_max_log_nfa, params.few_min_margin),
              (params.max_log_nfa, params.few_clear_margin))
     return any(log10_nfa <= nfa and margin >= least for nfa, least in tiers)
+
+
+def look_windows_below(log10_nfa: float, params: DecisionParams) -> float:
+    """The pixel margin below which the second look of a transform at ``log10_nfa`` also
+    compares its nearby placements window by window (:func:`look_confirms`): the first tier's
+    ``few_min_margin`` for a transform beyond chance by ``few_max_log_nfa``; nan (never) above.
+    """
+    return params.few_min_margin if log10_nfa <= params.few_max_log_nfa else math.nan
+
+
+def look_confirms(log10_nfa: float, second: Optional[Look], params: DecisionParams) -> bool:
+    """Whether the second look's pixels confirm a transform at ``log10_nfa``: its margin
+    (:func:`pixels_confirm`), or, in the first tier (``few_max_log_nfa``), where an occluder in
+    the finer image sinks the one ZNCC at the hypothesis as at its neighbours, its windows
+    (:func:`near_windows_agree`, as the final map's: ``DecisionParams.min_near_windows``).
+    """
+    if second is None:
+        return False
+    return pixels_confirm(log10_nfa, second.margin, params) or (
+        log10_nfa <= params.few_max_log_nfa and near_windows_agree(second.windows, params))
 
 
 @dataclass(frozen=True)
@@ -540,7 +570,7 @@ def disagrees(row, params: "DecisionParams") -> bool:
 
 def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
            context: SearchContext,
-           look: Optional[Callable[[np.ndarray, object], Look]] = None) -> Decision:
+           look: Optional[Callable[[np.ndarray, object, float], Look]] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
     ``coarser_shape``, ``finer_shape``: the (H, W) of the images searched (or their views);
@@ -548,10 +578,10 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     threshold sets the a-contrario test's tolerance), seed
     (:func:`scalematch.stages.rivals.second_transform`), rotation groups and
     searches made, which the a-contrario count multiplies, and the scale its reasons are shown
-    at (:class:`SearchContext`). ``look(t, outcome)``, when given, takes the second look
-    (:func:`look_again`) at a best transform of ``look_min_inliers`` to ``min_inliers - 1``
-    inliers: its figures go in the evidence, and it may accept a transform of
-    ``few_min_inliers`` or more (:func:`pixels_confirm`).
+    at (:class:`SearchContext`). ``look(t, outcome, windows_below)``, when given, takes the
+    second look (:func:`look_again`, with :func:`look_windows_below`) at a best transform of
+    ``look_min_inliers`` to ``min_inliers - 1`` inliers: its figures go in the evidence, and it
+    may accept a transform of ``few_min_inliers`` or more (:func:`look_confirms`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
     """
     spec = model_of(context.fit.model)
@@ -621,9 +651,10 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     # the second look decides only below min_inliers, or for a footprint mostly outside the
     # coarser image (the final map's pixel tests follow every match, final_checks): elsewhere
     # it would cost a tenth of a plain pair's time for nothing
-    second = look(t, best) if look is not None and spec.has_ratio and (
-        params.look_min_inliers <= k < params.min_inliers
-        or _outside_unproven(t, shapes, lnfa, params)) else None
+    second = look(t, best, look_windows_below(lnfa, params)) \
+        if look is not None and spec.has_ratio and (
+            params.look_min_inliers <= k < params.min_inliers
+            or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)
     if k < params.min_inliers:
         if not _few_confirmed(w, second, params):
@@ -639,7 +670,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
                   "chance")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
-    figs, refusal = _footprint_tests(t, shapes, w, figs, params)
+    figs, refusal = _footprint_tests(t, shapes, w, figs, params, second)
     if refusal is None:
         figs, refusal = _agreement_test(t, w, with_t, shapes[1], figs, params,
                                         context.shown_scale)
@@ -660,14 +691,17 @@ def _with_look(figs: Figures, second: Optional[Look]) -> Figures:
     if second is None:
         return figs
     return {**figs, "grown_inliers": len(second.inliers), "grown_chance": second.chance,
-            "pixel_ncc": second.ncc, "pixel_margin": second.margin, "pixel_z": second.z}
+            "pixel_ncc": second.ncc, "pixel_margin": second.margin, "pixel_z": second.z,
+            "pixel_windows": second.windows.windows,
+            "pixel_windows_agreeing": second.windows.claimed,
+            "pixel_windows_nearby": second.windows.nearby}
 
 
 def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) -> bool:
     """Whether the second look accepts a winner of fewer than ``min_inliers``: enough inliers,
-    far enough beyond chance for its pixel margin (:func:`pixels_confirm`), grown enough."""
+    far enough beyond chance for its pixels (:func:`look_confirms`), grown enough."""
     return second is not None and w.k >= params.few_min_inliers and \
-        pixels_confirm(w.log10_nfa, second.margin, params) and \
+        look_confirms(w.log10_nfa, second, params) and \
         len(second.inliers) >= params.few_min_grown
 
 
@@ -684,8 +718,8 @@ def _outside_unproven(t: np.ndarray, shapes, lnfa: float, params: DecisionParams
 Refusal = Optional[Tuple[str, str]]
 
 
-def _footprint_tests(t: np.ndarray, shapes, w: Winner, figs: Figures,
-                     params: DecisionParams) -> Tuple[Figures, Refusal]:
+def _footprint_tests(t: np.ndarray, shapes, w: Winner, figs: Figures, params: DecisionParams,
+                     second: Optional[Look]) -> Tuple[Figures, Refusal]:
     """Test 3, a plausible footprint of ``t`` (finer px -> coarser px; ``shapes``: (coarser,
     finer) (H, W)): not folded over, not too small, inside enough unless the evidence is
     overwhelming or the second look's pixels confirm it. (figures with the footprint's,
@@ -703,7 +737,7 @@ def _footprint_tests(t: np.ndarray, shapes, w: Winner, figs: Figures,
         return figs, (f"the high image would cover only {area:.0f} px^2 of the low image",
                       "footprint area")
     if inside < params.min_inside and w.log10_nfa > params.max_log_nfa_alone and \
-            not pixels_confirm(w.log10_nfa, figs.get("pixel_margin", math.nan), params):
+            not look_confirms(w.log10_nfa, second, params):
         return figs, (f"only {inside:.0%} of the high image's footprint lies inside the "
                       f"low image", "footprint inside")
     return figs, None

@@ -71,11 +71,18 @@ def _outcomes(k: int, n: int, s: float = 8.0):
                ScaleOutcome(empty, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
 
 
-def _look(grown: int, margin: float):
+def _look(grown: int, margin: float, windows=None, asked=None):
+    """A second look that grows to ``grown`` inliers at pixel margin ``margin``, with the
+    near windows ``windows`` (a NearWindows) when the decision asks for them below that
+    margin; ``asked``, a list, records the margin below which it was asked."""
     from scalematch.stages.decision import Look
 
-    def look(t, outcome):
+    def look(t, outcome, windows_below=float("nan")):
+        if asked is not None:
+            asked.append(windows_below)
         pairs = np.hstack([outcome.src[:1].repeat(grown, 0), outcome.dst[:1].repeat(grown, 0)])
+        if windows is not None and margin < windows_below:
+            return Look(t, pairs, 0.5, 0.99, margin, 5.0, windows)
         return Look(t, pairs, 0.5, 0.99, margin, 5.0)
     return look
 
@@ -117,6 +124,38 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     verdict = decide(three, (768, 1024), (480, 640), **_params(config),
                    look=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
+
+
+def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_only():
+    """A margin short of ``few_min_margin`` (an occluder sinks the one ZNCC) is made up by the
+    windows of the nearby placements (``min_near_windows``, as the final map's), but only in
+    the first tier (log10 NFA at most ``few_max_log_nfa``); nearby placements that agree as
+    often, or too few windows, confirm nothing. The figures are those measured on a true
+    occluded map at ratio 8 (37 windows, 0.35 at the map, 0.03 nearby; margin 0.09)."""
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+    from scalematch.stages.pixelcheck import NearWindows
+
+    params = Config().decision
+    _, strong = _outcomes(k=5, n=8)  # log10 NFA -12.4
+    asked = []
+    occluded = _look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03), asked=asked)
+    good = decide(strong, (768, 1024), (480, 640), **_params(Config()), look=occluded)
+    assert asked == [params.few_min_margin]
+    assert good.matched, good.reason
+    assert good.evidence.pixel_windows == 37 and good.evidence.pixel_windows_agreeing == 0.35
+    for windows in (NearWindows(37, 0.35, 0.2), NearWindows(12, 0.6, 0.0),
+                    NearWindows(37, 0.2, 0.0)):
+        verdict = decide(strong, (768, 1024), (480, 640), **_params(Config()),
+                         look=_look(grown=5, margin=0.09, windows=windows))
+        assert not verdict.matched and verdict.test == "too few inliers", windows
+    _, weak = _outcomes(k=5, n=100)  # log10 NFA -5.0: the windows are not asked for
+    asked.clear()
+    verdict = decide(weak, (768, 1024), (480, 640), **_params(Config()),
+                     look=_look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03),
+                                asked=asked))
+    assert params.few_max_log_nfa < verdict.evidence.log10_nfa <= params.max_log_nfa
+    assert not verdict.matched and math.isnan(asked[0]) and verdict.evidence.pixel_windows == 0
 
 
 def test_an_overhanging_footprint_needs_overwhelming_evidence_or_pixels_that_confirm_it():
