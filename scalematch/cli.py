@@ -36,7 +36,7 @@ import numpy as np
 
 from . import __version__
 from .errors import internal_error
-from .config import MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
+from .config import MAX_SCALES, MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
 from .result import MatchResult, dumps
 
@@ -167,7 +167,15 @@ class InputError(click.ClickException):
 def parse_scales(text: str) -> Tuple[float, ...]:
     """"1-8" (unit steps), "2-12:0.5" (steps of 0.5), "1,2,3.5" or a mix ("1-4,6,8") -> scales.
 
-    Raises ``ValueError`` with a message that says the accepted forms.
+    Raises ``ValueError`` with a message that says the accepted forms, and for more than
+    ``MAX_SCALES`` scales before they are listed.
+
+    >>> parse_scales("1-4,6")
+    (1.0, 2.0, 3.0, 4.0, 6.0)
+    >>> parse_scales("1-16:0.001")
+    Traceback (most recent call last):
+    ...
+    ValueError: scales '1-16:0.001' are 15001 scales, more than the 64 searched at most; take a larger step ("1-16:0.25" is 61)
     """
     out: List[float] = []
     forms = 'use e.g. "1-8", "2-12:0.5" or "1,2,3.5"'
@@ -176,22 +184,14 @@ def parse_scales(text: str) -> Tuple[float, ...]:
             continue
         try:
             if "-" in item[1:]:
-                rng, _, step_txt = item.partition(":")
-                lo_txt, _, hi_txt = rng.partition("-")
-                lo, hi = float(lo_txt), float(hi_txt)
-                step = float(step_txt) if step_txt else 1.0
-                if hi < lo:
-                    raise ValueError(f"scales {item!r} go down: write the range from the "
-                                     f"smaller scale, {hi_txt}-{lo_txt}")
-                if not step > 0:
-                    raise ValueError(f"the step of scales {item!r} must be more than 0")
-                n = int(np.floor((hi - lo) / step + 1e-9))
-                out.extend(round(lo + k * step, 6) for k in range(n + 1))
+                out.extend(_scale_range(item, MAX_SCALES - len(out)))
             elif ":" in item:
                 raise ValueError
             else:
                 out.append(float(item))
         except ValueError as exc:
+            if "searched at most" in str(exc):
+                raise
             if str(exc).startswith(("scales ", "the step")):
                 raise ValueError(f"{exc}; {forms}") from None
             raise ValueError(f"cannot read scales {text!r} at {item!r}; {forms}") from None
@@ -206,6 +206,27 @@ def _has_path(obj: Any, path: str) -> bool:
             return False
         obj = getattr(obj, name)
     return True
+
+
+def _scale_range(item: str, room: int) -> List[float]:
+    """The scales of one range "lo-hi" or "lo-hi:step"; ``ValueError`` when it is malformed or
+    holds more than ``room`` scales (said before they are listed)."""
+    rng, _, step_txt = item.partition(":")
+    lo_txt, _, hi_txt = rng.partition("-")
+    lo, hi = float(lo_txt), float(hi_txt)
+    step = float(step_txt) if step_txt else 1.0
+    if not all(math.isfinite(v) for v in (lo, hi, step)):
+        raise ValueError(f"scales {item!r} are not finite numbers")
+    if hi < lo:
+        raise ValueError(f"scales {item!r} go down: write the range from the smaller scale, "
+                         f"{hi_txt}-{lo_txt}")
+    if not step > 0:
+        raise ValueError(f"the step of scales {item!r} must be more than 0")
+    n = int(np.floor((hi - lo) / step + 1e-9)) + 1
+    if n > room:
+        raise ValueError(f"scales {item!r} are {n} scales, more than the {MAX_SCALES} searched "
+                         f"at most; take a larger step (\"1-16:0.25\" is 61)")
+    return [round(lo + k * step, 6) for k in range(n)]
 
 
 def _coerce(text: str, current: Any, path: str) -> Any:
@@ -274,27 +295,43 @@ def set_path(config: Any, path: str, value: Any, whole: Optional[str] = None) ->
     return dataclasses.replace(config, **{head: value})
 
 
+@contextlib.contextmanager
+def about(option: str) -> Iterator[None]:
+    """A ``ValueError`` raised inside names ``option`` first (``--scales 0: scales must be >=
+    1, got 0.0``), so that the message says which of the options given was refused."""
+    try:
+        yield
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
+
+
 def build_config(mode: str, model: Optional[str], scales: Optional[str], seed: Optional[int],
-                 thresholds: Dict[str, Any], settings: Sequence[str]) -> Config:
-    """The Config of the command-line options; ``ValueError`` with a message when one is bad."""
+                 thresholds: Dict[str, Any], settings: Sequence[str],
+                 options: Optional[Dict[str, str]] = None) -> Config:
+    """The Config of the command-line options; ``ValueError`` with a message when one is bad,
+    naming the option (``options``: the option of each threshold's path, "--ratio-test" say).
+    """
     config = Config.preset(mode)  # the modes are presets of the same names
     changes: Dict[str, Any] = {}
     if model is not None:
         changes["model"] = model
-    if scales is not None:
-        changes["scales"] = parse_scales(scales)
     if seed is not None:
         changes["seed"] = seed
     if changes:
         config = dataclasses.replace(config, **changes)
+    if scales is not None:
+        with about(f"--scales {scales}"):
+            config = dataclasses.replace(config, scales=parse_scales(scales))
     for path, value in thresholds.items():
         if value is not None:
-            config = set_path(config, path, value)
+            with about(f"{(options or {}).get(path, path)} {value}"):
+                config = set_path(config, path, value)
     for item in settings:
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
             raise ValueError(f"--set needs PATH=VALUE (e.g. harris.threshold=50), got {item!r}")
-        config = set_path(config, key.strip(), value.strip())
+        with about(f"--set {item}"):
+            config = set_path(config, key.strip(), value.strip())
     return config
 
 
@@ -319,7 +356,7 @@ def scale_table(result: MatchResult) -> str:
     for k, r in enumerate(result.scales):
         flag = "  skipped" if r.skipped else ("  <- best" if r.s == result.best_scale else
                                               "  ratio far from s" if k in off else "")
-        ratio = f"{r.ratio:7.3f}" if np.isfinite(r.ratio) and abs(r.ratio) < 1e3 else f"{'-':>7}"
+        ratio = f"{r.ratio:7.3f}" if np.isfinite(r.ratio) else f"{'-':>7}"
         rot = f"{r.rotation_deg:7.1f}" if np.isfinite(r.rotation_deg) else f"{'-':>7}"
         lines.append(f"{r.s:7.3g} {r.points:7d} {r.initial:7d} {r.kept:6d} {r.inliers:7d} "
                      f"{r.outlier_pct:6.1f} {ratio} {rot}{flag}")
@@ -585,7 +622,8 @@ def cli() -> None:
     """Match a low-resolution image against a high-resolution image of the same scene with
     unknown zoom (2x-16x) and rotation (Dufournaud, Schmid & Horaud, CVIU 2004).
 
-    Without a command name, the arguments go to the match command.
+    Without a command name, the arguments go to the match command. Each command's
+    options: scalematch match --help, scalematch batch --help.
 
     \b
     Examples:
@@ -646,10 +684,11 @@ def _search_options() -> List[Callable]:
                           "every pixel is scene. No-data keeps no points and is left out of "
                           "the pixel tests; a clipped sky or a backdrop is scene. The JSON's "
                           "low.nodata and high.nodata say what was taken. [default: auto]"),
-        click.option("--working-size", type=click.IntRange(min=0), default=None, metavar="PX",
+        click.option("--working-size", type=click.INT, default=None, metavar="PX",
                      help="Match an image whose longer side exceeds PX at that size and give "
-                          "the answer in its own pixels (0: always full size; the high image "
-                          "only with --order auto). [default: 2048]"),
+                          f"the answer in its own pixels: 0 (always full size) or at least "
+                          f"{MIN_WORKING_SIDE_PX}; the high image only with --order auto. "
+                          "[default: 2048]"),
         click.option("--scales", metavar="LIST",
                      help='Scales s of the high-res image to try: "1-8", "2-12:0.5" or '
                           '"1,2,3.5". [default: 1-16 in third octaves; paper mode 1-8]'),
@@ -702,18 +741,18 @@ def _with_defaults(text: str, config: Any) -> str:
 
 def _config_from(kwargs: Dict[str, Any]) -> Config:
     base = Config()
-    thresholds = {}
+    thresholds, options = {}, {}
     for name, paths, _, _ in THRESHOLD_OPTIONS:
         value = kwargs.pop("thr_" + name[2:].replace("-", "_"), None)
         for p in paths:
             if _has_path(base, p):
-                thresholds[p] = value
+                thresholds[p], options[p] = value, name
     try:
         config = build_config(kwargs.pop("mode"), kwargs.pop("model"), kwargs.pop("scales"),
                               kwargs.pop("seed"), thresholds,
                               tuple(kwargs.pop("settings"))
                               + (f"order={kwargs.pop('order')}",
-                                 f"views.enabled={kwargs.pop('views')}"))
+                                 f"views.enabled={kwargs.pop('views')}"), options)
         budget = kwargs.pop("time_budget")
         if budget is not None and math.isinf(budget) and budget > 0:
             budget = None  # inf: no limit, as without the option
@@ -727,7 +766,7 @@ def _config_from(kwargs: Dict[str, Any]) -> Config:
 
             config = set_path(config, "nodata.rule", parse_rule(nodata))
         working = kwargs.pop("working_size")
-        if working is not None and 0 < working < MIN_WORKING_SIDE_PX:
+        if working is not None and (working < 0 or 0 < working < MIN_WORKING_SIDE_PX):
             raise ValueError(f"--working-size must be 0 (always full size) or at least "
                              f"{MIN_WORKING_SIDE_PX} px, got {working}")
         if working is not None:  # 0: always full size
@@ -845,14 +884,25 @@ def _json_of_input_error(json_path: Optional[str], json_file: Optional[Path], lo
 
 def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
                       inputs: Sequence[str]) -> None:
-    """Refuse (exit 2) an output file of ``-o`` or ``--json`` that is one of ``inputs``."""
+    """Refuse (exit 2) an output file of ``-o`` or ``--json`` that is one of ``inputs`` or
+    one of the other's files, and ``-o -`` (standard output is for ``--json -`` only: the
+    pictures are files)."""
     from .render import OUTPUT_FILES
 
+    if out_dir is not None and str(out_dir) == "-":
+        raise InputError("--out-dir - : the pictures and matches.csv are files, not a stream; "
+                         "give a folder (--json - writes the JSON to standard output)")
     if out_dir is not None:
         for name in OUTPUT_FILES:
             check_not_an_input(out_dir / name, inputs, "--out-dir", "folder")
     if json_file is not None:
         check_not_an_input(json_file, inputs, "--json")
+    if out_dir is not None and json_file is not None:
+        for name in OUTPUT_FILES:
+            if _file_id(out_dir / name) == _file_id(json_file):
+                raise InputError(f"--json {json_file} is {name}, which --out-dir {out_dir} "
+                                 f"writes: one would overwrite the other; name the JSON "
+                                 f"otherwise (result.json, say)")
 
 
 def _check_writable(out_dir: Optional[Path], json_file: Optional[Path]) -> List[Path]:

@@ -24,6 +24,21 @@ W_MIN = 1e-12
 #: direction: at 10^8 px the epipolar lines across a 10^4 px image turn by under 10^-4 rad
 EPIPOLE_FAR = 1e8
 
+#: The ratios a fitted map can mean: beyond 1000 (or under 1/1000) an image of a few thousand
+#: px would span a few px of the other or less. Such a ratio is a degenerate fit (all points
+#: sent to one), not a zoom, and is reported as none (NaN, null in the JSON).
+USABLE_RATIOS = (1e-3, 1e3)
+
+
+def usable_ratio(ratio: float) -> float:
+    """``ratio`` when it is within ``USABLE_RATIOS``, else NaN.
+
+    >>> usable_ratio(3.0), usable_ratio(7.49e19), usable_ratio(float("inf"))
+    (3.0, nan, nan)
+    """
+    lo, hi = USABLE_RATIOS
+    return ratio if lo < ratio < hi else math.nan
+
 
 def similarity_matrix(scale: float, angle_deg: float, tx: float = 0.0, ty: float = 0.0) -> np.ndarray:
     """2x3 matrix of x' = scale * R(angle) x + t (angle counter-clockwise on screen is negative).

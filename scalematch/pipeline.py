@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from .config import Config
-from .geometry import answer_parts, finer_to_coarser
+from .geometry import answer_parts, finer_to_coarser, usable_ratio
 from .imageio import grey_levels
 from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
                      StepRecord, build_evidence)
@@ -231,6 +231,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
     if n_in and model_of(config.model).has_ratio:
         # where the inliers are: a homography's ratio varies across the image (perspective)
         ratio, angle, _ = answer_parts(best.transform, best_src[best.inliers])
+        ratio = usable_ratio(ratio)
     initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,
                    inliers=n_in, outlier_pct=100.0 * (1 - n_in / initial) if initial else 100.0,

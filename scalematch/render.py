@@ -701,7 +701,9 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
 
     Scales the probe skipped as hopeless have no bar and an asterisk on their label; a scale
     whose fit's ratio contradicts it (:func:`disagreeing_rows`) has a light grey bar, as the
-    decision does not count it, however many inliers it has.
+    decision does not count it, however many inliers it has. Each bar is its scale's own fit;
+    the answer is that fit refined on the matches of every scale (and grown), so where its
+    inliers differ from the winning bar's the title gives both.
     """
     rows = list(result.scales)
     labels = scale_labels(rows)
@@ -712,6 +714,8 @@ def scale_plot(result: MatchResult, size: Tuple[int, int] = (900, 500)) -> np.nd
     if result.matched:
         title = (f"inliers per scale: best s = {result.best_scale:.3g}, "
                  f"ratio {result.resolution_ratio:.2f}")
+        if best is not None and rows[best].inliers != result.n_inliers:
+            title += f"; the answer, refined over every scale: {result.n_inliers} inliers"
     else:
         title = "inliers per scale: no reliable match"
     xlabel = "scale s of the high-resolution image"

@@ -310,7 +310,22 @@ MEANINGLESS = [("--ransac-threshold", "-1", "ransac.threshold_px must be > 0"),
                ("--ransac-threshold", "nan", "ransac.threshold_px must be > 0, got nan"),
                ("--ratio-test", "1.5", "matcher.ratio must be in (0, 1]"),
                ("--ratio-test", "0", "matcher.ratio must be in (0, 1]"),
-               ("--ransac-iterations", "0", "ransac.max_iters must be an integer in [1, 2147483647]"),
+               ("--ransac-iterations", "0", "ransac.max_iters must be an integer in [1, 100000]"),
+               # options that multiply the work are bounded at the door, named
+               ("--ransac-iterations", "1000000",
+                "--ransac-iterations 1000000: ransac.max_iters must be an integer in [1, 100000]"),
+               ("--scales", "1-16:0.001", "--scales 1-16:0.001: scales '1-16:0.001' are 15001 "
+                                          "scales, more than the 64 searched at most"),
+               ("--scales", "1-1e300:0.5", "more than the 64 searched at most"),
+               ("--scales", "1-inf", "--scales 1-inf: scales '1-inf' are not finite numbers"),
+               ("--scales", ",".join(str(1 + k / 10) for k in range(65)),
+                "scales: at most 64 are searched, got 65"),
+               ("--scales", "0", "--scales 0: scales must be >= 1, got 0.0"),
+               ("--set", "views.longitude_step_deg=1", "--set views.longitude_step_deg=1: views: "
+                                                       "the passes hold 3600 views"),
+               ("--set", "scales=0", "--set scales=0: scales must be >= 1"),
+               ("--working-size", "-3", "--working-size must be 0 (always full size) or at "
+                                        "least 64 px, got -3"),
                ("--harris-threshold", "-5", "harris.threshold must be >= 0"),
                ("--min-inliers", "-1", "decision.min_inliers must be an integer in [0, 2147483647]"),
                ("--max-log-nfa", "inf", "decision.max_log_nfa must be a finite number"),
@@ -337,6 +352,17 @@ def test_meaningless_option_values_are_usage_errors(tmp_path, flat_pair, command
     pairs.write_text(f"{flat_pair[0]},{flat_pair[1]}\n")
     args = [command, *flat_pair] if command == "match" else [command, pairs]
     assert_one_line_error(run(*args, option, value), needle)
+
+
+def test_the_working_size_help_gives_the_values_taken():
+    text = run("match", "--help").output
+    assert "0 (always full size) or at least 64" in " ".join(text.split())
+    assert "x>=0" not in text  # 1 to 63 are refused: the range shown would mislead
+
+
+def test_the_group_help_says_where_the_options_are():
+    text = " ".join(run("--help").output.split())
+    assert "scalematch match --help" in text and "scalematch batch --help" in text
 
 
 def test_quiet_and_verbose_together_are_a_usage_error(flat_pair):
@@ -615,6 +641,24 @@ def test_json_never_overwrites_an_input(flat_pair):
         last = assert_one_line_error(run(low, high, "--json", target), "is an input")
         assert "--json" in last and "overwritten" in last
     assert low.read_bytes() == before
+
+
+@pytest.mark.parametrize("name", ["overlay.png", "matches.csv", "scales.png"])
+def test_json_onto_a_file_of_the_out_dir_is_refused_before_anything_is_written(tmp_path,
+                                                                               flat_pair, name):
+    folder = tmp_path / "out"
+    for target in (folder / name, folder / "sub" / ".." / name):
+        last = assert_one_line_error(run(*flat_pair, "-o", folder, "--json", target),
+                                     f"is {name}, which --out-dir")
+        assert "overwrite" in last
+    assert not folder.exists()  # refused at the door: no folder made, nothing written
+
+
+def test_out_dir_dash_is_refused_where_json_dash_means_stdout(tmp_path, flat_pair, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    last = assert_one_line_error(run(*flat_pair, "-o", "-"), "--out-dir -")
+    assert "--json -" in last
+    assert not (tmp_path / "-").exists()
 
 
 @pytest.mark.parametrize("name", ["overlay.png", "matches.csv"])

@@ -46,7 +46,12 @@ def test_an_unknown_preset_names_the_known_ones():
     (lambda: Config(time_budget_s=0.0), "time_budget_s must be > 0, got 0.0"),
     (lambda: Config(ransac=RansacParams(threshold_px=-1)),
      "ransac.threshold_px must be > 0, got -1"),
-    (lambda: RansacParams(max_iters=2.5), "ransac.max_iters must be an integer in [1, 2147483647], got 2.5"),
+    (lambda: RansacParams(max_iters=2.5), "ransac.max_iters must be an integer in [1, 100000], got 2.5"),
+    # what multiplies the work of a search is bounded where it is made
+    (lambda: RansacParams(max_iters=100_001), "ransac.max_iters must be an integer in [1, 100000]"),
+    (lambda: Config(scales=tuple(1 + k / 10 for k in range(65))),
+     "scales: at most 64 are searched, got 65"),
+    (lambda: ViewParams(longitude_step_deg=10.0), "the passes hold 360 views"),
     (lambda: HarrisParams(threshold=float("nan")), "harris.threshold must be >= 0, got nan"),
     (lambda: DecisionParams(min_inside=1.5), "decision.min_inside must be in [0, 1]"),
     (lambda: ViewParams(passes=((0.5,),)), "views.passes must be >= 1, got 0.5"),
@@ -152,8 +157,16 @@ def test_every_number_of_every_parameter_group_has_its_range_declared_once():
 
 
 def test_a_count_past_what_opencv_takes_is_refused_when_it_is_made():
-    """OpenCV takes its counts as C ints: 2^31 iterations is refused by the check, naming the
+    """OpenCV takes its counts as C ints: 2^31 points is refused by the check, naming the
     value, not by OpenCV deep inside a match (an internal error)."""
-    with pytest.raises(ValueError, match=r"ransac.max_iters must be an integer in \[1, 2147483647\]"):
-        RansacParams(max_iters=2**31)
-    assert RansacParams(max_iters=2**31 - 1).max_iters == 2**31 - 1
+    with pytest.raises(ValueError, match=r"harris.max_points must be an integer in \[0, 2147483647\]"):
+        HarrisParams(max_points=2**31)
+    assert HarrisParams(max_points=2**31 - 1).max_points == 2**31 - 1
+
+
+def test_the_bounds_on_work_admit_the_largest_settings_the_docs_name():
+    """64 scales, 200 views and 100,000 RANSAC iterations hold what the presets and the guide
+    use: half steps over 1-32, a longitude step of 18 degrees, the default cap times 20."""
+    assert len(Config(scales=tuple(1 + k / 2 for k in range(63))).scales) == 63
+    assert ViewParams(longitude_step_deg=18.0).longitude_step_deg == 18.0
+    assert RansacParams(max_iters=100_000).max_iters == 100_000

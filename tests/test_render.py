@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
+import json
+import math
 
 import cv2
 import numpy as np
@@ -416,3 +419,33 @@ def test_the_evidence_line_says_when_windows_decided():
     refused = MatchResult(matched=False, model="similarity", evidence=build_evidence(look))
     assert "+0.05 against nearby placements; 20% of 37 windows agree there, 3% nearby" in \
         evidence_line(refused)
+
+
+def test_the_scale_chart_gives_the_answers_inliers_where_they_differ_from_the_winning_bar(
+        pair, monkeypatch):
+    """The verdict counts the answer's inliers (its fit refined over every scale), the bars
+    each scale's own fit: a title that gave only the bars read as a contradiction (6 against
+    a winning bar of 5)."""
+    import scalematch.render as render
+
+    seen = []
+    monkeypatch.setattr(render, "bar_chart", lambda *a, titles, **k: seen.append(titles))
+    res = make_result(pair[2])  # the winning bar (s = 3) has 40 inliers, the answer 40
+    render.scale_plot(res)
+    more = dataclasses.replace(res, inliers=np.vstack([res.inliers, res.inliers[:6]]))
+    render.scale_plot(more)
+    assert "refined" not in seen[0].title
+    assert seen[1].title.endswith("the answer, refined over every scale: 46 inliers")
+
+
+def test_a_degenerate_fits_ratio_is_none_in_the_table_and_the_json():
+    """A fit sending every point to one gives a ratio like 7.49e+19: not a zoom. The table's
+    row holds NaN (null in the JSON), and the decision ignores the row as before (a NaN ratio
+    is as far from its scale as any)."""
+    from scalematch.geometry import usable_ratio
+    from scalematch.stages.decision import DecisionParams, disagrees
+
+    row = ScaleRow(8.0, usable_ratio(7.49e19), 346, 102, 24, 5, 95.1, 150.5)
+    assert math.isnan(row.ratio) and disagrees(row, DecisionParams())
+    res = dataclasses.replace(collapsed_fit_result(), scales=(row,))
+    assert json.loads(res.to_json("a.png", "b.png"))["scales"][0]["ratio"] is None

@@ -604,8 +604,8 @@ def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
     """The "no" when no scale's transform agrees with its own scale."""
     best = max(with_t, key=lambda o: o.row.inliers)
     implied = best.row.ratio * shown_scale
-    implies = (f"implies a ratio of {implied:.3g}" if 1e-3 < implied < 1e3 else
-               "implies no usable ratio")  # inf, 2.5e+19: no picture
+    implies = (f"implies a ratio of {implied:.3g}" if math.isfinite(implied) else
+               "implies no usable ratio")  # a degenerate fit: geometry.usable_ratio
     return Decision(False, f"no scale found a transform consistent with its own scale "
                     f"(the one with the most inliers, {best.row.inliers} at scale "
                     f"{best.row.s * shown_scale:.3g}, {implies})",

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar, List, Mapping, Optional, Tuple
+from typing import ClassVar, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -38,6 +38,10 @@ TILT4_PASSES: Tuple[Tuple[float, ...], ...] = PASSES[:2]
 #: ``ViewParams.coarser_directions``: the coarser image's views in one direction of the search
 #: (the one whose coarser image is the smaller), or in both
 COARSER_DIRECTIONS = ("one", "both")
+#: Most views the passes may hold together: each view is a search of its own at every scale, so
+#: the time of a "no" grows with their number. Four times the default's 50 (a longitude step
+#: of 18 degrees, a quarter of Morel & Yu's 72, stays within it).
+MAX_VIEWS = 200
 
 
 @dataclass(frozen=True)
@@ -135,6 +139,12 @@ class ViewParams:
             for t in tilts:
                 in_range("views", "passes", t, FACTOR)
         one_of("views", "coarser_directions", self.coarser_directions, COARSER_DIRECTIONS)
+        n = views_in(self.passes, self.longitude_step_deg)
+        if n > MAX_VIEWS:
+            raise ValueError(f"views: the passes hold {n} views at a longitude step of "
+                             f"{self.longitude_step_deg:g} degrees, more than the {MAX_VIEWS} "
+                             f"searched at most; take fewer tilts or a larger "
+                             f"views.longitude_step_deg")
 
 
 @dataclass(frozen=True)
@@ -157,12 +167,29 @@ class View:
         return self.tilt == 1.0
 
 
+def n_longitudes(tilt: float, step_deg: float) -> int:
+    """How many longitudes :func:`longitudes` gives ``tilt``.
+
+    >>> n_longitudes(1.0, 72.0), n_longitudes(2.0, 72.0), n_longitudes(8.0, 72.0)
+    (1, 5, 20)
+    """
+    return 1 if tilt <= 1.0 else int(math.ceil(180.0 / (step_deg / tilt) - 1e-9))
+
+
 def longitudes(tilt: float, step_deg: float) -> List[float]:
     """Longitudes phi in [0, 180) for ``tilt``: n equal steps of at most ``step_deg / tilt``."""
-    if tilt <= 1.0:
-        return [0.0]
-    n = int(math.ceil(180.0 / (step_deg / tilt) - 1e-9))
-    return [k * 180.0 / n for k in range(n)]
+    n = n_longitudes(tilt, step_deg)
+    return [k * 180.0 / n for k in range(n)] if tilt > 1.0 else [0.0]
+
+
+def views_in(passes: Sequence[Sequence[float]], step_deg: float) -> int:
+    """The views that ``passes`` of tilts hold at a longitude step of ``step_deg``, counted
+    without making them (the bound ``MAX_VIEWS`` is checked before a long list is built).
+
+    >>> views_in(PASSES, 72.0)
+    50
+    """
+    return sum(n_longitudes(t, step_deg) for tilts in passes for t in tilts if t > 1.0)
 
 
 def view_plan(params: ViewParams) -> List[List[Tuple[float, float]]]:
