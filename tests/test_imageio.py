@@ -399,6 +399,53 @@ def test_threads_decoding_damaged_files_each_get_their_own_words(tmp_path, bgr, 
     assert capfd.readouterr().err == ""
 
 
+def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, bgr):
+    """In a process of its own (libpng and libjpeg write to descriptor 2, which CliRunner does
+    not catch): a PNG with a bad CRC and a truncated JPEG are exit 2 with one "Error:" line
+    naming the file; a JPEG whose scan is cut short is matched as decoded, silent under -q,
+    its warning in the JSON (and in a batch line), one "Warning:" line without -q."""
+    import json
+    import subprocess
+    import sys
+
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "scalematch", *map(str, args)],
+                              capture_output=True, text=True, timeout=120)
+
+    high = ROOT / "data" / "demo_high.png"
+    demo = cv2.imread(str(ROOT / "data" / "demo_low.png"), cv2.IMREAD_COLOR)
+    crc = write(tmp_path / "crc.png", png_with_bad_idat_crc(demo))
+    cut = write(tmp_path / "cut-scan.jpg", jpeg_with_a_cut_scan(demo))
+    truncated = write(tmp_path / "truncated.jpg", cut.read_bytes()[:-2])
+
+    for path, needle in ((crc, 'the PNG decoder says "IDAT: CRC error"'),
+                         (truncated, "JPEG file is truncated")):
+        run = cli(path, high, "--no-views", "-q")
+        assert run.returncode == 2, (run.returncode, run.stderr)
+        assert run.stderr.splitlines() == [run.stderr.strip()], run.stderr  # one line
+        assert run.stderr.startswith(f"Error: {path}: ") and needle in run.stderr, run.stderr
+
+    warning = (f'{cut}: the JPEG decoder says "Corrupt JPEG data: premature end of data '
+               f'segment"; the image is used as decoded (copy or download the file again if it '
+               f'is damaged)')
+    quiet = cli(cut, high, "--no-views", "-q", "--json", "-")
+    assert quiet.returncode in (0, 1) and quiet.stderr == "", quiet.stderr
+    record = json.loads(quiet.stdout)
+    image = record["low"] if record["order"] == "given" else record["high"]
+    assert image["path"] == str(cut) and image["warning"] == warning
+    other = record["high"] if record["order"] == "given" else record["low"]
+    assert other["warning"] is None
+    said = cli(cut, high, "--no-views").stderr.splitlines()
+    assert said[0] == f"Warning: {warning}" and len(said) == 2, said  # then the verdict
+    pairs = write(tmp_path / "pairs.csv", f"{cut},{high}\n{crc},{high}\n".encode())
+    batch = cli("batch", pairs, "--no-views", "-q")
+    assert batch.returncode == 3 and batch.stderr == "", batch.stderr
+    lines = [json.loads(line) for line in batch.stdout.splitlines()]  # as the pairs finish
+    failed, done = sorted(lines, key=lambda line: "error" not in line)
+    assert failed["error"].startswith(f"{crc}: cannot decode the image: the PNG decoder says")
+    assert {done["low"]["warning"], done["high"]["warning"]} == {warning, None}
+
+
 def test_to_bgr8_layouts(bgr):
     grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
     for img in (bgr, grey, grey.astype(np.float32), bgr.astype(np.uint16) * 257,
