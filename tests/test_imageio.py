@@ -401,12 +401,16 @@ def test_threads_decoding_damaged_files_each_get_their_own_words(tmp_path, bgr, 
 
 def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, bgr):
     """In a process of its own (libpng and libjpeg write to descriptor 2, which CliRunner does
-    not catch): a PNG with a bad CRC and a truncated JPEG are exit 2 with one "Error:" line
+    not catch, and Python's logging says Pillow's records on stderr only where no logging is
+    set up, as pytest sets it up): a PNG with a bad CRC, a TIFF of 16003 samples per pixel
+    (which Pillow logs as it gives up) and a truncated JPEG are exit 2 with one "Error:" line
     naming the file; a JPEG whose scan is cut short is matched as decoded, silent under -q,
     its warning in the JSON (and in a batch line), one "Warning:" line without -q."""
     import json
     import subprocess
     import sys
+
+    from scalematch.lab.fuzz import tiff_entries
 
     def cli(*args):
         return subprocess.run([sys.executable, "-m", "scalematch", *map(str, args)],
@@ -417,8 +421,13 @@ def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, 
     crc = write(tmp_path / "crc.png", png_with_bad_idat_crc(demo))
     cut = write(tmp_path / "cut-scan.jpg", jpeg_with_a_cut_scan(demo))
     truncated = write(tmp_path / "truncated.jpg", cut.read_bytes()[:-2])
+    tiff = bytearray(cv2.imencode(".tif", demo)[1].tobytes())
+    at = next(pos for pos, tag, _ in tiff_entries(tiff) if tag == 277) + 8  # SamplesPerPixel
+    tiff[at:at + 2] = (16003).to_bytes(2, "little" if tiff[:2] == b"II" else "big")
+    samples = write(tmp_path / "samples.tif", bytes(tiff))
 
     for path, needle in ((crc, 'the PNG decoder says "IDAT: CRC error"'),
+                         (samples, "cannot decode the image"),
                          (truncated, "JPEG file is truncated")):
         run = cli(path, high, "--no-views", "-q")
         assert run.returncode == 2, (run.returncode, run.stderr)
