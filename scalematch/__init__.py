@@ -41,6 +41,7 @@ _EXPORTS = {
     "PAPER_SCALES": ".stages.detector",
     "detect": ".stages.detector",
     "ImageError": ".imageio",
+    "ImageWarning": ".imageio",
     "read_grey": ".imageio",
     "MatchResult": ".result",
     "ScaleRow": ".result",

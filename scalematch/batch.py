@@ -490,7 +490,8 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
         result = match(grey_of_file(low.image, pair.low_file),
                        grey_of_file(high.image, pair.high_file), config,
                        decoded_factors=(low.factor, high.factor))
-        return with_columns(result.to_dict(pair.low, pair.high, low.shape, high.shape), pair)
+        return with_columns(result.to_dict(pair.low, pair.high, low.shape, high.shape,
+                                           (low.warning, high.warning)), pair)
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
         error, kind = str(exc), INPUT
     except Exception as exc:  # noqa: BLE001 (a pair must never stop the batch; MemoryError too)

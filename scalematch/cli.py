@@ -846,7 +846,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
             _json_of_input_error(json_path, json_file, low, high, config):
         result = _match_images(*grey, config, factors, quiet)
     if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        _write_json(result.to_json(low, high, low_read.shape, high_read.shape), json_file)
+        _write_json(result.to_json(low, high, low_read.shape, high_read.shape,
+                                   warnings=(low_read.warning, high_read.warning)), json_file)
     written: Dict[str, Path] = {}
     if out_dir is not None:
         written = _write_pictures(out_dir, low, high, low_read.image, high_read.image, result,
@@ -854,7 +855,8 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     if not quiet:
         json_written = json_path if json_file is not None else None
         for text in _match_report(result, written, json_written, verbose,
-                                  (low_read.shape, high_read.shape)):
+                                  (low_read.shape, high_read.shape),
+                                  (low_read.warning, high_read.warning)):
             click.echo(text, err=True)
     sys.exit(EXIT_MATCHED if result.matched else EXIT_NO_MATCH)
 
@@ -991,9 +993,12 @@ def _write_pictures(out_dir: Path, low: str, high: str, low_img: np.ndarray, hig
 
 
 def _match_report(result: MatchResult, written: Dict[str, Path], json_written: Optional[str],
-                  verbose: bool, shapes: Optional[Tuple[Sequence[int], Sequence[int]]] = None
-                  ) -> List[str]:
-    """What the match says on stderr: the verdict line (``summary``), after the per-scale table,
+                  verbose: bool, shapes: Optional[Tuple[Sequence[int], Sequence[int]]] = None,
+                  warnings: Sequence[str] = ()) -> List[str]:
+    """What the match says on stderr: first, a ``Warning:`` line for each of ``warnings`` (what
+    the reading of an image warned of: ``Decoded.warning``, a damaged file decoded anyway,
+    said once, here rather than before the match, so that a run ending in an error says only
+    its ``Error:`` line); the verdict line (``summary``), after the per-scale table,
     the timings and the files written (``written`` by ``-o``, ``json_written`` by ``--json``: its
     path as given) when ``verbose``; without ``verbose``, where the files went, in one line.
     A slow "no" of a search with views says how to get a quicker one (:func:`slow_no_hint`); a
@@ -1002,7 +1007,7 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
     image is the larger, how to try the other (:func:`order_hint`). The verdict comes last."""
     hints = [slow_no_hint(result)] + ([larger_ratio_hint(result, *shapes),
                                         order_hint(result, *shapes)] if shapes else [])
-    lines = [hint for hint in hints if hint]
+    lines = [f"Warning: {text}" for text in warnings if text] + [hint for hint in hints if hint]
     if verbose:
         lines.append(scale_table(result))
         lines.append("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import re
 import struct
 import threading
@@ -113,10 +114,39 @@ def _pillow_unguarded() -> Iterator[None]:
             Image.MAX_IMAGE_PIXELS = saved
 
 
+class _NotWhileReading(logging.Filter):
+    """Drops Pillow's log records in a thread that is reading a header here (``_READING``)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (getattr(_READING, "header", False) and record.name.split(".")[0] == "PIL")
+
+
+#: Which threads are reading a header with Pillow (``_READING.header``).
+_READING = threading.local()
+_QUIET_PILLOW = _NotWhileReading()
+
+
+@contextlib.contextmanager
+def _pillow_unlogged() -> Iterator[None]:
+    """Pillow's log records of the block not said on stderr. Pillow logs an error as it gives
+    up on a TIFF with more samples per pixel than it decodes ("More samples per pixel than can
+    be decoded: 16003"), and Python's logging says a record on stderr when the program set up
+    no logging (``logging.lastResort``): here, that Pillow cannot read a header only means the
+    readers of this module are tried next. The records still reach the handlers a program set
+    up; only the last resort drops them, and only those of the thread reading."""
+    if logging.lastResort is not None:
+        logging.lastResort.addFilter(_QUIET_PILLOW)  # once: a filter is added only once
+    _READING.header = True
+    try:
+        yield
+    finally:
+        _READING.header = False
+
+
 def _pillow_header(data: bytes) -> Header:
     from PIL import Image  # imported when a file is read (40-46 ms), not with scalematch
 
-    with warnings.catch_warnings(), _pillow_unguarded():
+    with warnings.catch_warnings(), _pillow_unguarded(), _pillow_unlogged():
         warnings.simplefilter("ignore")  # Pillow warns about corrupt EXIF
         try:
             with Image.open(io.BytesIO(data)) as im:

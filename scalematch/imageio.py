@@ -13,7 +13,16 @@ refused from its size, and the header comes from the first ``HEADER_BYTES``. The
 checked against ``max_pixels``, the decoder's own limits and ``min_side`` (:func:`check_size`),
 so a decompression bomb is refused without allocating it; a file whose header cannot be read
 is not decoded at all, and a PNG file only once its chunks are known to lie within it. OpenCV
-decodes the pixels.
+decodes the pixels (faster than Pillow, and holding the image once: docs/design/SPEED.md,
+"Decoding: OpenCV, not Pillow").
+
+The decoders' own words: libpng, libjpeg and libtiff write what they find wrong straight to the
+process's stderr (file descriptor 2, past ``sys.stderr``). It is caught while a file is decoded
+(:func:`native_stderr`) and said once, in this module's words, naming the file: a file the
+decoder refuses is an ``ImageError`` that quotes the decoder; a file it decodes while saying
+something (a damaged JPEG: "Corrupt JPEG data: premature end of data segment") is used as
+decoded, and what the decoder said is its warning (``Decoded.warning``; an ``ImageWarning``
+from :func:`read_image` and :func:`read_grey`).
 
 The EXIF orientation (JPEG, WebP, PNG ``eXIf`` before the pixels, TIFF) is read from the header
 and applied here (the file is decoded with ``IMREAD_IGNORE_ORIENTATION``), so the result does
@@ -22,17 +31,22 @@ not depend on whether the installed OpenCV applies it itself.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import stat
+import sys
+import tempfile
+import threading
+import warnings
 from pathlib import Path
-from typing import Any, NamedTuple, Optional, Tuple
+from typing import Any, Iterator, List, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
 
-from .headers import (IMAGE_SIGNATURES, PNG_SIGNATURE, BadHeader, Header, header,
-                      header_may_follow, png_chunk_problem)
+from .headers import (IMAGE_SIGNATURES, JPEG_SOI, PNG_SIGNATURE, TIFF_SIGNATURES, BadHeader,
+                      Header, header, header_may_follow, png_chunk_problem)
 from .stages.detector import MIN_SIDE_PX
 
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
@@ -49,6 +63,12 @@ UNIT_FLOAT_MAX = 2.0
 
 class ImageError(ValueError):
     """An input image cannot be used; the message says what is wrong."""
+
+
+class ImageWarning(UserWarning):
+    """An input image was decoded, but its decoder said something was wrong with the file (a
+    damaged JPEG, a malformed PNG metadata chunk); the message names the file and quotes the
+    decoder."""
 
 
 def _level_scale(img: np.ndarray) -> float:
@@ -392,6 +412,116 @@ def _room_for(p: Path, size: Tuple[int, int]) -> None:
         raise MemoryError(f"{p}: no memory to decode the {size[0]}x{size[1]} image") from exc
 
 
+# --------------------------------------------------------------------------- the decoders' words
+
+#: Most bytes of what the native decoders write on stderr during one decode that are read back:
+#: libjpeg says only its first warning, libpng and libtiff one line before they give up.
+NATIVE_TEXT_BYTES = 4096
+#: Most lines of it quoted, and most characters of each.
+NATIVE_LINES, NATIVE_LINE_CHARS = 3, 200
+#: File descriptor 2 belongs to the whole process: one decode at a time has it redirected (a
+#: block inside another, in the same thread, redirects it again and gives it back to the outer).
+_STDERR_LOCK = threading.RLock()
+
+
+@contextlib.contextmanager
+def native_stderr() -> Iterator[List[str]]:
+    """What native code writes on the process's stderr while the block runs (file descriptor 2,
+    which the C libraries write to directly, past ``sys.stderr``): its lines, in the list
+    yielded, filled once the block ends; none of it reaches the real stderr.
+
+    Descriptor 2 is pointed at a temporary file meanwhile and set back after, whatever the
+    block raises. It belongs to the whole process, so one thread at a time redirects it (the
+    others wait): whatever another thread writes to it meanwhile is caught too. When it cannot
+    be redirected (closed, or no temporary file can be made), the block runs as it is and the
+    list stays empty.
+
+    >>> with native_stderr() as said:
+    ...     _ = os.write(2, b"libpng error: IDAT: CRC error\\n")
+    >>> said
+    ['libpng error: IDAT: CRC error']
+    """
+    said: List[str] = []
+    with _STDERR_LOCK:
+        redirected = _stderr_to_file()
+        if redirected is None:
+            yield said
+            return
+        sink, saved = redirected
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            with sink:
+                sink.seek(0)
+                text = sink.read(NATIVE_TEXT_BYTES).decode("utf-8", "replace")
+            said.extend(line.strip() for line in text.splitlines() if line.strip())
+
+
+def _stderr_to_file() -> Optional[Tuple[Any, int]]:
+    """Point file descriptor 2 at a new temporary file: (the file, a duplicate of what
+    descriptor 2 was); None, nothing changed, when there is no stderr or no temporary file."""
+    try:
+        sys.stderr.flush()  # Python's own text, written before, stays on the real stderr
+    except (AttributeError, OSError, ValueError):
+        pass
+    try:
+        sink = tempfile.TemporaryFile()
+    except OSError:
+        return None
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr at all: nothing to keep quiet
+        sink.close()
+        return None
+    try:
+        os.dup2(sink.fileno(), 2)
+    except OSError:
+        os.close(saved)
+        sink.close()
+        return None
+    return sink, saved
+
+
+#: The prefixes libpng puts before its words (its default error and warning handlers).
+_NATIVE_PREFIXES = ("libpng error: ", "libpng warning: ")
+
+
+def decoder_words(lines: List[str]) -> str:
+    """What a decoder said (:func:`native_stderr`'s lines) as one quotation: the first
+    ``NATIVE_LINES`` distinct lines, each at most ``NATIVE_LINE_CHARS``, without libpng's
+    prefixes; "" when it said nothing.
+
+    >>> decoder_words(["libpng error: IDAT: CRC error"])
+    '"IDAT: CRC error"'
+    >>> decoder_words(["Corrupt JPEG data: premature end of data segment"] * 2 + ["Bogus"])
+    '"Corrupt JPEG data: premature end of data segment; Bogus"'
+    """
+    out: List[str] = []
+    for line in lines:
+        for prefix in _NATIVE_PREFIXES:
+            if line.startswith(prefix):
+                line = line[len(prefix):]
+        line = line[:NATIVE_LINE_CHARS]
+        if line and line not in out:
+            out.append(line)
+    return f'"{"; ".join(out[:NATIVE_LINES])}"' if out else ""
+
+
+def _format_name(raw: bytes) -> str:
+    """The format of the file whose bytes are ``raw``, as its decoder is named in messages."""
+    if raw.startswith(PNG_SIGNATURE):
+        return "PNG"
+    if raw.startswith(JPEG_SOI):
+        return "JPEG"
+    if raw.startswith(TIFF_SIGNATURES):
+        return "TIFF"
+    if raw.startswith(b"RIFF") and raw[8:12] == b"WEBP":
+        return "WebP"
+    return "image"
+
+
 #: Reduction factors of a JPEG decoded at a reduced size, largest first: libjpeg's DCT scaling
 #: (OpenCV's ``IMREAD_REDUCED_*`` modes, flag bits 64, 32, 16) decodes 1/8, 1/4 or 1/2 of each
 #: side directly, the pixel ``x`` of the reduced image standing for file pixels
@@ -416,6 +546,9 @@ class Decoded(NamedTuple):
     image: np.ndarray  #: as :func:`read_image` returns it, maybe ``factor`` times smaller
     factor: int  #: file px per image px (1: full size); x_file = factor x + (factor - 1) / 2
     size: Tuple[int, int]  #: (width, height) of the image in the file, orientation applied
+    #: what the decoder said was wrong with the file it decoded anyway (a damaged JPEG), the
+    #: file named ("": nothing)
+    warning: str = ""
 
     @property
     def shape(self) -> Tuple[int, int]:
@@ -447,9 +580,12 @@ def reduction(head: Header, at_least: Optional[int], min_side: int = MIN_SIDE_PX
 
 
 def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: int,
-            factor: int = 1) -> np.ndarray:
+            factor: int = 1) -> Tuple[np.ndarray, str]:
     """The pixels of ``raw`` (the bytes of ``p``, header ``head``) decoded, EXIF orientation
-    applied; at ``1 / factor`` of each side for a JPEG (:func:`reduction`)."""
+    applied, at ``1 / factor`` of each side for a JPEG (:func:`reduction`); and the warning of
+    a file the decoder decoded while saying something was wrong with it ("" when it said
+    nothing). A file it refuses is an ``ImageError`` quoting what it said
+    (:func:`native_stderr`)."""
     size = head.size
     if size is not None:
         check_size(p, size, max_pixels, min_side)
@@ -467,26 +603,44 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
     if factor > 1:
         flags |= REDUCED_FLAGS[factor]
 
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags)
-    except cv2.error as exc:
-        if "Insufficient memory" in str(exc):
-            raise MemoryError(f"{p}: no memory to decode the image") from exc
-        img = None
-    finally:
-        cv2.utils.logging.setLogLevel(level)
-    if img is None:
-        _room_for(p, size)  # out of memory is not a corrupt file
-        raise _corrupt(p)
+    img, words = _imdecode(p, raw, flags, size)
     img = _orient(img, head.orientation)
     h, w = img.shape[:2]
     if max_pixels and w * h * factor * factor > max_pixels:
         raise _too_many(p, w, h, max_pixels)
     if min(w, h) * factor < min_side:
         raise _too_small(p, w, h, min_side)
-    return img
+    warning = (f"{p}: the {_format_name(raw)} decoder says {words}; the image is used as "
+               f"decoded (copy or download the file again if it is damaged)") if words else ""
+    return img, warning
+
+
+def _imdecode(p: Path, raw: bytearray, flags: int, size: Tuple[int, int]
+              ) -> Tuple[np.ndarray, str]:
+    """OpenCV's decode of ``raw`` (the bytes of ``p``, an image of ``size`` (w, h) px) with
+    ``flags``, its log silenced and what the native decoder says on stderr caught: (the image,
+    the decoder's words quoted by :func:`decoder_words`, "" when it said nothing).
+    ``ImageError`` quoting the decoder when it gives no image; ``MemoryError`` when that is for
+    want of memory."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        with native_stderr() as said:
+            img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags)
+    except cv2.error as exc:
+        if "Insufficient memory" in str(exc):
+            raise MemoryError(f"{p}: no memory to decode the image") from exc
+        img = None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    words = decoder_words(said)
+    if img is None:
+        _room_for(p, size)  # out of memory is not a corrupt file
+        if words:
+            raise ImageError(f"{p}: cannot decode the image: the {_format_name(raw)} decoder "
+                             f"says {words}; the file is corrupt, copy or download it again")
+        raise _corrupt(p)
+    return img, words
 
 
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
@@ -496,12 +650,24 @@ def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     Raises ``ImageError`` (one line, what is wrong and what to do) for a missing file, a directory,
     a device or pipe, an empty, truncated or non-image file, a file larger than an image within
     ``max_pixels`` can be, an image above ``max_pixels`` pixels (checked from the header before
-    decoding where the format allows) or with a side below ``min_side`` px. The file is read
-    within bounds (:func:`read_bytes`).
+    decoding where the format allows) or with a side below ``min_side`` px, or one its decoder
+    refuses (quoting the decoder). The file is read within bounds (:func:`read_bytes`).
+
+    Warns (``ImageWarning``: the file named, the decoder quoted) of a file the decoder decodes
+    while saying something is wrong with it (a damaged JPEG); the image is returned as decoded.
     """
+    return _read_warned(path, max_pixels, min_side)
+
+
+def _read_warned(path: str | Path, max_pixels: int, min_side: int) -> np.ndarray:
+    """:func:`read_image`'s work; its ``ImageWarning`` points at the line that called the
+    public function (``read_image``, ``read_grey``)."""
     p = Path(path)
     raw, head = read_bytes(p, max_pixels)
-    return _decode(p, raw, head, max_pixels, min_side)
+    img, warning = _decode(p, raw, head, max_pixels, min_side)
+    if warning:
+        warnings.warn(warning, ImageWarning, stacklevel=3)
+    return img
 
 
 def read_reduced(path: str | Path, at_least: Optional[int],
@@ -514,7 +680,8 @@ def read_reduced(path: str | Path, at_least: Optional[int],
     A 16 MP camera JPEG against a 2048 px working size: decoded at half size, 0.05 s instead
     of 0.1 s, and 12 MB instead of 48 MB of pixels (its grey copy: 16 MB instead of 64 MB).
     ``Decoded.factor`` says how much smaller the image is than the file's; ``match`` takes it
-    (``decoded_factors``) and answers in the file's pixels.
+    (``decoded_factors``) and answers in the file's pixels. What the decoder said was wrong
+    with a file it decoded is ``Decoded.warning`` (no ``ImageWarning``: the caller says it).
 
     >>> import os, tempfile
     >>> path = os.path.join(tempfile.mkdtemp(), "big.jpg")
@@ -527,12 +694,12 @@ def read_reduced(path: str | Path, at_least: Optional[int],
     p = Path(path)
     raw, head = read_bytes(p, max_pixels)
     factor = reduction(head, at_least, min_side)
-    img = _decode(p, raw, head, max_pixels, min_side, factor)
+    img, warning = _decode(p, raw, head, max_pixels, min_side, factor)
     h, w = img.shape[:2]
     if factor == 1:
-        return Decoded(img, 1, (w, h))
+        return Decoded(img, 1, (w, h), warning)
     fw, fh = head.size  # as stored; orientations 5 to 8 turn it by a quarter
-    return Decoded(img, factor, (fw, fh) if head.orientation <= 4 else (fh, fw))
+    return Decoded(img, factor, (fw, fh) if head.orientation <= 4 else (fh, fw), warning)
 
 
 def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
@@ -558,6 +725,12 @@ def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     ImageError
         One line saying what is wrong and what to do (see :func:`read_image`).
 
+    Warns
+    -----
+    ImageWarning
+        A file its decoder decoded while saying something is wrong with it (see
+        :func:`read_image`).
+
     >>> import os, tempfile
     >>> path = os.path.join(tempfile.mkdtemp(), "grey.png")
     >>> cv2.imwrite(path, np.full((40, 60), 200, np.uint8))
@@ -570,4 +743,4 @@ def read_grey(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,
     ...
     scalematch.imageio.ImageError: .../missing.png: no such file; check the path
     """
-    return to_grey(read_image(path, max_pixels=max_pixels, min_side=min_side))
+    return to_grey(_read_warned(path, max_pixels, min_side))

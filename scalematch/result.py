@@ -280,7 +280,8 @@ class MatchResult:
 
     def to_dict(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
                 low_shape: Optional[Sequence[int]] = None,
-                high_shape: Optional[Sequence[int]] = None) -> Dict[str, Any]:
+                high_shape: Optional[Sequence[int]] = None,
+                warnings: Tuple[str, str] = ("", "")) -> Dict[str, Any]:
         """The documented JSON object of this match (README.md, "Output"; docs/GUIDE.md, "JSON"):
         plain types only.
 
@@ -293,6 +294,8 @@ class MatchResult:
             (arrays matched in Python) writes null.
         low_shape, high_shape : (H, W) tuples, optional
             The images' sizes in px, after EXIF orientation; None writes null width and height.
+        warnings : (str, str)
+            What reading the first and the second image given warned of (``Decoded.warning``).
 
         >>> r = MatchResult(matched=False, reason="too few inliers", model="similarity",
         ...                 transform=None, resolution_ratio=float("nan"),
@@ -303,14 +306,11 @@ class MatchResult:
         >>> d["matched"], d["reason"], d["resolution_ratio"], d["high"]["width"]
         (False, 'too few inliers', None, 640)
         >>> r.to_dict()["low"]  # arrays matched in Python: no path or size to record
-        {'path': None, 'width': None, 'height': None, 'nodata': {'value': None, 'share': 0.0}}
+        {'path': None, 'width': None, 'height': None, 'nodata': {'value': None, 'share': 0.0}, 'warning': None}
         """
         from . import __version__
 
-        nd_low, nd_high = self.nodata
-        if self.order == Direction.SWAPPED:
-            low_path, high_path, low_shape, high_shape = high_path, low_path, high_shape, low_shape
-            nd_low, nd_high = nd_high, nd_low
+        low, high = self._image_records((low_path, high_path), (low_shape, high_shape), warnings)
         t = self.transform
         return {
             "matched": bool(self.matched),
@@ -335,9 +335,17 @@ class MatchResult:
             "covariance_used": self.covariance_used or None,
             "rejected": None if self.rejected is None else self.rejected.to_dict(),
             "version": __version__,
-            "low": _image_record(low_path, low_shape, nd_low),
-            "high": _image_record(high_path, high_shape, nd_high),
+            "low": low, "high": high,
         }
+
+    def _image_records(self, paths: Tuple[Optional[str], Optional[str]],
+                       shapes: Tuple[Optional[Sequence[int]], Optional[Sequence[int]]],
+                       warnings: Tuple[str, str]) -> Tuple[Dict[str, Any], Dict[str, Any]]:
+        """The "low" and "high" records of the images given (first, second): the coarser
+        image's first, as ``order`` says."""
+        first, second = (_image_record(path, shape, nodata, warning) for path, shape, nodata,
+                         warning in zip(paths, shapes, self.nodata, warnings))
+        return (second, first) if self.order == Direction.SWAPPED else (first, second)
 
     def _epipoles(self) -> Optional[Dict[str, list]]:
         """A matched fundamental matrix's epipoles by image, "low" and "high"
@@ -351,21 +359,24 @@ class MatchResult:
 
     def to_json(self, low_path: Optional[str] = None, high_path: Optional[str] = None,
                 low_shape: Optional[Sequence[int]] = None,
-                high_shape: Optional[Sequence[int]] = None, indent: Optional[int] = 2) -> str:
+                high_shape: Optional[Sequence[int]] = None, indent: Optional[int] = 2,
+                warnings: Tuple[str, str] = ("", "")) -> str:
         """The text of ``scalematch LOW HIGH --json FILE``: :meth:`to_dict` as JSON, ending in a
         newline (``indent=None``: one line, as ``batch`` writes)."""
-        return dumps(self.to_dict(low_path, high_path, low_shape, high_shape), indent) + "\n"
+        return dumps(self.to_dict(low_path, high_path, low_shape, high_shape, warnings),
+                     indent) + "\n"
 
 
 def _image_record(path: Optional[str], shape: Optional[Sequence[int]],
-                  nodata: NoDataSeen = NoDataSeen()) -> Dict[str, Any]:
-    """An image's "low"/"high" object: its path and size, null where not known, and what it
-    showed of no-data."""
+                  nodata: NoDataSeen = NoDataSeen(), warning: str = "") -> Dict[str, Any]:
+    """An image's "low"/"high" object: its path and size, null where not known, what it
+    showed of no-data, and what its reading warned of (null: nothing)."""
     return {"path": None if path is None else str(path),
             "width": None if shape is None else int(shape[1]),
             "height": None if shape is None else int(shape[0]),
             "nodata": {"value": to_jsonable(float(nodata.value)),
-                       "share": round(float(nodata.share), 4)}}
+                       "share": round(float(nodata.share), 4)},
+            "warning": warning or None}
 
 
 def error_record(low_path: str, high_path: str, error: str, kind: str, config: Any,

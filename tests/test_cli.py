@@ -481,7 +481,7 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     assert data["n_inliers"] == data["inliers"] == 0 and data["matches"] == []
     assert data["best_scale"] is None and data["resolution_ratio"] is None  # as GUIDE says
     assert data["low"] == {"path": str(flat_pair[0]), "width": 160, "height": 120,
-                           "nodata": {"value": None, "share": 0.0}}
+                           "nodata": {"value": None, "share": 0.0}, "warning": None}
     assert data["high"]["width"] == 240 and data["version"] == __version__
     assert data["config"]["model"] == "similarity"
     for name in ("overlay.png", "scales.png", "matches.csv"):

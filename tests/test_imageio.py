@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -13,8 +14,8 @@ import pytest
 
 from PIL import Image
 
-from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, header, read_grey, read_image,
-                                read_reduced, to_bgr8, to_grey)
+from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, ImageWarning, header, read_grey,
+                                read_image, read_reduced, to_bgr8, to_grey)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -302,6 +303,156 @@ def test_a_truncated_png_is_said_once_without_libpng_noise(tmp_path, bgr, capfd)
     with pytest.raises(ImageError, match="PNG file is truncated"):
         read_grey(path)
     assert capfd.readouterr().err == ""  # libpng's own "input buffer is incomplete" not run
+
+
+def png_with_bad_idat_crc(img: np.ndarray) -> bytes:
+    """``img`` as a PNG whose first image data chunk's CRC is wrong (its pixels intact)."""
+    data = bytearray(cv2.imencode(".png", img)[1].tobytes())
+    pos = 8
+    while data[pos + 4:pos + 8] != b"IDAT":
+        pos += 12 + int.from_bytes(data[pos:pos + 4], "big")
+    end = pos + 8 + int.from_bytes(data[pos:pos + 4], "big")
+    data[end] ^= 0xFF
+    return bytes(data)
+
+
+def jpeg_with_a_cut_scan(img: np.ndarray) -> bytes:
+    """``img`` as a JPEG whose scan stops halfway, its end-of-image marker kept: libjpeg
+    decodes it, the rest grey, saying "Corrupt JPEG data: premature end of data segment"."""
+    data = jpeg_bytes(img)
+    scan = data.rfind(b"\xff\xda")
+    return data[:(scan + len(data)) // 2] + b"\xff\xd9"
+
+
+def test_a_png_with_a_bad_crc_is_refused_in_one_line_quoting_libpng(tmp_path, bgr, capfd):
+    """libpng refuses the file and says why on the process's stderr ("libpng error: IDAT: CRC
+    error"): its words come once, in the error naming the file, and nothing reaches stderr."""
+    path = write(tmp_path / "crc.png", png_with_bad_idat_crc(bgr))
+    with pytest.raises(ImageError) as err:
+        read_grey(path)
+    assert str(err.value) == (f'{path}: cannot decode the image: the PNG decoder says "IDAT: CRC '
+                              f'error"; the file is corrupt, copy or download it again')
+    assert capfd.readouterr().err == ""
+
+
+def test_a_damaged_jpeg_that_decodes_is_used_with_one_warning(tmp_path, bgr, capfd):
+    """The same warning at full and at reduced size, as ``Decoded.warning`` and as an
+    ``ImageWarning`` of read_grey; the image as libjpeg decodes it (the top intact, the rest
+    grey); nothing from libjpeg on stderr. A truncated JPEG (no end-of-image marker) is still
+    refused."""
+    data = jpeg_with_a_cut_scan(bgr)
+    path = write(tmp_path / "cut-scan.jpg", data)
+    said = (f'{path}: the JPEG decoder says "Corrupt JPEG data: premature end of data segment"; '
+            f'the image is used as decoded (copy or download the file again if it is damaged)')
+    full, reduced = read_reduced(path, None), read_reduced(path, at_least=40)
+    assert (full.factor, reduced.factor) == (1, 4)
+    assert full.warning == reduced.warning == said
+    with pytest.warns(ImageWarning) as caught:
+        grey = read_grey(path)
+    assert [str(w.message) for w in caught] == [said]
+    assert caught[0].filename == __file__  # the warning points at the caller's line
+    intact = to_grey(cv2.imdecode(np.frombuffer(jpeg_bytes(bgr), np.uint8), cv2.IMREAD_COLOR))
+    assert np.abs(grey[:16] - intact[:16]).max() < 1.0  # the first row of blocks, as decoded
+    assert read_reduced(write(tmp_path / "good.jpg", jpeg_bytes(bgr)), None).warning == ""
+    with pytest.raises(ImageError, match="truncated"):
+        read_grey(write(tmp_path / "truncated.jpg", data[:-2]))
+    assert capfd.readouterr().err == ""
+
+
+def test_native_stderr_catches_fd_2_and_gives_it_back(capfd):
+    """What is written to descriptor 2 inside is caught, line by line; after, descriptor 2 is
+    the real stderr again, also when the block raises."""
+    from scalematch.imageio import native_stderr
+
+    with native_stderr() as said:
+        os.write(2, b"libpng warning: iCCP: too short\n\nsecond line\n")
+        assert said == []  # filled once the block ends
+    assert said == ["libpng warning: iCCP: too short", "second line"]
+    with pytest.raises(RuntimeError):
+        with native_stderr() as said:
+            os.write(2, b"inside\n")
+            raise RuntimeError("the block failed")
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "after\n"
+
+
+def test_threads_decoding_damaged_files_each_get_their_own_words(tmp_path, bgr, capfd):
+    """Descriptor 2 belongs to the process: decodes in threads take it in turn, so each file
+    gets what its own decoder said, and nothing leaks."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    jpeg = write(tmp_path / "cut-scan.jpg", jpeg_with_a_cut_scan(bgr))
+    png = write(tmp_path / "crc.png", png_with_bad_idat_crc(bgr))
+
+    def said(path: Path) -> str:
+        try:
+            return read_reduced(path, None).warning
+        except ImageError as exc:
+            return str(exc)
+
+    paths = [jpeg, png] * 40
+    with ThreadPoolExecutor(4) as pool:
+        out = list(pool.map(said, paths))
+    for path, text in zip(paths, out):
+        assert text.startswith(f"{path}: "), text
+        assert ("premature end" in text) == (path == jpeg) and ("CRC" in text) == (path == png)
+    assert capfd.readouterr().err == ""
+
+
+def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, bgr):
+    """In a process of its own (libpng and libjpeg write to descriptor 2, which CliRunner does
+    not catch, and Python's logging says Pillow's records on stderr only where no logging is
+    set up, as pytest sets it up): a PNG with a bad CRC, a TIFF of 16003 samples per pixel
+    (which Pillow logs as it gives up) and a truncated JPEG are exit 2 with one "Error:" line
+    naming the file; a JPEG whose scan is cut short is matched as decoded, silent under -q,
+    its warning in the JSON (and in a batch line), one "Warning:" line without -q."""
+    import json
+    import subprocess
+    import sys
+
+    from scalematch.lab.fuzz import tiff_entries
+
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "scalematch", *map(str, args)],
+                              capture_output=True, text=True, timeout=120)
+
+    high = ROOT / "data" / "demo_high.png"
+    demo = cv2.imread(str(ROOT / "data" / "demo_low.png"), cv2.IMREAD_COLOR)
+    crc = write(tmp_path / "crc.png", png_with_bad_idat_crc(demo))
+    cut = write(tmp_path / "cut-scan.jpg", jpeg_with_a_cut_scan(demo))
+    truncated = write(tmp_path / "truncated.jpg", cut.read_bytes()[:-2])
+    tiff = bytearray(cv2.imencode(".tif", demo)[1].tobytes())
+    at = next(pos for pos, tag, _ in tiff_entries(tiff) if tag == 277) + 8  # SamplesPerPixel
+    tiff[at:at + 2] = (16003).to_bytes(2, "little" if tiff[:2] == b"II" else "big")
+    samples = write(tmp_path / "samples.tif", bytes(tiff))
+
+    for path, needle in ((crc, 'the PNG decoder says "IDAT: CRC error"'),
+                         (samples, "cannot decode the image"),
+                         (truncated, "JPEG file is truncated")):
+        run = cli(path, high, "--no-views", "-q")
+        assert run.returncode == 2, (run.returncode, run.stderr)
+        assert run.stderr.splitlines() == [run.stderr.strip()], run.stderr  # one line
+        assert run.stderr.startswith(f"Error: {path}: ") and needle in run.stderr, run.stderr
+
+    warning = (f'{cut}: the JPEG decoder says "Corrupt JPEG data: premature end of data '
+               f'segment"; the image is used as decoded (copy or download the file again if it '
+               f'is damaged)')
+    quiet = cli(cut, high, "--no-views", "-q", "--json", "-")
+    assert quiet.returncode in (0, 1) and quiet.stderr == "", quiet.stderr
+    record = json.loads(quiet.stdout)
+    image = record["low"] if record["order"] == "given" else record["high"]
+    assert image["path"] == str(cut) and image["warning"] == warning
+    other = record["high"] if record["order"] == "given" else record["low"]
+    assert other["warning"] is None
+    said = cli(cut, high, "--no-views").stderr.splitlines()
+    assert said[0] == f"Warning: {warning}" and len(said) == 2, said  # then the verdict
+    pairs = write(tmp_path / "pairs.csv", f"{cut},{high}\n{crc},{high}\n".encode())
+    batch = cli("batch", pairs, "--no-views", "-q")
+    assert batch.returncode == 3 and batch.stderr == "", batch.stderr
+    lines = [json.loads(line) for line in batch.stdout.splitlines()]  # as the pairs finish
+    failed, done = sorted(lines, key=lambda line: "error" not in line)
+    assert failed["error"].startswith(f"{crc}: cannot decode the image: the PNG decoder says")
+    assert {done["low"]["warning"], done["high"]["warning"]} == {warning, None}
 
 
 def test_to_bgr8_layouts(bgr):
@@ -617,9 +768,11 @@ def test_every_file_of_the_fuzz_corpus_is_read_or_refused_in_one_line(corpus_dir
     assert outcomes["read"] > 20 and outcomes["refused"] > 100, outcomes
 
 
-def test_the_fuzz_corpus_through_the_command_line_exits_0_1_or_2(corpus_dir):
+def test_the_fuzz_corpus_through_the_command_line_exits_0_1_or_2(corpus_dir, capfd):
     """Every file of the corpus as LOW against the demo's finer image: 0 or 1 for a file that
-    decodes, 2 with one "Error:" line for one that does not; never 4 (an internal error)."""
+    decodes, with nothing on stderr under -q (a damaged JPEG's warning is in the JSON), 2
+    with one "Error:" line for one that does not; never 4 (an internal error). Nothing of the
+    decoders' own (libpng, libjpeg, libtiff) reaches the process's stderr."""
     from click.testing import CliRunner
 
     from scalematch.cli import cli
@@ -633,4 +786,7 @@ def test_the_fuzz_corpus_through_the_command_line_exits_0_1_or_2(corpus_dir):
         if run.exit_code == 2:
             lines = run.stderr.strip().splitlines()
             assert len(lines) == 1 and lines[0].startswith(f"Error: {path}: "), run.stderr
+        else:
+            assert run.stderr == "", (path.name, run.stderr)
     assert codes.get(2, 0) > 100 and codes.get(0, 0) + codes.get(1, 0) > 20, codes
+    assert capfd.readouterr().err == ""

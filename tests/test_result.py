@@ -13,7 +13,7 @@ from click.testing import CliRunner
 import scalematch
 from scalematch.cli import cli
 from scalematch.config import Config
-from scalematch.result import Evidence, MatchResult, ScaleRow, dumps
+from scalematch.result import Direction, Evidence, MatchResult, ScaleRow, dumps
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,7 +54,7 @@ def test_the_json_of_a_hand_built_result_has_plain_types_and_no_nan():
     assert d["transform"] == [[0.5, 0.0, 5.0], [0.0, 0.5, -3.0]]
     assert d["scales"][0]["ratio"] is None  # nan -> null
     assert d["low"] == {"path": "low.png", "width": 200, "height": 100,
-                        "nodata": {"value": None, "share": 0.0}}
+                        "nodata": {"value": None, "share": 0.0}, "warning": None}
     text = hand_result().to_json("low.png", "high.png", (100, 200), (400, 800))
     assert text.endswith("}\n") and json.loads(text) == d
     assert "\n" not in hand_result().to_json("a", "b", (1, 1), (1, 1), indent=None).rstrip("\n")
@@ -79,8 +79,20 @@ def test_to_dict_without_paths_or_sizes_writes_null_there():
     r = MatchResult(matched=False, model="similarity", reason="too few inliers")
     d = r.to_dict()
     assert d["low"] == d["high"] == {"path": None, "width": None, "height": None,
-                                     "nodata": {"value": None, "share": 0.0}}
+                                     "nodata": {"value": None, "share": 0.0}, "warning": None}
     assert json.loads(r.to_json())["matched"] is False
+
+
+def test_an_images_warning_goes_with_its_record_whichever_the_order():
+    """What the reading of the first image given warned of is in its own record: ``low``
+    in the given order, ``high`` when the order is swapped."""
+    said = ("a.jpg: the JPEG decoder says ...", "")
+    given = hand_result().to_dict("a.jpg", "b.png", (100, 200), (400, 800), said)
+    assert given["low"]["warning"] == said[0] and given["high"]["warning"] is None
+    swapped = dataclasses.replace(hand_result(), order=Direction.SWAPPED)
+    d = json.loads(swapped.to_json("a.jpg", "b.png", (100, 200), (400, 800), warnings=said))
+    assert d["high"]["path"] == "a.jpg" and d["high"]["warning"] == said[0]
+    assert d["low"]["warning"] is None
 
 
 def test_the_json_of_a_fundamental_matrix_gives_its_epipoles_by_image():
