@@ -22,6 +22,7 @@ from .stages.pixelcheck import PixelParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
 from .stages.views import TILT4_PASSES, ViewParams
+from .stages.vote import VoteParams
 
 #: Names of the models the robust estimator can fit (the records: ``stages.estimator.MODELS``).
 MODELS = tuple(_MODEL_RECORDS)
@@ -131,8 +132,10 @@ class Config:
     #: placements, and the choice between several matched searches
     pixel: PixelParams = field(default_factory=PixelParams)
     order: str = "auto"  #: see ORDERS
-    #: simulated tilted views of the finer image, tried when the plain search finds nothing
+    #: simulated tilted views of both images, tried when the plain search finds nothing
     views: ViewParams = field(default_factory=ViewParams)
+    #: the pooled vote over the views' pairs: which are matched in full
+    vote: VoteParams = field(default_factory=VoteParams)
     model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
     #: where an image shows no scene (a canvas's corners, a declared no-data value): kept out of
     #: detection and of the pixel tests (``stages.nodata``; ``--nodata``)
@@ -247,8 +250,9 @@ def _paper() -> Config:
                   matcher=MatcherParams(selection="knn", k=3),
                   # "In practice we run the latter algorithm at all scales" (section 5)
                   probe=ProbeParams(enabled=False),
-                  # the jets carry no orientation to compare
+                  # the jets carry no orientation to compare, nor to vote with: no views
                   guided=GuidedParams(use_orientation=False),
+                  views=ViewParams(enabled=False),
                   # the paper's detector keeps what passes the threshold: no point budget
                   harris=HarrisParams(min_points=0),
                   harris_low=HarrisParams(max_points=12000, min_points=0))
@@ -268,8 +272,8 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     "default-no-probe": lambda: Config(probe=ProbeParams(enabled=False)),
     # the default on 15 scales 1-11.3 (quarter octaves)
     "default-quarter-octaves": lambda: Config(scales=geometric_scales(1.0, 12.0, 4)),
-    # the default without its third pass of views (t = 6 and 8): tilts up to about 6 solved, a
-    # "no" about 2.3x sooner (docs/design/VIEWS.md, "The third pass")
+    # the default without its third pass of views (t = 6 and 8): tilts up to about 6 solved
+    # (docs/design/VIEWS.md, "The third pass")
     "tilt-4": lambda: Config(views=ViewParams(passes=TILT4_PASSES)),
     # the default with a time budget of 1 s (docs/design/VIEWS.md, "The time budget"): no step
     # of the plan starts after 1 s, so a "no" costs about that much; docs/NULLS.md, "Mode
@@ -282,11 +286,6 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
-    # the first look at a smaller size and from K = 1.5 (the default's is 500 px, from K = 2):
-    # the views of 1 MP images ranked on copies of 300 px too (docs/design/SPEED.md, "The
-    # first look": it loses steep pairs)
-    "first-look": lambda: Config(views=ViewParams(first_look_short_px=300.0,
-                                                  first_look_min_factor=1.5)),
     # the default searching for a homography (``--model homography``: Oxford, perspective
     # pairs), so that the null set can be run with it (docs/NULLS.md, "Mode homography")
     "homography": lambda: Config(model="homography"),

@@ -20,7 +20,6 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
-import cv2
 import numpy as np
 
 from .config import Config
@@ -28,8 +27,9 @@ from .geometry import answer_parts, finer_to_coarser, usable_ratio
 from .imageio import grey_levels
 from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
                      StepRecord, build_evidence)
-from .sharing import Leaders, Measured, Memo, Meter
-from .search import (Attempt, ScaleOutcome, Step, ViewKey, out_of_time, overwhelming,
+from .features import Describing, ImageViews, Roles, image_views
+from .sharing import Measured, Memo, Meter
+from .search import (Attempt, ScaleOutcome, Step, coarser_viewed, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
 from .stages.decision import (Claim, FinalFigures, Look, SearchContext, Seen, decide, figures,
                               final_checks, look_again, plane_parallax,
@@ -47,7 +47,9 @@ from .stages.refit import (candidates_in_images, guided_refit, pooled_refit, ref
 from .stages.rivals import EpipolarFit, off_plane
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, ViewParams, identity_view, tilt_view, valid_in
+from .stages.views import View, identity_view, tilt_view, valid_in, view_scales
+from .stages.vote import (Candidates as VoteCandidates, Cells, Ranked, best_pairs, index_scale,
+                          log10_nfa as cells_nfa, scale_index, vote as vote_cells)
 from .modes import Mode, mode_of
 from .working import WorkImages, at_working_size, in_original, shown_scale
 
@@ -192,7 +194,6 @@ def run_plan(search: "Search", plan: Sequence[Step], t0: float) -> SearchRun:
         stopped = stop_reason(step, attempts, plan, config)
         if stopped:
             break
-    search.memo.forget_views()
     search.meter.finish()
     timings["total"] = time.perf_counter() - t0
     return SearchRun(tuple(attempts), tuple(records), tuple(plan), stopped, timings)
@@ -340,17 +341,6 @@ def _joined(head: Described, rest: Described, offset: int) -> Described:
                      desc=np.vstack([head.desc, rest.desc]))
 
 
-class FirstLevel(NamedTuple):
-    """A view's points at s = 1 as the coarser image's detector finds them (``harris_low``,
-    whose strongest are the finer detector's: :func:`shares_first_level`) and the descriptors
-    of the ``described`` strongest, found when the view was the finer image's; the view as the
-    coarser image's (:func:`describe_coarser_view`) describes only the others."""
-
-    keypoints: Keypoints
-    head: Described
-    described: int
-
-
 class Detected(NamedTuple):
     """One scale of a view, detected and (its probe's points) described."""
 
@@ -360,66 +350,46 @@ class Detected(NamedTuple):
     level: Optional[Level]  #: the level, when kept for the full pass
     #: every point described already (s = 1, shared with the other direction), or None
     full: Optional[Described] = None
-    #: not detected yet: the probe skipped this scale (``ViewParams.probe_every``)
-    pending: bool = False
 
 
 class Reuse(NamedTuple):
-    """What the detection of a view takes from the rest of the search, or gives it: none of it
+    """What the detection of the finer image takes from the rest of the search: none of it
     changes the points found (:func:`detect_view`).
 
     ``known``: the same image described as the coarser one (the other direction), whose points
-    give this view's s = 1 points when it is the image itself (:func:`shares_first_level`).
-    ``measured``: the finer image's contrast (:func:`scalematch.stages.detector.image_contrast`),
-    when the detector adapts to it, and its gradients at s = 1 (:meth:`Memo.measured`), used
-    when the view is the image itself. ``every``: with the probe, only every ``every``-th scale
-    is detected (the others are ``pending`` until :func:`complete_probe`). ``share``: given the
-    view's s = 1 points as the coarser image's detector finds them (:class:`FirstLevel`), when
-    the same view is searched as the coarser image later in the pass.
+    give its s = 1 points (:func:`shares_first_level`). ``measured``: the finer image's
+    contrast (:func:`scalematch.stages.detector.image_contrast`), when the detector adapts to
+    it, and its gradients at s = 1 (:meth:`Memo.measured`).
     """
 
     known: Optional[LowFeatures] = None
     measured: Measured = Measured(None)
-    every: int = 1
-    share: Optional[Callable[[FirstLevel], None]] = None
 
 
 def detect_view(view: View, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None,
                 reuse: Reuse = Reuse()) -> Tuple[Tuple[Detected, ...], bool]:
-    """Detect every scale of one view and describe the probe's points: (detected, probing).
+    """Detect every scale of the finer image and describe the probe's points: (detected,
+    probing).
 
     ``scales``: the scales to detect (the step's). ``tick()`` is called once per scale
-    detected. The levels of a view of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the
+    detected. The levels of an image of at most ``KEEP_LEVELS_MAX_PX`` pixels are kept for the
     full pass. ``reuse``: what other steps found on the same images (:class:`Reuse`).
     """
     config = search.config
-    known, (contrast, grads), every, share = reuse
+    known, (contrast, grads) = reuse
     scales = sorted(scales)
     probing = config.probe.enabled and len(scales) > config.probe.keep
-    every = every if probing else 1
     keep = view.image.size <= KEEP_LEVELS_MAX_PX
     n_probe = config.probe.points if probing else config.harris.max_points
     reuse = known is not None and view.is_identity and shares_first_level(config)
-    share = share if share is not None and not reuse and shares_first_level(config) else None
     detected = []
-    for n, level in enumerate(scale_space(view.image, scales, **_space(config))):
+    for level in scale_space(view.image, scales, **_space(config)):
         if min(level.image.shape) < config.harris.min_level_side_px:
             detected.append(Detected(Keypoints.empty(level.s), None, None))
-        elif n % every:  # left to the full search, if it takes this scale
-            detected.append(Detected(Keypoints.empty(level.s), None, level if keep else None,
-                                     None, True))
         elif reuse and level.s == 1.0:  # found already: the coarser image of the other direction
             kp, part, full = known.strongest(config.harris.max_points, n_probe)
             detected.append(Detected(kp, part, level if keep else None, full))
-        elif share is not None and level.s == 1.0:  # the coarser detector's points, shared
-            wide = detect_on_level(level, config.harris_low, contrast, None,
-                                   view.inside_distance, config.views.edge_margin_px)
-            kp = _part(wide, slice(config.harris.max_points))
-            part = _part(kp, slice(n_probe))
-            desc = search.mode.describe(level, part)
-            share(FirstLevel(wide, desc, len(part)))
-            detected.append(Detected(kp, desc, level if keep else None))
         else:
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
@@ -461,31 +431,13 @@ def _levels(view: View, detected: Sequence[Detected], wanted: Sequence[int],
         view.image, scales[:wanted[-1] + 1], **_space(config))) if i in wanted), False
 
 
-def complete_probe(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
-                   contrast: Optional[Contrast] = None) -> Probed:
-    """``probed`` with the scales its probe left ``pending`` detected and probed too: the same
-    as a view detected and probed at every scale (:func:`detect_view` with ``every`` = 1)."""
-    config = search.config
-    pending = [i for i, d in enumerate(probed.detected) if d.pending]
-    if not pending:
-        return probed
-    view, detected = probed.view, list(probed.detected)
-    keep = view.image.size <= KEEP_LEVELS_MAX_PX
-    for i, level in _levels(view, detected, pending, scales, config)[0]:
-        kp = _detect(view, level, config, contrast)
-        detected[i] = Detected(kp, search.mode.describe(level,
-                                                        _part(kp, slice(config.probe.points))),
-                               level if keep else None)
-    return score_view(view, tuple(detected), probed.probing, low, search)
-
-
 def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequence[float],
                 tick: Callable[[], None] = lambda: None) -> List[ScaleOutcome]:
     """Match the probe's chosen scales of a view in full (steps 4-6); one outcome per scale.
 
-    The probe's descriptors are kept: only the other points are described. The view is probed
-    at every scale (none ``pending``: :func:`complete_probe`). ``scales``: the view's (the
-    step's). ``tick()`` is called once per scale matched or skipped.
+    The probe's descriptors are kept: only the other points are described. ``scales``: the
+    view's (the step's, in the view's pixels). ``tick()`` is called once per scale matched or
+    skipped.
     """
     config = search.config
     scales = sorted(scales)
@@ -494,7 +446,7 @@ def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequen
 
     def one(item) -> ScaleOutcome:
         i, level = item
-        kp, desc, _, full, _ = detected[i]
+        kp, desc, _, full = detected[i]
         if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
@@ -523,238 +475,117 @@ def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequen
 
 def run_step(search: Search, step: Step,
              searches: int) -> Tuple[List[Attempt], StepRecord, float]:
-    """Run one step of the plan: probe its views, match the promising ones in full, decide;
-    (attempts, record, seconds).
+    """Run one step of the plan: the finer image itself (probe its scales, match the promising
+    ones in full, decide), or the pooled views (:func:`run_views`); (attempts, record,
+    seconds).
 
     ``search.memo`` holds what earlier steps computed on the same images; ``searches`` counts
-    the views probed by earlier steps (the a-contrario test counts them all).
+    the view pairs searched by earlier steps (the a-contrario test counts them all).
     """
     t0 = time.perf_counter()
     meter = search.meter
     start = meter.done
-    # the views worth probing at full resolution (every view, without the first look)
-    followed = replace(step, views=first_look(search, step))
-    if not followed.views:
-        candidates = []
-    elif step.side == "coarser":
-        candidates = probe_coarser_views(search, followed)
+    if step.view_pass > 0:
+        attempts, record = run_views(search, step, searches)
     else:
-        candidates = probe_finer_views(search, followed)
-    if step.view_pass == 0:  # the finer image's own scales, for the views of the coarser one
-        search.memo.plain[step.direction] = candidates[0][0]
-    # every view looked at counts in the a-contrario test, those of the first look too
-    attempts = match_chosen(search, step, candidates, searches + len(step.views))
-    meter.tick(start + step.cost - meter.done)  # the views the probe left out
-    record = StepRecord(step.direction, step.view_pass, len(step.views), len(attempts),
-                        probe_best([p.score for p, _, _ in candidates]),
-                        any(a.matched for a in attempts), step.side)
+        candidate = probe_plain(search, step)
+        attempts = match_chosen(search, step, [candidate], searches + 1)
+        record = StepRecord(step.direction, 0, 1, len(attempts), candidate.score,
+                            any(a.matched for a in attempts), step.side)
+    meter.tick(start + step.cost - meter.done)  # what the step left out
     return attempts, record, time.perf_counter() - t0
 
 
-def look_factor(shape: Tuple[int, int], views: ViewParams) -> float:
-    """The first look's shrink factor K for a coarser image of ``shape`` (H, W): its shorter
-    side brought to ``first_look_short_px``, at most ``first_look_max_factor``; 1 (no first
-    look) below ``first_look_min_factor`` or when the first look is off.
+class Candidate(NamedTuple):
+    """A view pair to match in full: a view of the finer image probed (its chosen scales in
+    ``probed.run``), the coarser features it is matched against and the view of the coarser
+    image they come from (None: the image itself)."""
 
-    >>> p = ViewParams(first_look_short_px=300)
-    >>> look_factor((768, 1024), p), look_factor((2000, 3000), p), look_factor((400, 500), p)
-    (2.56, 3.0, 1.0)
-    """
-    if views.first_look_short_px <= 0:
-        return 1.0
-    k = min(min(shape) / views.first_look_short_px, views.first_look_max_factor)
-    return round(k, 3) if k >= views.first_look_min_factor else 1.0
+    probed: "Probed"
+    coarser: LowFeatures
+    coarser_view: Optional[View]
+    direction: Direction
+    scales: Tuple[float, ...]  #: the finer view's scales, in its own pixels (sorted)
+    score: float  #: what chose it: the probe's best score, or the pair's votes
 
 
-def first_look(search: Search, step: Step) -> Tuple[ViewKey, ...]:
-    """The views of ``step`` to probe at full resolution: all of them, unless the first look
-    (``ViewParams.first_look_short_px``) ranks them on both images shrunk by
-    :func:`look_factor`, probed as at full resolution; then the ``first_look_follow`` best that
-    score at least ``first_look_min_score``, in the step's order."""
-    views = search.config.views
-    lo_img = step.direction.coarser_finer(search.work.low, search.work.high)[0]
-    k = look_factor(lo_img.shape, views)
-    if step.view_pass == 0 or k <= 1.0:
-        return step.views
-    small = search.memo.small(k, lambda: shrunk_search(search, k))
-    keys = list(step.views)
-    # the first view alone: what every view shares (the coarser image described, the finer
-    # image's plain scales) is made once, then the others side by side
-    scores = [look_score(small, step, keys[0])]
-    scores += thread_map(lambda key: look_score(small, step, key), keys[1:])
-    best = sorted(range(len(keys)), key=lambda i: (-scores[i], i))[:views.first_look_follow]
-    return tuple(keys[i] for i in sorted(best) if scores[i] >= views.first_look_min_score)
+def probe_plain(search: Search, step: Step) -> Candidate:
+    """Detect and probe the finer image itself at every scale against the coarser image, which
+    is described once per direction (``memo.coarser``), on a thread while the finer image is
+    detected; the finer image probed is kept (``memo.plain``) for the views."""
+    cfg, memo, direction = search.config, search.memo, step.direction
+    lo_img, hi_img = search.work.coarser_finer(direction)
+    lo_valid, hi_valid = search.work.valid(direction)
+    view = identity_view(hi_img, hi_valid)
 
+    def detect():  # the gradients measured with the contrast serve the image's s = 1 level
+        reuse = Reuse(memo.coarser.get(direction.other), memo.measured(hi_img, cfg.harris))
+        return detect_view(view, search, step.scales, search.meter.tick, reuse)
 
-def shrunk_search(search: Search, k: float) -> "Search":
-    """A :class:`Search` of both images shrunk by ``k`` (``cv2.INTER_AREA``), no-data too, with
-    its own memo and no progress meter: the first look's."""
-    work = search.work
-
-    def small(image: np.ndarray) -> np.ndarray:
-        return cv2.resize(image, (0, 0), fx=1.0 / k, fy=1.0 / k, interpolation=cv2.INTER_AREA)
-
-    def nodata(nd: NoData, image: np.ndarray) -> NoData:
-        if nd.valid is None:
-            return nd
-        shrunk = cv2.resize(nd.valid.astype(np.uint8), (image.shape[1], image.shape[0]),
-                            interpolation=cv2.INTER_NEAREST).astype(bool)
-        return replace(nd, valid=shrunk)
-
-    low, high = small(work.low), small(work.high)
-    shrunk = replace(work, low=low, high=high, low_nodata=nodata(work.low_nodata, low),
-                     high_nodata=nodata(work.high_nodata, high))
-    return Search(shrunk, search.config, search.mode, Memo(), Meter(None, 0))
-
-
-def look_score(small: "Search", step: Step, key: ViewKey) -> float:
-    """The first look's score of one view of ``step``: its probe's best score on the shrunk
-    images of ``small`` (:func:`shrunk_search`), as the full-resolution probe would score it."""
-    look = replace(step, views=(key,), full_searches=1)
-    if step.side == "coarser":
-        candidates = probe_coarser_views(small, look)
-    else:
-        candidates = probe_finer_views(small, look)
-    return max((p.score for p, _, _ in candidates), default=0.0)
-
-
-def without_levels(probed: Probed) -> Probed:
-    """``probed`` without its kept scale-space levels (:func:`_levels` makes them again)."""
-    return replace(probed, detected=tuple(d._replace(level=None) for d in probed.detected))
-
-
-#: A view probed in a step: (the finer image's view probed, the coarser features it was
-#: probed against, the view of the coarser image they come from or None: the image itself)
-Candidate = Tuple["Probed", LowFeatures, Optional[View]]
-
-
-def probe_finer_views(search: Search, step: Step) -> List[Candidate]:
-    """Detect and probe each view of the finer image (at every scale) against the coarser
-    image, described once per direction (``memo.coarser``)."""
-    cfg, memo, tick = search.config, search.memo, search.meter.tick
-    lo_img, hi_img = search.work.coarser_finer(step.direction)
-    lo_valid, hi_valid = search.work.valid(step.direction)
-    # the finer image described as the coarser one by the other direction: its s = 1 points
-    coarser = memo.coarser
-    known = coarser.get(step.direction.other)
-    every = cfg.views.probe_every if step.view_pass > 0 else 1  # the views' probe
-    # the detector adapts to the finer image's contrast (measured once, on the image itself,
-    # on the thread that detects its first view; memo.contrast(hi_img, ...) after that)
-
-    def view_of(key) -> View:  # made once in the pass (memo.view): the other side views it too
-        return memo.view(hi_img, key, step.view_pass,
-                         lambda: tilt_view(hi_img, *key, cfg.views, hi_valid))
-
-    def shared(key) -> Optional[Callable[[FirstLevel], None]]:
-        if step.view_pass == 0 or not cfg.views.coarser:
-            return None
-        return lambda first: memo.keep_first(hi_img, key, step.view_pass, first)
-
-    def probe(key) -> Probed:
-        view = view_of(key)
-        reuse = Reuse(known, Measured(memo.contrast(hi_img, cfg.harris)), every, shared(key))
-        return score_view(view, *detect_view(view, search, step.scales, tick, reuse),
-                          coarser[step.direction], search)
-
-    def first_view(view: View):  # the gradients: for the image itself
-        reuse = Reuse(known, memo.measured(hi_img, cfg.harris), every, shared(keys[0]))
-        return detect_view(view, search, step.scales, tick, reuse)
-
-    keys = list(step.views)
-    leaders = Leaders(step.full_searches, without_levels)
-    if step.direction not in coarser:  # described while the first view is detected
-        view = view_of(keys[0])
-        coarser[step.direction], detected = thread_map(lambda job: job(), [
+    if direction not in memo.coarser:  # described while the finer image is detected
+        memo.coarser[direction], detected = thread_map(lambda job: job(), [
             lambda: describe_low(lo_img, search, *memo.measured(lo_img, cfg.harris_low),
                                  distance_inside(lo_valid)),
-            lambda: first_view(view)])
-        leaders.add(0, score_view(view, *detected, coarser[step.direction], search))
-    start = len(leaders.probed)
-    # the views side by side (each one alone: same answer); only the best ones keep their levels
-    thread_map(lambda k: leaders.add(k, probe(keys[k])), range(start, len(keys)))
-    probed = leaders.probed
-    if every > 1:  # the views whose probe of some scales scores best are probed at them all
-        top = sorted(range(len(probed)), key=lambda k: -probed[k].score)[:step.full_searches]
-        done = thread_map(lambda k: complete_probe(probed[k], coarser[step.direction], search,
-                                                   step.scales,
-                                                   memo.contrast(hi_img, cfg.harris)),
-                          top)
-        for k, p in zip(top, done):
-            probed[k] = p
-    return [(p, coarser[step.direction], None) for p in probed]
+            detect])
+    else:
+        detected = detect()
+    probed = score_view(view, *detected, memo.coarser[direction], search)
+    memo.plain[direction] = probed
+    return Candidate(probed, memo.coarser[direction], None, direction, tuple(sorted(step.scales)),
+                     probed.score)
 
 
-def describe_coarser_view(view: View, search: Search, contrast: Optional[Contrast],
-                          first: Optional[FirstLevel] = None) -> LowFeatures:
+def describe_coarser_view(view: View, search: Search, contrast: Optional[Contrast]
+                          ) -> LowFeatures:
     """A view of the coarser image described as the coarser image is (at s = 1,
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
-    image's own (the detector adapts to it as for the image itself). ``first``: the same
-    view's points found as the finer image's (:class:`FirstLevel`): only the points it did
-    not describe are described (a point's descriptors depend on that point alone)."""
+    image's own (the detector adapts to it as for the image itself)."""
     config = search.config
     level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    if first is None:
-        kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
-                             config.views.edge_margin_px)
-        return LowFeatures(view.image, search.mode.describe(level, kp), kp)
-    kp, desc, n = first
-    if len(kp) > n:
-        desc = _joined(desc, search.mode.describe(level, _part(kp, slice(n, None))), n)
-    return LowFeatures(view.image, desc, kp)
+    kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
+                         config.views.edge_margin_px)
+    return LowFeatures(view.image, search.mode.describe(level, kp), kp)
 
 
-def plain_probed(search: Search, step: Step) -> Probed:
-    """The finer image of ``step.direction`` detected at every scale of ``step``, as its pass 0
-    did (kept in ``memo.plain``; detected here when that step did not run, its score unset)."""
-    memo, direction = search.memo, step.direction
+def plain_probed(search: Search, direction: Direction, scales: Sequence[float]) -> Probed:
+    """The finer image of ``direction`` detected at every scale of ``scales``, as its plain
+    step did (kept in ``memo.plain``; detected here when that step did not run, its score
+    unset)."""
+    memo = search.memo
     if direction not in memo.plain:
-        hi_img = direction.coarser_finer(search.work.low, search.work.high)[1]
+        hi_img = search.work.coarser_finer(direction)[1]
         view = identity_view(hi_img, search.work.valid(direction)[1])
-        detected, probing = detect_view(view, search, step.scales, reuse=Reuse(
+        detected, probing = detect_view(view, search, scales, reuse=Reuse(
             memo.coarser.get(direction.other), Measured(memo.contrast(hi_img,
                                                                      search.config.harris))))
         memo.plain[direction] = Probed(view, detected, (), (), math.nan, probing)
     return memo.plain[direction]
 
 
-def probe_coarser_views(search: Search, step: Step) -> List[Candidate]:
-    """Detect each view of the coarser image once (s = 1) and probe the finer image's own
-    scales (detected by pass 0) against it: a view of the coarser image costs one detection,
-    where a view of the finer image costs one per scale."""
-    work = search.work
-    lo_img = step.direction.coarser_finer(work.low, work.high)[0]
-    plain = plain_probed(search, step)
-    contrast = search.memo.contrast(lo_img, search.config.harris_low)
-
-    def probe(key) -> Candidate:
-        view = search.memo.view(lo_img, key, step.view_pass, lambda: tilt_view(
-            lo_img, *key, search.config.views, work.valid(step.direction)[0]))
-        feats = describe_coarser_view(view, search, contrast,
-                                      search.memo.first_level(lo_img, key, step.view_pass))
-        search.meter.tick()
-        return score_view(plain.view, plain.detected, plain.probing, feats, search), feats, view
-
-    return thread_map(probe, list(step.views))
+def coarser_described(search: Search, direction: Direction) -> LowFeatures:
+    """The coarser image of ``direction`` described at s = 1, as its plain step did (kept in
+    ``memo.coarser``; described here when that step did not run)."""
+    memo, cfg = search.memo, search.config
+    if direction not in memo.coarser:
+        lo_img = search.work.coarser_finer(direction)[0]
+        memo.coarser[direction] = describe_low(
+            lo_img, search, memo.contrast(lo_img, cfg.harris_low),
+            None, distance_inside(search.work.valid(direction)[0]))
+    return memo.coarser[direction]
 
 
 def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
                  searches: int) -> List[Attempt]:
-    """Match in full the views the probe finds promising (of a pass of views: the
-    ``step.full_searches`` best, scoring at least ``views.min_probe_score``), and decide each."""
+    """Match in full each of ``candidates`` (a view of the finer image probed, with the chosen
+    scales: ``Probed.run``), and decide each; ``searches``: the view pairs searched so far,
+    these included (the a-contrario test counts them all)."""
     work, cfg, mode = search.work, search.config, search.mode
-    hi_img = step.direction.coarser_finer(work.low, work.high)[1]
-    chosen = sorted(candidates, key=lambda c: -c[0].score)
-    if step.view_pass > 0:  # views are matched in full only when the probe finds them promising
-        chosen = [c for c in chosen[:step.full_searches]
-                  if c[0].score >= cfg.views.min_probe_score]
     attempts: List[Attempt] = []
-    for p, low_feats, coarser_view in chosen:
-        p = complete_probe(p, low_feats, search, step.scales,  # done unless a tie
-                           search.memo.contrast(hi_img, cfg.harris))
-        outcomes = tuple(finish_view(p, low_feats, search, step.scales, search.meter.tick))
+    for p, low_feats, coarser_view, direction, scales, score in candidates:
+        outcomes = tuple(finish_view(p, low_feats, search, scales, search.meter.tick))
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
-                         else work.valid(step.direction)[0])
+                         else work.valid(direction)[0])
 
         def look(t, outcome, windows_below, view=p.view, low_feats=low_feats,
                  valid=coarser_shown) -> Look:
@@ -764,13 +595,173 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
                               windows_below=windows_below)
 
         context = SearchContext(fit_spec(cfg), mode.orientation, searches,
-                                shown_scale(work, step.direction))
+                                shown_scale(work, direction) * p.view.scale)
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
                          context=context, look=look)
-        attempts.append(Attempt(step, p.view, p.score, outcomes, verdict, coarser_view))
+        attempts.append(Attempt(replace(step, direction=direction), p.view, score,
+                                outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):
             break  # no other view of this step can do better
     return attempts
+
+
+def run_views(search: Search, step: Step, searches: int) -> Tuple[List[Attempt], StepRecord]:
+    """The step of views: every view of both images described once (:mod:`scalematch.features`),
+    one pooled vote over every view pair of every direction searched
+    (:mod:`scalematch.stages.vote`), and the ``step.full_searches`` view pairs whose best cell
+    is strongest, beyond chance, matched in full and decided; (attempts, record).
+
+    A direction's view pairs are its finer image's views against its coarser image itself
+    (``finer``), and its finer image itself against its coarser image's views (``coarser``,
+    ``ViewParams.coarser``); the images themselves were searched by the plain steps.
+    """
+    cfg, work = search.config, search.work
+    directions = [d for d, _ in step.directions]
+    scales = dict(step.directions)
+    viewed = coarser_viewed(directions, finer_sides(work), cfg.views.coarser_directions) \
+        if cfg.views.coarser else ()
+    images = views_of_images(search, step, viewed)
+    sides: List[Tuple[Direction, str]] = []
+    cells: List[Cells] = []
+    for d in directions:
+        coarser, finer = d.coarser_finer(images[Direction.GIVEN], images[Direction.SWAPPED])
+        sides.append((d, "finer"))
+        cells.append(side_cells(finer, coarser, "finer", cfg.matcher, cfg.vote))
+        if d in viewed:
+            sides.append((d, "coarser"))
+            cells.append(side_cells(finer, coarser, "coarser", cfg.matcher, cfg.vote))
+    # every cell voted so far counts, the earlier passes' too
+    search.memo.cells_tried += sum(c.tried for c in cells)
+    nfa = [cells_nfa(c, search.memo.cells_tried) for c in cells]
+    ranked = best_pairs(cells, nfa, step.full_searches, cfg.vote)
+    pairs = sum(len(step.views) for _, side in sides)
+    chosen = [view_pair(search, sides[r.side][0], images, r, scales[sides[r.side][0]])
+              for r in ranked]
+    attempts = match_chosen(search, step, chosen, searches + pairs)
+    record = StepRecord(step.direction, step.view_pass, pairs, len(attempts),
+                        max((r.votes for r in ranked), default=0),
+                        any(a.matched for a in attempts), "both")
+    return attempts, record
+
+
+def views_of_images(search: Search, step: Step, viewed: Sequence[Direction]
+                    ) -> Dict[Direction, ImageViews]:
+    """Each image's views and tables, keyed by the direction in which it is the coarser one
+    (``GIVEN``: the first image given, ``SWAPPED``: the second), as far as the step needs them:
+    as the finer image of a direction searched, every level of its views; as the coarser image
+    of a direction in ``viewed``, the first level of its views. The images themselves come
+    from the plain steps' detection (:func:`plain_probed`, :func:`coarser_described`)."""
+    cfg, work, memo = search.config, search.work, search.memo
+    scales = dict(step.directions)
+    out = {}
+    for d in (Direction.GIVEN, Direction.SWAPPED):
+        image = d.coarser_finer(work.low, work.high)[0]
+        valid = d.coarser_finer(work.low_valid, work.high_valid)[0]
+        finer_scales = scales.get(d.other, ())  # this image is the other direction's finer one
+        plain = plain_probed(search, d.other, finer_scales) if finer_scales else None
+        coarser = coarser_described(search, d) if d in scales else None
+        how = Describing(search.mode.describe, cfg.harris, cfg.harris_low,
+                         memo.contrast(image, cfg.harris), _space(cfg), cfg.probe.points,
+                         cfg.views.edge_margin_px, cfg.views.vote_every,
+                         cfg.harris.min_level_side_px, cfg.views.finer_from_scale)
+        roles = Roles(plain.view if plain is not None else identity_view(image, valid),
+                      [x.probe for x in plain.detected if x.probe is not None]
+                      if plain is not None else [],
+                      coarser.described if coarser is not None else None, finer_scales,
+                      d in viewed)
+        out[d] = image_views(image, valid, roles, step.views, cfg.views, how, search.meter.tick)
+    return out
+
+
+def side_cells(finer: ImageViews, coarser: ImageViews, side: str, matcher, params) -> Cells:
+    """The cells of one side of a direction's vote: the finer image's tilted views (all their
+    levels probed) against the coarser image itself (``"finer"``), or the finer image itself
+    (every scale probed) against each tilted view of the coarser image (``"coarser"``: the
+    ratio test within each view, as a search of that view alone)."""
+    f, c = finer.finer, coarser.coarser
+    if side == "finer":
+        f_rows, c_parts = f.rows(f.view > 0), [c.rows(c.view == 0)]
+    else:
+        f_rows = f.rows(f.view == 0)
+        c_parts = [c.rows(c.view == v) for v in np.unique(c.view[c.view > 0])]
+    found = []
+    for part in c_parts:
+        cand = match_descriptors(f_rows.desc, part.desc, matcher)
+        if len(cand):
+            i, j = cand.i, cand.j
+            found.append(VoteCandidates(f_rows.view[i], part.view[j], f_rows.s[i] / part.s[j],
+                                        f_rows.xy[i], part.xy[j], part.angle[j] - f_rows.angle[i],
+                                        f_rows.point[i], part.point[j]))
+    if not found:
+        return vote_cells(VoteCandidates(*(np.zeros(0),) * 3, np.zeros((0, 2)), np.zeros((0, 2)),
+                                         np.zeros(0), np.zeros(0, np.int64),
+                                         np.zeros(0, np.int64)), finer.finer_sides,
+                          coarser.coarser_shapes, params)
+    joined = VoteCandidates(*(np.concatenate([getattr(x, f) for x in found])
+                              for f in VoteCandidates.__dataclass_fields__))
+    return vote_cells(joined, finer.finer_sides, coarser.coarser_shapes, params)
+
+
+def view_pair(search: Search, direction: Direction, images: Dict[Direction, ImageViews],
+              ranked: Ranked, scales: Sequence[float]) -> Candidate:
+    """A view pair the vote ranks among the best, made ready to be matched in full at full
+    resolution (ASIFT's second resolution, Morel & Yu 2009, section 4): the finer view (made
+    again at full resolution when the vote's was shrunk: ``ViewParams.decimation``) detected
+    at the scales of its cells beyond chance and their neighbours (every point, the probe's
+    described), the coarser view (made again the same way) described whole, or the coarser
+    image itself."""
+    cfg, memo, work = search.config, search.memo, search.work
+    coarser_img, finer_img = direction.coarser_finer(images[Direction.GIVEN],
+                                                     images[Direction.SWAPPED])
+    lo_img, hi_img = work.coarser_finer(direction)
+    lo_valid, hi_valid = work.valid(direction)
+    voted_f = finer_img.finer_views[ranked.finer_view]
+    voted_c = coarser_img.coarser_views[ranked.coarser_view]
+    full = replace(cfg.views, decimation=1.0)
+    f_view = plain_probed(search, direction, scales).view if ranked.finer_view == 0 else \
+        tilt_view(hi_img, voted_f.tilt, voted_f.longitude_deg, full, hi_valid)
+    c_view = None if ranked.coarser_view == 0 else \
+        tilt_view(lo_img, voted_c.tilt, voted_c.longitude_deg, full, lo_valid)
+    own = view_scales(f_view, scales)
+    # the vote's scales are between its views' pixels: in the full views' pixels, times theirs
+    shift = voted_f.scale / voted_c.scale
+    indices = scale_index(index_scale(np.array(ranked.scale_indices[:cfg.probe.keep])) * shift)
+    wanted = sorted({k for si in indices for k in _near_scale(own, int(si)) if 0 <= k < len(own)})
+    if f_view.is_identity:
+        probed = replace(plain_probed(search, direction, scales), run=tuple(wanted),
+                         score=float(ranked.votes))
+    else:
+        probed = detect_chosen(f_view, own, wanted, search, memo.contrast(hi_img, cfg.harris))
+    low = coarser_described(search, direction) if c_view is None else describe_coarser_view(
+        c_view, search, memo.contrast(lo_img, cfg.harris_low))
+    return Candidate(probed, low, c_view, direction, tuple(own), float(ranked.votes))
+
+
+def _near_scale(own: Sequence[float], index: int) -> List[int]:
+    """The positions in ``own`` (a view's scales) of the scale of third-octave ``index`` and
+    of its two neighbours."""
+    at = int(np.argmin([abs(k - index) for k in scale_index(np.asarray(own))]))
+    return [at - 1, at, at + 1]
+
+
+def detect_chosen(view: View, scales: Sequence[float], wanted: Sequence[int], search: Search,
+                  contrast: Optional[Contrast]) -> Probed:
+    """A tilted view detected at the scales ``wanted`` (positions in its ``scales``, its own
+    pixels) for a full match: every point, the probe's strongest described (the others are
+    described by :func:`finish_view`); the other scales are left empty."""
+    config = search.config
+    detected = []
+    for n, level in enumerate(scale_space(view.image, scales[:max(wanted) + 1] if wanted else [],
+                                          **_space(config))):
+        if n not in wanted or min(level.image.shape) < config.harris.min_level_side_px:
+            detected.append(Detected(Keypoints.empty(level.s), None, None))
+            continue
+        kp = _detect(view, level, config, contrast)
+        detected.append(Detected(kp, search.mode.describe(level, _part(
+            kp, slice(config.probe.points))), level))
+    detected += [Detected(Keypoints.empty(s_), None, None) for s_ in scales[len(detected):]]
+    usable = tuple(n for n in wanted if detected[n].probe is not None)
+    return Probed(view, tuple(detected), usable, usable, math.inf, True)
 
 
 def fit_spec(config: Config) -> FitSpec:
@@ -875,12 +866,13 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     records, plan, stopped = run.records, run.plan, run.stopped
     decided = shown.verdict.evidence
     direction = shown.step.direction
-    g = shown_scale(work, direction)
+    g = shown_scale(work, direction) * shown.view.scale
     f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
     searched_ = dict(searches=sum(r.views for r in records), search_order=direction,
                      view_tilt=shown.shown_view.tilt,
                      view_longitude_deg=shown.shown_view.longitude_deg,
-                     view_of=shown.step.side, probe_score=shown.probe,
+                     view_of="coarser" if shown.coarser_view is not None else "finer",
+                     probe_score=shown.probe,
                      probe_best=probe_best([r.probe_best for r in records]),
                      steps_run=len(records), steps_planned=len(plan), stopped=stopped)
     sized = dict(low_working_factor=work.f_low, high_working_factor=work.f_high,
@@ -932,9 +924,17 @@ def _common(search: Search, run: SearchRun, shown: Attempt) -> dict:
     """What every result of a search holds: a "no" has no best scale (NaN, null in the JSON),
     as it has no ratio; its refused candidate is told in ``rejected``."""
     return dict(model=search.config.model, best_scale=math.nan,
-                scales=tuple(o.row for o in shown.outcomes), timings=run.timings,
+                scales=rows_of(shown), timings=run.timings,
                 config=search.config, search=run.records,
                 covariance_used=search.mode.covariance_used)
+
+
+def rows_of(attempt: Attempt) -> Tuple[ScaleRow, ...]:
+    """The per-scale rows of an attempt in the finer image's scales: a view simulated on the
+    image shrunk (``View.scale``) has its rows' scales and ratios in its own pixels."""
+    k = attempt.view.scale
+    return tuple(o.row if k == 1.0 else replace(o.row, s=o.row.s * k, ratio=o.row.ratio * k)
+                 for o in attempt.outcomes)
 
 
 def unreachable(search: Search, run: SearchRun) -> MatchResult:
@@ -1011,7 +1011,7 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit,
     ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
         math.nan, math.nan, (math.nan, math.nan))
     return MatchResult(**dict(_common(search, run, winner), model=model,
-                              best_scale=winner.verdict.best_scale),
+                              best_scale=winner.verdict.best_scale * winner.view.scale),
                        matched=True, transform=t, resolution_ratio=ratio, rotation_deg=angle,
                        translation=tr, inliers=inliers,
                        evidence=evidence_of(winner, run, final, search.work, seen),

@@ -160,20 +160,22 @@ def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
 class StepRecord:
     """What one step of the search plan did (JSON ``search``, one object per step run)."""
 
-    direction: Direction  #: which image was taken as the coarser one
-    view_pass: int  #: 0: the finer image itself; k: the k-th pass of simulated tilted views
-    views: int  #: views detected and probed
-    full: int  #: views matched in full (the probe's choice)
-    probe_best: float  #: the best probe score among its views
+    direction: Direction  #: which image was taken as the coarser one (the views: the first)
+    view_pass: int  #: 0: the finer image itself; k: the k-th pass of tilted views of both images
+    #: view pairs searched: 1 for the finer image itself; for the views, every pair of the
+    #: pooled vote (each image's views against the other image, in each direction)
+    views: int
+    full: int  #: view pairs matched in full (the probe's or the vote's choice)
+    #: the best probe score (the image itself), or the best cell's votes (the views)
+    probe_best: float
     matched: bool  #: a reliable match was found in this step
-    side: str = "finer"  #: whose views: "finer" or "coarser" (``search.Step.side``)
+    side: str = "finer"  #: whose views: "finer" (the image itself) or "both" (``Step.side``)
 
     @property
     def name(self) -> str:
-        """``given pass 0``: the key of the step's time in ``MatchResult.timings`` (``given
-        pass 1 coarser`` for a step of views of the coarser image)."""
-        return f"{self.direction} pass {self.view_pass}" + (
-            " coarser" if self.side == "coarser" else "")
+        """``given pass 0``: the key of the step's time in ``MatchResult.timings`` (``views
+        pass 1`` for the first pass of views)."""
+        return f"views pass {self.view_pass}" if self.view_pass else f"{self.direction} pass 0"
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,12 @@
 """The search as data: a plan of steps, what each step found, and the rule that stops the search.
 
 A match is searched for progressively (Mishkin, Matas & Perdoch 2015, "MODS"): first the
-finer image itself, then passes of simulated tilted views, each pass run only when the ones
-before found nothing; with the automatic order, each pass in both directions (which image is
-the coarser one). A pass views the finer image first, then the coarser one: where the finer
-image is the oblique one, it is coarser than the other along one axis, and only a view of the
-coarser image brings the pair back within the scales searched (docs/design/VIEWS.md, "Views of
-the coarser image").
+finer image itself, in the given order, then in the other (with the automatic order), and only
+when neither finds a match, passes of simulated tilted views of both images, each pass only
+when the earlier ones found nothing, and each in both orders at once: one pooled vote over
+every view pair of the pass (:mod:`scalematch.features`, :mod:`scalematch.stages.vote`). The views of the finer image reach a finer image seen more
+obliquely than the coarser one; the views of the coarser image reach a finer image that is the
+oblique one (docs/design/VIEWS.md, "Views of the coarser image").
 :func:`search_plan` writes that down as a tuple of :class:`Step`;
 :func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
 step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are
@@ -27,11 +27,12 @@ from .stages.descriptors import Described
 from .stages.estimator import Estimate, model_of
 from .stages.views import View, view_plan
 
-#: (tilt, longitude in degrees) of a view; (1, 0) is the finer image itself.
+#: (tilt, longitude in degrees) of a view; (1, 0) is the image itself.
 ViewKey = Tuple[float, float]
 PLAIN: Tuple[ViewKey, ...] = ((1.0, 0.0),)
-#: Which image a step's views are of (``Step.side``).
-SIDES = ("finer", "coarser")
+#: Which image a step's views are of (``Step.side``): the plain steps view the finer image
+#: (itself), the step of views both images
+SIDES = ("finer", "both")
 
 #: Why a search stopped (``Evidence.stopped``).
 STOP_REASONS = {
@@ -43,26 +44,27 @@ STOP_REASONS = {
 
 @dataclass(frozen=True)
 class Step:
-    """One step of the plan: the views of one pass of one image, in one direction."""
+    """One step of the plan: the finer image itself in one direction, or a pass of views of
+    both images in every direction searched (``view_pass`` 1 and on)."""
 
-    direction: Direction  #: which image is taken as the coarser one
-    view_pass: int  #: 0: the finer image itself; k >= 1: the k-th pass of tilted views
-    views: Tuple[ViewKey, ...]  #: the views to probe
+    direction: Direction  #: which image is taken as the coarser one (the views: the first)
+    view_pass: int  #: 0: the finer image itself; k >= 1: the k-th pass of views, pooled
+    views: Tuple[ViewKey, ...]  #: the views (of each image, for the step of views)
     scales: Tuple[float, ...]  #: the scales of the finer image searched (this direction's)
-    full_searches: int  #: at most this many views are matched in full
-    #: "finer": views of the finer image, each detected at every scale; "coarser": views of the
-    #: coarser image, each detected once (s = 1) and probed against the finer image's own
-    #: scales, detected by the direction's pass 0
+    full_searches: int  #: at most this many views (view pairs) are matched in full
+    #: "finer": the finer image itself; "both": the views of both images
     side: str = "finer"
+    #: the directions the step of views searches, each with its scales
+    directions: Tuple[Tuple[Direction, Tuple[float, ...]], ...] = ()
 
     @property
     def cost(self) -> int:
-        """Progress units: each view detected at each scale (a coarser view: once), each full
-        search at each scale."""
-        full = min(self.full_searches, len(self.views)) * len(self.scales)
-        if self.side == "coarser":
-            return len(self.views) + full
-        return len(self.views) * len(self.scales) + full
+        """Progress units: each scale of the finer image detected, and each scale of each view
+        of each image (the step of views), and each full search at each scale."""
+        if self.view_pass == 0:
+            return 2 * len(self.scales)
+        return sum(len(self.views) * (len(scales) + 1) for _, scales in self.directions) + \
+            self.full_searches * max((len(sc) for _, sc in self.directions), default=0)
 
 
 def within_reach(scales: Sequence[float], finer_side: Optional[float],
@@ -85,34 +87,32 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     ``scales[d]``: the scales of direction ``d`` (at working size a direction may have none,
     :func:`scalematch.working.direction_scales`); ``finer_sides[d]``: the longer side of that
     direction's finer image, px, which bounds its scales (:func:`within_reach`, with
-    ``config.min_footprint_px``). Pass 0 is the finer image itself; the passes
-    of views (``config.views``) follow, for models with a ratio (a fundamental matrix has no
-    view to refit). With ``config.order == "auto"`` each pass runs the given direction first;
-    each pass of views runs the finer image's views (both directions), then, with
-    ``config.views.coarser``, the coarser image's (:func:`coarser_viewed`).
+    ``config.min_footprint_px``). The plain steps (the finer image itself) run the given
+    direction first, then the other with ``config.order == "auto"``; the step of views
+    (``config.views``) follows, for models with a ratio in the default mode (a fundamental
+    matrix has no view to refit; the paper's jets carry no orientation to vote with).
 
     >>> from scalematch.config import Config
     >>> plan = search_plan(Config(), {Direction.GIVEN: (1.0, 2.0), Direction.SWAPPED: (1.0,)})
-    >>> [(str(s.direction)[0], s.view_pass, s.side[0], len(s.views)) for s in plan]
+    >>> [(str(s.direction)[0], s.view_pass, s.side, len(s.views)) for s in plan]
     ... # doctest: +NORMALIZE_WHITESPACE
-    [('g', 0, 'f', 1), ('s', 0, 'f', 1), ('g', 1, 'f', 5), ('s', 1, 'f', 5), ('g', 1, 'c', 5),
-     ('s', 1, 'c', 5), ('g', 2, 'f', 10), ('s', 2, 'f', 10), ('g', 2, 'c', 10), ('s', 2, 'c', 10),
-     ('g', 3, 'f', 35), ('s', 3, 'f', 35), ('g', 3, 'c', 35), ('s', 3, 'c', 35)]
+    [('g', 0, 'finer', 1), ('s', 0, 'finer', 1), ('g', 1, 'both', 5), ('g', 2, 'both', 10),
+     ('g', 3, 'both', 35)]
+    >>> [(str(d)[0], sc) for d, sc in plan[-1].directions]
+    [('g', (1.0, 2.0)), ('s', (1.0,))]
     """
     order = (Direction.GIVEN, Direction.SWAPPED) if config.order == "auto" else (Direction.GIVEN,)
     known = finer_sides or {}
     scales = {d: within_reach(scales.get(d, ()), known.get(d), config.min_footprint_px)
               for d in order}
     directions = [d for d in order if scales[d]]
-    passes = [PLAIN] + ([tuple(p) for p in view_plan(config.views)]
-                        if model_of(config.model).has_ratio else [])
-    viewed = {"finer": directions,
-              "coarser": coarser_viewed(directions, known, config.views.coarser_directions)}
-    sides = SIDES if config.views.coarser else SIDES[:1]
-    return tuple(Step(d, k, views, tuple(scales[d]),
-                      len(views) if k == 0 else config.views.full_searches, side)
-                 for k, views in enumerate(passes) for side in (sides if k else SIDES[:1])
-                 for d in viewed[side])
+    plan = [Step(d, 0, PLAIN, tuple(scales[d]), 1) for d in directions]
+    if directions and model_of(config.model).has_ratio and config.mode == "default":
+        both = tuple((d, tuple(scales[d])) for d in directions)
+        plan += [Step(directions[0], k, tuple(keys), tuple(scales[directions[0]]),
+                      config.views.full_searches, "both", both)
+                 for k, keys in enumerate(view_plan(config.views), 1) if keys]
+    return tuple(plan)
 
 
 def coarser_viewed(directions: Sequence[Direction], finer_sides: Mapping[Direction, float],
@@ -239,16 +239,12 @@ def searched(records: Sequence[StepRecord]) -> str:
     >>> g = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
     >>> searched([g, replace(g, direction=Direction.SWAPPED)])
     'both orders'
-    >>> searched([g, replace(g, view_pass=1, views=5)])
-    'the order given, tilted views'
-    >>> searched([g, replace(g, view_pass=1, views=5), replace(g, view_pass=1, side="coarser")])
+    >>> searched([g, replace(g, view_pass=1, views=100, side="both")])
     'the order given, tilted views of both images'
     """
-    orders = {r.direction for r in records}
+    orders = {r.direction for r in records if r.view_pass == 0}
     what = ["both orders" if len(orders) > 1 else
             "the order given" if Direction.GIVEN in orders else "the other order"]
-    views = [r for r in records if r.view_pass > 0]
-    if views:
-        what.append("tilted views of both images" if any(r.side == "coarser" for r in views)
-                    else "tilted views")
+    if any(r.view_pass > 0 for r in records):
+        what.append("tilted views of both images")
     return ", ".join(what)

@@ -17,7 +17,7 @@ from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
 from scalematch.pipeline import distinct_pairs
 from scalematch.result import Evidence, MatchResult
-from scalematch.stages.detector import HarrisParams, image_contrast
+from scalematch.stages.detector import HarrisParams
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
 
@@ -228,12 +228,13 @@ def test_unrelated_pair_is_no_reliable_match(raccoon):
     left, right = raccoon[:, :480], raccoon[:, 544:]
     low = make_zoom_pair(left, 3.0, np.random.default_rng(0), high_size=(160, 120)).low
     high = right[200:560, 0:480]
-    for config in (Config(), Config.paper()):
+    for config in (Config.paper(), Config()):
         r = match(low, high, config)
         assert not r.matched and r.reason
         assert r.transform is None and r.inliers.shape == (0, 4)
-    # the reason says what was searched: views only when they ran
-    assert r.reason.endswith("searches: both orders, tilted views of both images)"), r.reason
+    # the reason says what was searched: views only when they ran (the default's: 2 plain
+    # searches and the pooled views' pairs, 2 x 50 of each direction)
+    assert r.reason.endswith("(202 searches: both orders, tilted views of both images)"), r.reason
     r = match(low, high, Config.preset("no-views"))
     assert not r.matched and r.reason.endswith("(2 searches: both orders)"), r.reason
     assert [(s.direction.value, s.view_pass) for s in r.search] == [("given", 0), ("swapped", 0)]
@@ -364,25 +365,25 @@ def test_the_search_record_says_what_ran(raccoon):
     found = match(pair.low, pair.high)
     assert [(str(r.direction), r.view_pass, r.matched) for r in found.search] == [
         ("given", 0, True)]
-    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 14
+    assert found.evidence.stopped == "matched" and found.evidence.steps_planned == 5
     none = match(raccoon[:300, :400], raccoon[400:, 500:900])
     assert not none.matched and none.evidence.stopped == "plan done"
-    assert [(r.view_pass, r.side[0]) for r in none.search] == [
-        (0, "f"), (0, "f"), (1, "f"), (1, "f"), (1, "c"), (1, "c"), (2, "f"), (2, "f"),
-        (2, "c"), (2, "c"), (3, "f"), (3, "f"), (3, "c"), (3, "c")]
-    # each pass's views of the finer image, then as many of the coarser one
+    assert [(r.view_pass, r.side) for r in none.search] == [
+        (0, "finer"), (0, "finer"), (1, "both"), (2, "both"), (3, "both")]
+    # each pass's views of the finer image against the coarser one, and the finer image
+    # against as many views of the coarser one, in each direction
     assert none.evidence.searches == sum(r.views for r in none.search) == 2 + 4 * (5 + 10 + 35)
 
 
 def test_a_time_budget_stops_a_no_after_the_first_step_and_spares_a_plain_match(raccoon):
     """The budget is checked between steps, never before the first: a budget far smaller than
-    any step stops an unrelated pair after the given order's plain search (1 step of 14, the
+    any step stops an unrelated pair after the given order's plain search (1 step of 5, the
     reason says so), and a plain zoom pair, solved by that first step, still matches."""
     tiny = Config(time_budget_s=1e-6)
     none = match(raccoon[:300, :400], raccoon[400:, 500:900], tiny)
     assert not none.matched and none.evidence.stopped == "time budget"
     assert [(str(r.direction), r.view_pass) for r in none.search] == [("given", 0)]
-    assert "time budget of 1e-06 s ran out after 1 of 14 steps" in none.reason
+    assert "time budget of 1e-06 s ran out after 1 of 5 steps" in none.reason
     pair = _pair(raccoon, 3.0, 4)
     found = match(pair.low, pair.high, tiny)
     assert found.matched and _error(found, pair) < 1.0
@@ -581,7 +582,6 @@ def test_a_smooth_scene_is_solved_by_the_point_budget():
 def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
     """A 12-bit image stored as 0-4095 in a 16-bit PNG is read as 0-16 grey levels,
     and 32 grey levels as 0-31: the threshold follows the image's contrast, so they match."""
-    import cv2
 
     from scalematch.imageio import read_grey
 
@@ -603,48 +603,6 @@ def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
 
 
 
-def test_a_view_probed_at_every_other_scale_and_completed_is_the_view_probed_at_all(raccoon):
-    """ViewParams.probe_every = 2: a view's probe detects every other scale; completing it
-    (``complete_probe``: the views whose probe scores best) gives what a probe of every scale
-    gives: the same points and probe descriptors at each scale, the same scores."""
-    from scalematch.modes import mode_of
-    from scalematch.stages.views import tilt_view
-    from scalematch.working import at_working_size
-
-    config = Config()
-    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
-    search = pipeline.Search(at_working_size(pair.low, pair.high, config), config,
-                             mode_of(config), pipeline.Memo(), pipeline.Meter(None, 0))
-    low = pipeline.describe_low(pair.low, search,
-                                image_contrast(pair.low, config.harris_low))
-    contrast = image_contrast(pair.high, config.harris)
-    view = tilt_view(pair.high, 4.0, 36.0, config.views)
-    measured = pipeline.Measured(contrast)
-    every = pipeline.score_view(view, *pipeline.detect_view(
-        view, search, config.scales, reuse=pipeline.Reuse(measured=measured)), low, search)
-    sampled = pipeline.score_view(view, *pipeline.detect_view(
-        view, search, config.scales, reuse=pipeline.Reuse(measured=measured, every=2)),
-        low, search)
-    assert [d.pending for d in sampled.detected][:4] == [False, True, False, True]
-    done = pipeline.complete_probe(sampled, low, search, config.scales, contrast)
-    assert done.run == every.run and done.score == every.score
-    for a, b in zip(done.detected, every.detected):
-        assert np.array_equal(a.keypoints.xy, b.keypoints.xy)
-        assert (a.probe is None) == (b.probe is None)
-        assert a.probe is None or np.array_equal(a.probe.desc, b.probe.desc)
-
-
-def test_probing_views_at_every_other_scale_keeps_a_tilt_of_4_answer(raccoon):
-    """A ratio-2 pair seen with a tilt of 4 (seed 0), solved by a view at t = 4: probing the
-    views at every other scale (the default) gives the transform of probing every scale."""
-    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
-    sampled = match(pair.low, pair.high)
-    every = match(pair.low, pair.high,
-                  replace(Config(), views=replace(ViewParams(), probe_every=1)))
-    assert sampled.matched and every.matched and sampled.evidence.view_tilt == 4.0
-    assert np.array_equal(sampled.transform, every.transform)
-
-
 def _search(config, low, high):
     from scalematch.modes import mode_of
     from scalematch.working import at_working_size
@@ -653,102 +611,51 @@ def _search(config, low, high):
                            pipeline.Memo(), pipeline.Meter(None, 0))
 
 
-def test_a_view_found_as_the_finer_image_is_described_as_the_coarser_one_found_alone(raccoon):
-    """A view searched as the finer image keeps its s = 1 points (``FirstLevel``, through
-    ``detect_view``'s ``share``); the same view searched as the coarser image, from them,
-    has the points and descriptors of a view detected and described on its own, and the
-    finer side's detection is the one it has without sharing (the same descriptors, to the
-    rounding of float32 products)."""
-    from scalematch.stages.views import tilt_view
+def test_each_image_is_viewed_once_in_a_pass_for_both_orders(raccoon, monkeypatch):
+    """Features once per image: each of the two images has each of its views made once,
+    whichever order reads it (as the finer image of one, the coarser of the other): an
+    unrelated pair runs the three passes of 5, 10 and 35 views, 50 views made per image."""
+    from scalematch import features
 
-    config = Config()
-    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
-    search = _search(config, pair.low, pair.high)
-    view = tilt_view(pair.high, 4.0, 36.0, config.views)
-    measured = pipeline.Measured(image_contrast(pair.high, config.harris))
-    kept = []
-    shared, _ = pipeline.detect_view(view, search, config.scales, reuse=pipeline.Reuse(
-        measured=measured, every=2, share=kept.append))
-    alone, _ = pipeline.detect_view(view, search, config.scales,
-                                    reuse=pipeline.Reuse(measured=measured, every=2))
-    assert len(kept) == 1 and kept[0].described == config.probe.points
-    for a, b in zip(shared, alone):
-        assert np.array_equal(a.keypoints.xy, b.keypoints.xy)
-        assert (a.probe is None) == (b.probe is None)
-        assert a.probe is None or np.array_equal(a.probe.desc, b.probe.desc)
-    from_first = pipeline.describe_coarser_view(view, search, measured.contrast, kept[0])
-    own = pipeline.describe_coarser_view(view, search, measured.contrast)
-    assert len(own.keypoints) > config.probe.points  # some points were left to describe
-    assert np.array_equal(from_first.keypoints.xy, own.keypoints.xy)
-    for name in ("xy", "index", "angle"):
-        assert np.array_equal(getattr(from_first.described, name), getattr(own.described, name))
-    # the descriptors of the points described apart differ by the rounding of a product over
-    # fewer rows (BLAS blocks by size), as where a view's full pass joins its probe's
-    assert np.allclose(from_first.described.desc, own.described.desc, rtol=0, atol=1e-6)
-
-
-def test_the_best_views_of_a_step_keep_their_levels_and_only_they():
-    """``Leaders``: views added in any order; the ``keep`` best (highest score, the earlier
-    one on a tie: the order ``match_chosen`` sorts them in) keep their levels, the others
-    lose them; every view stays in the step's order."""
-    from scalematch.stages.detector import Keypoints
-
-    scores = [3.0, 9.0, 5.0, 9.0, 1.0, 5.0, 7.0]
-    level = np.zeros((4, 4), np.float32)
-    rng = np.random.default_rng(0)
-    leaders = pipeline.Leaders(3, pipeline.without_levels)
-    for k in rng.permutation(len(scores)):
-        detected = (pipeline.Detected(Keypoints.empty(1.0), None, level),)
-        leaders.add(int(k), pipeline.Probed(None, detected, (), (), scores[k], True))
-    best = sorted(range(len(scores)), key=lambda k: -scores[k])[:3]
-    assert best == [1, 3, 6]
-    assert [p.score for p in leaders.probed] == scores
-    assert [k for k, p in enumerate(leaders.probed) if p.detected[0].level is not None] == best
-
-
-def test_a_view_is_made_once_in_a_pass_within_the_budget(monkeypatch):
-    """``Memo.view``: the same view of the same image in one pass is made once; another pass
-    makes it again; past ``VIEW_CACHE_MAX_BYTES`` every request makes it."""
-    from scalematch.stages.views import tilt_view
-
-    image = np.random.default_rng(0).random((60, 80)).astype(np.float32)
     made = []
+    real = features.view_of
 
-    def make():
-        made.append(1)
-        return tilt_view(image, 2.0, 36.0)
+    def counted(source, tilt, longitude, params):
+        made.append((source.shape, tilt, longitude))
+        return real(source, tilt, longitude, params)
 
-    memo = pipeline.Memo()
-    first = memo.view(image, (2.0, 36.0), 1, make)
-    assert memo.view(image, (2.0, 36.0), 1, make) is first and len(made) == 1
-    memo.view(image, (2.0, 36.0), 2, make)
-    assert len(made) == 2
-    from scalematch import sharing
-
-    monkeypatch.setattr(sharing, "VIEW_CACHE_MAX_BYTES", 0)
-    memo = pipeline.Memo()
-    memo.view(image, (2.0, 36.0), 1, make)
-    memo.view(image, (2.0, 36.0), 1, make)
-    assert len(made) == 4
+    monkeypatch.setattr(features, "view_of", counted)
+    none = match(raccoon[:300, :400], raccoon[400:, 500:900])
+    assert not none.matched
+    assert len(made) == 2 * 50 and len(set(made)) == len(made)
 
 
-def test_views_made_once_and_shared_give_the_answer_of_views_made_each_time(raccoon,
-                                                                            monkeypatch):
-    """The oblique pair solved by a view of the coarser image (which the other direction
-    searched as its finer image): the same transform and evidence with the views and their
-    s = 1 points shared as with every view made and detected where it is searched."""
-    from scalematch.lab.synthetic import make_oblique_pair
+def test_the_vote_counts_every_cell_of_every_pass(raccoon, monkeypatch):
+    """The a-contrario count of a pass's cells multiplies the cells of every pass voted so far:
+    the count a pass uses only grows."""
+    counts = []
+    real = pipeline.cells_nfa
 
-    pair = make_oblique_pair(raccoon, 2.0, 4.0, np.random.default_rng(2), high_size=(160, 120))
-    shared = match(pair.low, pair.high)
-    from scalematch import sharing
+    def seen(cells, tried):
+        counts.append(tried)
+        return real(cells, tried)
 
-    monkeypatch.setattr(sharing, "VIEW_CACHE_MAX_BYTES", 0)
-    monkeypatch.setattr(pipeline.Memo, "first_level", lambda self, *args: None)
-    alone = match(pair.low, pair.high)
-    assert shared.matched and shared.evidence.view_of == "coarser"
-    assert np.array_equal(shared.transform, alone.transform)
-    assert shared.evidence == alone.evidence
+    monkeypatch.setattr(pipeline, "cells_nfa", seen)
+    match(raccoon[:300, :400], raccoon[400:, 500:900])
+    passes = sorted(set(counts))
+    assert len(passes) == 3 and passes[0] > 0
+    assert counts == sorted(counts)
+
+
+def test_a_tilted_pair_found_by_the_vote_at_half_resolution_is_matched_at_full(raccoon):
+    """``ViewParams.decimation`` 2: the vote sees every view shrunk by 2, and the view pair it
+    chooses is made again at full resolution for the full match: a ratio-2 pair seen with a
+    tilt of 4 is solved within 1 px either way (by a view at t = 4)."""
+    pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
+    for d in (1.0, 2.0):
+        r = match(pair.low, pair.high, Config(views=replace(ViewParams(), decimation=d)))
+        assert r.matched and r.evidence.view_tilt == 4.0, (d, r.reason)
+        assert _error(r, pair) < 1.0
 
 
 @pytest.mark.parametrize("path", ["data/demo_low.png", Path("data/demo_low.png")])
@@ -758,47 +665,3 @@ def test_a_path_given_for_an_image_points_to_read_grey(path):
                                          r"an array; read it first: "
                                          r"scalematch.read_grey\('data/demo_low.png'\)"):
         match(path, "data/demo_high.png")
-
-
-def test_the_first_look_hands_on_only_its_best_views_and_the_pair_is_still_matched(raccoon):
-    """With the first look (``ViewParams.first_look_short_px``), a pass's views are ranked on
-    the images shrunk and only the ``first_look_follow`` best, in the step's order, are probed
-    at full resolution; a score floor above every score hands on none. The tilted pair (t = 4,
-    ratio 2) is still matched, and every view looked at counts in its steps' records."""
-    from dataclasses import replace
-
-    from scalematch.search import search_plan
-
-    photo = cv2.resize(raccoon, (2048, 1536), interpolation=cv2.INTER_AREA)
-    pair = make_tilted_pair(photo, 2.0, 4.0, np.random.default_rng(1))
-    config = Config.preset("first-look", views=replace(
-        Config().views, first_look_short_px=300.0, first_look_min_factor=1.5,
-        first_look_follow=2))
-    search = _search(config, pair.low, pair.high)
-    assert pipeline.look_factor(pair.low.shape, config.views) == pytest.approx(
-        min(pair.low.shape) / 300.0, abs=1e-3)
-    plan = search_plan(config, search.work.scales, pipeline.finer_sides(search.work))
-    step = next(s for s in plan if s.view_pass == 2 and s.side == "finer")
-    chosen = pipeline.first_look(search, step)
-    assert len(chosen) == 2 and set(chosen) <= set(step.views)
-    assert list(chosen) == sorted(chosen, key=step.views.index)
-    strict = replace(search, config=replace(config, views=replace(config.views,
-                                                                   first_look_min_score=1e9)))
-    assert pipeline.first_look(strict, step) == ()
-    r = match(pair.low, pair.high, config)
-    assert r.matched, r.reason
-    err = reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape)
-    assert err < 3.0
-    views = {(s.direction, s.view_pass, s.side): len(s.views) for s in plan}
-    assert all(rec.views == views[rec.direction, rec.view_pass, rec.side] for rec in r.search)
-
-
-def test_by_default_the_first_look_shrinks_camera_size_images_only():
-    """The default first look ranks views on copies whose shorter side is 500 px, and only when
-    that shrinks by 2 or more: a 1 MP coarser image (1024x768) is searched at full resolution
-    alone, a 12 MP photo at the working size (2048x1536) is looked at shrunk by 3."""
-    views = Config().views
-    assert pipeline.look_factor((768, 1024), views) == 1.0
-    assert pipeline.look_factor((1000, 1500), views) == 2.0
-    assert pipeline.look_factor((1536, 2048), views) == 3.0
-

@@ -1,23 +1,25 @@
-"""Step 1 (before the scale-space): simulated tilted views of the high image (Morel & Yu 2009, "ASIFT").
+"""Step 1 (before the scale-space): simulated tilted views of the images (Morel & Yu 2009, "ASIFT").
 
 A camera that looks at a plane obliquely sees it compressed along one direction: locally, a
 change of viewpoint is an affine map, and every affine map with a positive determinant is a
 similarity after a compression by a *tilt* t >= 1 along some direction (its *longitude* phi):
 ``A = lambda R(psi) [R(phi)^T diag(1/t, 1) R(phi)]``. The scale search of the paper absorbs
-the similarity; these views absorb the compression. Each view is the high image turned by phi,
-blurred along x by ``c sqrt(t^2 - 1)`` (Morel & Yu's anti-aliasing, c = 0.8) and shrunk along x
-by t; ``to_view`` (2x3) maps a high-image pixel to its pixel in the view.
+the similarity; these views absorb the compression. Each view is the image shrunk by
+``ViewParams.decimation``, turned by phi, blurred along x by ``c sqrt(t^2 - 1)`` (Morel & Yu's
+anti-aliasing, c = 0.8) and shrunk along x by t; ``to_view`` (2x3) maps an image pixel to its
+pixel in the view.
 
-Views are tried progressively (Mishkin, Matas & Perdoch 2015, "MODS"): the pipeline first runs
-without any, and adds a pass of views only when the previous pass found nothing, so ordinary
-pairs cost no more than before.
+The search first runs without any view, and adds the views only when the images themselves
+found nothing (Mishkin, Matas & Perdoch 2015, "MODS"), so ordinary pairs cost no more than
+before; the views of both images are then searched together, in one pooled vote
+(:mod:`scalematch.features`, :mod:`scalematch.stages.vote`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar, List, Mapping, Optional, Sequence, Tuple
+from typing import ClassVar, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -25,22 +27,22 @@ import numpy as np
 from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds, in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
 from .nodata import away_from, distance_inside
+from .scalespace import antialias_sigma, gaussian_blur
 
 
 #: The passes of views (docs/design/VIEWS.md, "The passes"): t = 2, then 4, then 6 and 8
 #: together (longitude steps 72/t: 5, 10, then 15 + 20 views), as far as MODS's steepest view
 #: synthesis (t = 8). Each pass runs only when every earlier one found nothing, so only a "no"
-#: pays for all of them
-#: (docs/design/VIEWS.md, "The third pass": 2.3x the time of a "no" with t = 2 and 4 only)
+#: pays for all of them; each pass is one pooled vote over its views of both images
 PASSES: Tuple[Tuple[float, ...], ...] = ((2.0,), (4.0,), (6.0, 8.0))
 #: The passes without the third one (the ``tilt-4`` preset): tilts up to about 6 solved
 TILT4_PASSES: Tuple[Tuple[float, ...], ...] = PASSES[:2]
 #: ``ViewParams.coarser_directions``: the coarser image's views in one direction of the search
 #: (the one whose coarser image is the smaller), or in both
 COARSER_DIRECTIONS = ("one", "both")
-#: Most views the passes may hold together: each view is a search of its own at every scale, so
-#: the time of a "no" grows with their number. Four times the default's 50 (a longitude step
-#: of 18 degrees, a quarter of Morel & Yu's 72, stays within it).
+#: Most views the passes may hold together: each view is searched at every scale, so the time
+#: of a "no" grows with their number. Four times the default's 50 (a longitude step of 18
+#: degrees, a quarter of Morel & Yu's 72, stays within it).
 MAX_VIEWS = 200
 
 
@@ -48,89 +50,70 @@ MAX_VIEWS = 200
 class ViewParams:
     """Which tilted views to simulate when the plain search finds nothing."""
 
-    enabled: bool = True  #: False: never simulate views (today's 0.1 behaviour)
+    enabled: bool = True  #: False: never simulate views (the plain search in both orders only)
     #: passes of tilts, each run only when every earlier pass found nothing. Morel & Yu sample
     #: t = sqrt(2)^k; the gradient descriptor tolerates a tilt of about 2 on its own (measured
     #: on tilted zoom pairs, docs/BENCHMARKS.md), so views at t = 2 then 4 (a sampling ratio of
     #: 2) cover tilts up to about 6 with 15 views instead of 27; t = 6 and 8 reach 8 and more
-    #: (docs/design/VIEWS.md, "The third pass": 92 % of the pairs at t = 6 and at t = 8,
-    #: ratio 2, both orders)
+    #: (docs/design/VIEWS.md, "The third pass")
     passes: Tuple[Tuple[float, ...], ...] = PASSES
     #: longitude step at tilt t is ``longitude_step_deg / t`` over [0, 180) (Morel & Yu: 72)
     longitude_step_deg: float = 72.0
     #: anti-aliasing blur along the compressed axis: c * sqrt(t^2 - 1) px (Morel & Yu: c = 0.8)
     antialias_c: float = 0.8
-    #: each pass also views the coarser image (after the finer one's views, both directions):
+    #: a view is simulated on its image shrunk by this factor (ASIFT's low resolution, Morel &
+    #: Yu 2009, section 4, at 2 rather than 3), so a finer image's view is searched from scale
+    #: 2 on and a coarser image's view serves ratios from 1/2 of the finer image's scales. Every
+    #: tilted and steep pair of the gate was solved by a view at scale 2 or more, and the
+    #: oblique pairs' views of the coarser image at finer scales 1 to 4 (8 and under at
+    #: decimation 2); a view costs a quarter of its pixels (docs/design/VIEWS.md, "The pooled
+    #: vote")
+    decimation: float = 1.0
+    #: the views of the finer image are searched from this scale on (of the image's pixels):
+    #: their levels are then made from the view decimated by 2 (``stages.scalespace``), and
+    #: the finer levels, most of a view's cost, are never made. Every tilted and steep pair of
+    #: the gate was solved by a view at scale 2 or more (docs/design/VIEWS.md, "The pooled
+    #: vote"); the views of the coarser image keep its full resolution, which the oblique
+    #: pairs need (at decimation 2, 14 of the gate's 24 oblique runs were solved, and 2 wrong)
+    finer_from_scale: float = 2.0
+    #: the views of the coarser image are searched too (both images' views are in the vote):
     #: where the finer image is the oblique one (a telephoto seen obliquely against a frontal
     #: wide shot) its directional ratios are r and r / t, and below 1 no scale searched reaches
     #: them; a view of the coarser image compressed by t along that axis does
     #: (docs/design/VIEWS.md, "Views of the coarser image")
     coarser: bool = True
     #: ... in "both" directions of the automatic order, or in "one": the one whose coarser
-    #: image is the smaller (shorter longer side; the given one on a tie), cheaper to detect.
-    #: Both reach the same pairs in principle (a pair whose finer image maps with singular
-    #: values s1 > 1 > s2: the given direction's views of tilt s1 / s2 at scale s1, the other's
-    #: at 1 / s2; docs/design/VIEWS.md, "Views of the coarser image"), but not always in
-    #: practice: "one" made a "no" 0.84x as long (122 null runs) and solved 74 of the oblique
-    #: set's 104 runs, "both" 80
+    #: image is the smaller (shorter longer side; the given one on a tie). Both reach the same
+    #: pairs in principle (a pair whose finer image maps with singular values s1 > 1 > s2: the
+    #: given direction's views of tilt s1 / s2 at scale s1, the other's at 1 / s2;
+    #: docs/design/VIEWS.md, "Views of the coarser image"), but not always in practice
     coarser_directions: str = "both"
-    #: views of a pass matched in full: the ones whose probe scores best (the others are only
-    #: detected and probed, which costs about half a search)
+    #: view pairs matched in full: the ones whose best cell of the pooled vote is strongest
+    #: (``stages.vote.best_pairs``)
     full_searches: int = 3
-    #: ... and only when that score reaches this: measured on 16 unrelated pairs, no view's
-    #: probe score went above 4 in either order, while the views that solved tilted zoom pairs
-    #: scored 5 to 80 (a chance similarity fit of the probe's 100 points finds 2-4 inliers)
-    min_probe_score: float = 5.0
     #: a match of the plain search with fewer distinct inliers than this is compared with the
-    #: first pass of views, and the stronger (lower log10 NFA) answer is taken: a tilted view
-    #: of a repeated facade gave a plain similarity of 6 wrong inliers at log10 NFA -12.6 on a
-    #: tilted zoom pair (t = 2.83) where the views find the truth (docs/BENCHMARKS.md)
+    #: views, and the stronger answer is taken: a tilted view of a repeated facade gave a plain
+    #: similarity of 6 wrong inliers at log10 NFA -12.6 on a tilted zoom pair (t = 2.83) where
+    #: the views find the truth (docs/BENCHMARKS.md)
     confirm_below_inliers: int = 12
-    #: the probe of a view first detects and scores every N-th scale only (N = 1: each one);
-    #: the ``full_searches`` views that score best are then probed at every scale, so the views
-    #: matched in full are chosen as with N = 1 wherever those few include the right one.
-    #: Detection is most of a view's cost and most views are only probed. N = 2: a "no" 0.86x
-    #: as long, the tilted zoom pairs and Oxford solved as before (docs/design/VIEWS.md,
-    #: "The passes"); without the completion 3 tilted pairs of 104 were lost (the right view's
-    #: probe score fell from 7-12 to 4, under ``min_probe_score``, its best scale not probed)
-    probe_every: int = 2
+    #: the vote probes every N-th level of a tilted view (N = 1: each one); the view pairs
+    #: matched in full are matched at every level near their best cells. Detection is most of
+    #: a view's cost; a third-octave scale off still matches (the descriptor's tolerance)
+    vote_every: int = 2
     #: keypoints closer than this to the view's empty corners are dropped, px at s = 1 (x s):
     #: the descriptor window is 16 level px wide, so 8 px keeps it inside the image
     edge_margin_px: float = 8.0
-    #: the first look (ASIFT's two resolutions, Morel & Yu 2009, section 4): every view of a
-    #: pass is probed on copies of both images shrunk by a factor K, and only the views it
-    #: ranks best are probed and matched at full resolution. K makes the coarser image's
-    #: shorter side this many px (0: no first look), at most ``first_look_max_factor``; below
-    #: ``first_look_min_factor`` the images are searched at full resolution only. The shrunk
-    #: probe ranks the views where the coarser image keeps 500 px (on steep pairs the winning
-    #: view ranks 1st at K = 1.5 with 512 px, 3rd to 5th at K = 2.56 with 300 px), and it pays
-    #: only where K is 2 or more: camera-size photos, whose "no" it makes 1.85x sooner (two
-    #: unrelated 12-16 MP photos: 8.6 s against 16.0 s in process) with 84 tilted and oblique
-    #: pairs of such photos solved as before; a 1 MP image is searched as without it
-    #: (docs/design/SPEED.md, "The first look")
-    first_look_short_px: float = 500.0
-    first_look_max_factor: float = 3.0
-    first_look_min_factor: float = 2.0
-    #: views of a step that the first look hands on to the full-resolution probe, at most ...
-    first_look_follow: int = 3
-    #: ... and only those whose first-look score reaches this (0: the best ones, whatever they
-    #: scored)
-    first_look_min_score: float = 0.0
 
     #: each number's range, checked when the parameters are made (``checks.check_bounds``)
     BOUNDS: ClassVar[Mapping[str, Bounds]] = {
         "longitude_step_deg": POSITIVE,
         "antialias_c": NON_NEGATIVE,
-        "min_probe_score": NON_NEGATIVE,
+        "decimation": FACTOR,
+        "finer_from_scale": FACTOR,
         "edge_margin_px": NON_NEGATIVE,
         "full_searches": AT_LEAST_ONE,
-        "first_look_short_px": NON_NEGATIVE,
-        "first_look_min_score": NON_NEGATIVE,
-        "first_look_max_factor": FACTOR,
-        "first_look_min_factor": FACTOR,
-        "first_look_follow": AT_LEAST_ONE,
-        "probe_every": AT_LEAST_ONE,
         "confirm_below_inliers": COUNT,
+        "vote_every": AT_LEAST_ONE,
     }
 
     def __post_init__(self) -> None:
@@ -149,18 +132,21 @@ class ViewParams:
 
 @dataclass(frozen=True)
 class View:
-    """A simulated view of the high image."""
+    """A simulated view of an image."""
 
     tilt: float  #: t >= 1 (1: the image itself)
     longitude_deg: float  #: phi, degrees, the direction compressed by t
     image: np.ndarray = field(repr=False)  #: (h', w') float32 view
-    to_view: np.ndarray = field(repr=False)  #: 2x3, high px -> view px
-    #: (h', w') float32 distance (view px) to the nearest pixel outside the high image or on its
+    to_view: np.ndarray = field(repr=False)  #: 2x3, image px -> view px
+    #: (h', w') float32 distance (view px) to the nearest pixel outside the image or on its
     #: no-data region (:mod:`scalematch.stages.nodata`), or None when every pixel of the view
     #: shows the scene
     inside_distance: object = field(default=None, repr=False)
     #: (h, w) of the image viewed (None: unknown), where a map found through the view must hold
     source_shape: Optional[Tuple[int, int]] = None
+    #: image px per view px along the uncompressed direction (``ViewParams.decimation``; 1 for
+    #: the image itself): a scale s of the view's pixels is the scale s * scale of the image's
+    scale: float = 1.0
 
     @property
     def is_identity(self) -> bool:
@@ -193,11 +179,40 @@ def views_in(passes: Sequence[Sequence[float]], step_deg: float) -> int:
 
 
 def view_plan(params: ViewParams) -> List[List[Tuple[float, float]]]:
-    """The passes of (tilt, longitude) pairs, after the plain pass (which is not listed)."""
+    """The passes of (tilt, longitude) pairs, after the plain search (the image itself is not
+    listed).
+
+    >>> [len(p) for p in view_plan(ViewParams())], view_plan(ViewParams())[0][:2]
+    ([5, 10, 35], [(2.0, 0.0), (2.0, 36.0)])
+    """
     if not params.enabled:
         return []
-    return [[(t, phi) for t in tilts for phi in longitudes(t, params.longitude_step_deg)]
-            for tilts in params.passes]
+    return [[(t, phi) for t in tilts if t > 1.0
+             for phi in longitudes(t, params.longitude_step_deg)] for tilts in params.passes]
+
+
+def view_scales(view: View, scales: Sequence[float]) -> List[float]:
+    """The scales of the image's pixels (sorted) that ``view`` serves, in the view's pixels:
+    ``s / view.scale`` where that is at least 1 (a view does not enlarge its pixels).
+
+    >>> v = View(2.0, 0.0, np.zeros((4, 4), np.float32), np.eye(2, 3), scale=2.0)
+    >>> view_scales(v, (1.0, 1.587, 2.0, 2.52, 4.0))
+    [1.0, 1.26, 2.0]
+    """
+    return [round(s / view.scale, 6) for s in sorted(scales) if s / view.scale >= 1.0 - 1e-9]
+
+
+def shrunk(image: np.ndarray, factor: float, camera_blur_px: float = 0.5
+           ) -> Tuple[np.ndarray, np.ndarray]:
+    """(``image`` shrunk by ``factor``, the 2x3 map from its pixels to the shrunk ones): blurred
+    as the scale-space blurs a level decimated by ``factor``
+    (:func:`stages.scalespace.antialias_sigma`), then resampled by area."""
+    if factor <= 1.0:
+        return image, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    h, w = image.shape[:2]
+    nw, nh = max(int(round(w / factor)), 1), max(int(round(h / factor)), 1)
+    blurred = gaussian_blur(np.asarray(image, np.float32), antialias_sigma(factor, camera_blur_px))
+    return cv2.resize(blurred, (nw, nh), interpolation=cv2.INTER_AREA), resize_map(nw / w, nh / h)
 
 
 def identity_view(high: np.ndarray, valid: Optional[np.ndarray] = None) -> View:
@@ -207,17 +222,47 @@ def identity_view(high: np.ndarray, valid: Optional[np.ndarray] = None) -> View:
                 distance_inside(valid), tuple(high.shape[:2]))
 
 
+class Source(NamedTuple):
+    """An image as its views are made from it: shrunk by ``scale`` (``ViewParams.decimation``),
+    where it shows the scene (None: everywhere) and the map from the image's pixels."""
+
+    image: np.ndarray
+    valid: Optional[np.ndarray]
+    to_source: np.ndarray  #: 2x3, image px -> source px
+    shape: Tuple[int, int]  #: (h, w) of the image itself
+    scale: float  #: image px per source px
+
+
+def source_of(image: np.ndarray, valid: Optional[np.ndarray], decimation: float) -> Source:
+    """``image`` prepared to make its views from (shrunk once for all of them)."""
+    small, to_small = shrunk(image, decimation)
+    if valid is not None and decimation > 1.0:
+        valid = cv2.resize(valid.astype(np.uint8), (small.shape[1], small.shape[0]),
+                           interpolation=cv2.INTER_NEAREST).astype(bool)
+    return Source(np.asarray(small, np.float32), valid, to_small, tuple(image.shape[:2]),
+                  max(float(decimation), 1.0))
+
+
 def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
               params: ViewParams = ViewParams(), valid: Optional[np.ndarray] = None) -> View:
     """The view of ``high`` (H, W) float32 compressed by ``tilt`` along ``longitude_deg``.
 
-    The image is turned by phi onto a canvas that holds all of it, blurred along x by
-    ``antialias_c * sqrt(t^2 - 1)`` px and resized along x by 1/t (``cv2.resize``'s
-    centre-aligned convention: x -> (x + 0.5) / t - 0.5). ``valid``: where the image shows the
-    scene (None: everywhere); the view's ``inside_distance`` measures to the rest.
+    The image is shrunk by ``params.decimation`` (:func:`shrunk`), turned by phi onto a canvas
+    that holds all of it, blurred along x by ``antialias_c * sqrt(t^2 - 1)`` px and resized
+    along x by 1/t (``cv2.resize``'s centre-aligned convention: x -> (x + 0.5) / t - 0.5;
+    :func:`compressed_x`). ``valid``: where the image shows the scene (None: everywhere); the
+    view's ``inside_distance`` measures to the rest. Many views of one image:
+    :func:`view_of` on one :func:`source_of`.
     """
     if tilt <= 1.0:
         return identity_view(high, valid)
+    return view_of(source_of(high, valid, params.decimation), tilt, longitude_deg, params)
+
+
+def view_of(source: Source, tilt: float, longitude_deg: float, params: ViewParams) -> View:
+    """The view of ``source`` (:func:`source_of`) compressed by ``tilt`` along
+    ``longitude_deg`` (:func:`tilt_view`)."""
+    high, valid = source.image, source.valid
     h, w = high.shape
     a = math.radians(longitude_deg)
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
@@ -225,19 +270,54 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     turn = np.hstack([rot, (-lo)[:, None]])
     cw, ch = (int(v) for v in np.ceil(hi - lo) + 1)
-    img = cv2.warpAffine(np.asarray(high, np.float32), turn, (cw, ch), flags=cv2.INTER_LINEAR,
+    img = cv2.warpAffine(high, turn, (cw, ch), flags=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    shown = np.ones((h, w), np.uint8) if valid is None else valid.astype(np.uint8)
-    inside = cv2.warpAffine(shown, turn, (cw, ch), flags=cv2.INTER_NEAREST,
-                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    img = cv2.GaussianBlur(img, (0, 0), sigmaX=params.antialias_c * math.sqrt(tilt * tilt - 1),
-                           sigmaY=0.01)
-    nw = max(int(round(cw / tilt)), 1)
-    img = cv2.resize(img, (nw, ch), interpolation=cv2.INTER_LINEAR)
-    inside = cv2.resize(inside, (nw, ch), interpolation=cv2.INTER_NEAREST)
-    to_view = compose(resize_map(nw / cw, 1.0), turn)
+    img = compressed_x(img, tilt, params.antialias_c)
+    nw = img.shape[1]
+    squeeze = resize_map(nw / cw, 1.0)
+    if valid is None:  # the image's own outline, turned and squeezed: a parallelogram
+        inside = np.zeros((ch, nw), np.uint8)
+        outline = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+        cv2.fillConvexPoly(inside, np.round(apply(compose(squeeze, turn), outline)).astype(
+            np.int32), 1)
+    else:
+        inside = cv2.resize(cv2.warpAffine(valid.astype(np.uint8), turn, (cw, ch),
+                                           flags=cv2.INTER_NEAREST,
+                                           borderMode=cv2.BORDER_CONSTANT, borderValue=0),
+                            (nw, ch), interpolation=cv2.INTER_NEAREST)
+    to_view = compose(compose(squeeze, turn), source.to_source)
     dist = cv2.distanceTransform(inside, cv2.DIST_L2, 3)
-    return View(float(tilt), float(longitude_deg), img, to_view, dist, (h, w))
+    return View(float(tilt), float(longitude_deg), img, to_view, dist, source.shape, source.scale)
+
+
+def compressed_x(image: np.ndarray, tilt: float, c: float) -> np.ndarray:
+    """``image`` (float32) compressed along x by ``tilt`` after Morel & Yu's anti-aliasing blur
+    of ``c sqrt(t^2 - 1)`` px, done as halvings (each a blur of ``c sqrt(3)`` px and a resize by
+    1/2) and a last step of the factor left: the blurs compose to the same total (``c^2 (4^k -
+    1)`` of the halvings, in the image's px, plus ``c^2 (r^2 - 1) 4^k`` of the last step, is
+    ``c^2 (t^2 - 1)`` for ``t = r 2^k``), but each runs on a narrower image with a short kernel:
+    one blur of 6.3 px (t = 8) on the whole canvas was most of a view's cost. The resizes are
+    centre-aligned, so they compose to one resize by the final width over the first.
+
+    >>> img = np.tile(np.arange(64, dtype=np.float32), (4, 1))
+    >>> compressed_x(img, 8.0, 0.8).shape, compressed_x(img, 1.0, 0.8).shape
+    ((4, 8), (4, 64))
+    """
+    out = np.asarray(image, np.float32)
+    left = float(tilt)
+    while left >= 2.0 - 1e-9 and out.shape[1] > 1:
+        out = _blurred_resized(out, c * math.sqrt(3.0), 2.0)
+        left /= 2.0
+    if left > 1.0 + 1e-9:
+        out = _blurred_resized(out, c * math.sqrt(left * left - 1.0), left)
+    return out
+
+
+def _blurred_resized(image: np.ndarray, sigma: float, factor: float) -> np.ndarray:
+    """``image`` blurred along x by ``sigma`` px, then resized along x by 1 / ``factor``."""
+    blurred = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=0.01)
+    nw = max(int(round(image.shape[1] / factor)), 1)
+    return cv2.resize(blurred, (nw, image.shape[0]), interpolation=cv2.INTER_LINEAR)
 
 
 def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:

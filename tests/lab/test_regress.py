@@ -148,15 +148,15 @@ def test_every_kind_is_made_in_both_orders_with_unique_ids(shared_dir):
 
 
 def test_a_preset_with_settings_is_the_configuration_of_every_run():
-    """``--preset first-look+views.first_look_short_px=500`` runs the first-look preset with
-    that value; an unknown preset or parameter is refused before the run (exit 2)."""
+    """``--preset tilt-4+views.decimation=2`` runs the tilt-4 preset with that value; an unknown
+    preset or parameter is refused before the run (exit 2)."""
     from scalematch.cli import set_path
     from scalematch.config import Config
 
-    config = regress.configured("first-look+views.first_look_short_px=500", Config, set_path)
-    base = Config.preset("first-look")
-    assert config == replace(base, views=replace(base.views, first_look_short_px=500))
+    config = regress.configured("tilt-4+views.decimation=2", Config, set_path)
+    base = Config.preset("tilt-4")
+    assert config == replace(base, views=replace(base.views, decimation=2.0))
     runner = CliRunner()
-    for bad in ("nope", "first-look+views.bogus=1"):
+    for bad in ("nope", "tilt-4+views.bogus=1"):
         out = runner.invoke(regress.regress_command, ["--preset", bad, "--kinds", "zoom"])
         assert out.exit_code == 2 and "--preset" in out.output, out.output
