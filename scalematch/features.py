@@ -9,10 +9,10 @@ level is described (its ``VIEWS_COARSER_POINTS`` strongest, for the vote). The p
 with every point of the levels they need, detected again then (a level costs less to make than
 to keep).
 
-A tilted view is simulated on the image shrunk by ``ViewParams.decimation`` (the view's own
-pixels are then that many image pixels): a view searched from scale s on needs no finer
+A tilted view of a camera-size image is simulated on the image shrunk
+(:func:`stages.views.decimation_of`: the view's own pixels are then that many image pixels): a view searched from scale s on needs no finer
 pixels than the image decimated by s, and the levels finer than that are what a view costs
-(``ViewParams.decimation`` says what it solves). The image itself (the identity view) keeps
+(``ViewParams.max_short_side_px`` says what it solves). The image itself (the identity view) keeps
 its full resolution: its levels are those of the plain search, whose detection this module
 takes as it is (:func:`identity_rows`).
 """
@@ -28,7 +28,7 @@ from .stages.descriptors import Described
 from .stages.detector import Contrast, HarrisParams, Keypoints, detect_on_level
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
-from .stages.views import View, ViewParams, source_of, view_of, view_scales
+from .stages.views import View, ViewParams, decimation_of, source_of, view_of, view_scales
 
 #: Points of a view's first level described for the vote when the image is the coarser one,
 #: strongest first: the vote needs only enough of them to find the view pair (the pair matched
@@ -98,7 +98,7 @@ class ImageViews:
     images are not kept: a view chosen for a full match is made again
     (:func:`stages.views.tilt_view`)."""
 
-    #: the views of the finer image's table (shrunk by ``ViewParams.decimation``)
+    #: the views of the finer image's table
     finer_views: Tuple[ViewInfo, ...]
     #: the views of the coarser image's table (at full resolution)
     coarser_views: Tuple[ViewInfo, ...]
@@ -194,13 +194,11 @@ def image_views(image: np.ndarray, valid: Optional[np.ndarray], roles: Roles,
     """Every view of ``image`` (``valid``: where it shows the scene; None: everywhere) and its
     tables, as far as the search needs them (``roles``): the image itself from the plain
     steps' detection, and its tilted views ``keys`` (tilt, longitude), simulated and
-    described here side by side on threads. As the finer image, a view is simulated on the
-    image shrunk by ``params.decimation`` (its levels start there); as the coarser image, at
-    full resolution: the oblique pairs' footprints in the coarser views are small, and at
-    half resolution 6 of the gate's 24 oblique runs were lost. ``tick()`` is called once per
+    described here side by side on threads (on the image shrunk by
+    :func:`stages.views.decimation_of` when it is camera-size). ``tick()`` is called once per
     view made."""
     keys = list(keys) if roles.scales or roles.coarser_views else []
-    source = source_of(image, valid, params.decimation) if keys else None
+    source = source_of(image, valid, decimation_of(image.shape, params)) if keys else None
 
     def one(key):
         view = view_of(source, *key, params)

@@ -706,7 +706,7 @@ def view_pair(search: Search, direction: Direction, images: Dict[Direction, Imag
               ranked: Ranked, scales: Sequence[float]) -> Candidate:
     """A view pair the vote ranks among the best, made ready to be matched in full at full
     resolution (ASIFT's second resolution, Morel & Yu 2009, section 4): the finer view (made
-    again at full resolution when the vote's was shrunk: ``ViewParams.decimation``) detected
+    again at full resolution when the vote's was shrunk: ``ViewParams.max_short_side_px``) detected
     at the scales of its cells beyond chance and their neighbours (every point, the probe's
     described), the coarser view (made again the same way) described whole, or the coarser
     image itself."""
@@ -717,7 +717,7 @@ def view_pair(search: Search, direction: Direction, images: Dict[Direction, Imag
     lo_valid, hi_valid = work.valid(direction)
     voted_f = finer_img.finer_views[ranked.finer_view]
     voted_c = coarser_img.coarser_views[ranked.coarser_view]
-    full = replace(cfg.views, decimation=1.0)
+    full = replace(cfg.views, max_short_side_px=0.0)
     f_view = plain_probed(search, direction, scales).view if ranked.finer_view == 0 else \
         tilt_view(hi_img, voted_f.tilt, voted_f.longitude_deg, full, hi_valid)
     c_view = None if ranked.coarser_view == 0 else \

@@ -648,13 +648,16 @@ def test_the_vote_counts_every_cell_of_every_pass(raccoon, monkeypatch):
 
 
 def test_a_tilted_pair_found_by_the_vote_at_half_resolution_is_matched_at_full(raccoon):
-    """``ViewParams.decimation`` 2: the vote sees every view shrunk by 2, and the view pair it
-    chooses is made again at full resolution for the full match: a ratio-2 pair seen with a
-    tilt of 4 is solved within 1 px either way (by a view at t = 4)."""
+    """Views of images whose shorter side is over ``ViewParams.max_short_side_px`` are made
+    shrunk for the vote, and the view pair it chooses is made again at full resolution for the
+    full match: a ratio-2 pair seen with a tilt of 4 is solved within 1 px with its views at
+    full resolution and at about half (by a view at t = 4)."""
     pair = make_tilted_pair(raccoon, 2.0, 4.0, np.random.default_rng(0))
-    for d in (1.0, 2.0):
-        r = match(pair.low, pair.high, Config(views=replace(ViewParams(), decimation=d)))
-        assert r.matched and r.evidence.view_tilt == 4.0, (d, r.reason)
+    short = min(min(pair.low.shape), min(pair.high.shape))
+    for limit in (0.0, short / 2):
+        r = match(pair.low, pair.high, Config(views=replace(ViewParams(),
+                                                              max_short_side_px=limit)))
+        assert r.matched and r.evidence.view_tilt == 4.0, (limit, r.reason)
         assert _error(r, pair) < 1.0
 
 

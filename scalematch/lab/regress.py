@@ -340,7 +340,7 @@ _MATCH: Dict[str, Any] = {}
 
 def configured(method: str, config_class: Any, set_path: Callable[..., Any]) -> Any:
     """The Config of ``method``: a preset's name, then any ``+path=value`` settings as
-    ``--set`` takes them (``tilt-4+views.decimation=2``)."""
+    ``--set`` takes them (``tilt-4+views.max_short_side_px=500``)."""
     name, *settings = method.split("+")
     config = config_class.preset(name)
     for item in settings:
@@ -634,7 +634,7 @@ def _git(tree: Path, *args: str) -> str:
               help="Without the shared folder, say so and exit 0 (for CI runs elsewhere).")
 @click.option("--preset", default="default", show_default=True,
               help="The configuration: a Config preset, with values set as +path=value "
-                   "(tilt-4+views.decimation=2): a design's gate against "
+                   "(tilt-4+views.max_short_side_px=500): a design's gate against "
                    "the default's baseline.")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path),
               help="With --update: write the new baseline's table into this Markdown file "

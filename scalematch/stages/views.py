@@ -5,7 +5,7 @@ change of viewpoint is an affine map, and every affine map with a positive deter
 similarity after a compression by a *tilt* t >= 1 along some direction (its *longitude* phi):
 ``A = lambda R(psi) [R(phi)^T diag(1/t, 1) R(phi)]``. The scale search of the paper absorbs
 the similarity; these views absorb the compression. Each view is the image shrunk by
-``ViewParams.decimation``, turned by phi, blurred along x by ``c sqrt(t^2 - 1)`` (Morel & Yu's
+:func:`decimation_of` (camera-size images), turned by phi, blurred along x by ``c sqrt(t^2 - 1)`` (Morel & Yu's
 anti-aliasing, c = 0.8) and shrunk along x by t; ``to_view`` (2x3) maps an image pixel to its
 pixel in the view.
 
@@ -61,14 +61,15 @@ class ViewParams:
     longitude_step_deg: float = 72.0
     #: anti-aliasing blur along the compressed axis: c * sqrt(t^2 - 1) px (Morel & Yu: c = 0.8)
     antialias_c: float = 0.8
-    #: a view is simulated on its image shrunk by this factor (ASIFT's low resolution, Morel &
-    #: Yu 2009, section 4, at 2 rather than 3), so a finer image's view is searched from scale
-    #: 2 on and a coarser image's view serves ratios from 1/2 of the finer image's scales. Every
-    #: tilted and steep pair of the gate was solved by a view at scale 2 or more, and the
-    #: oblique pairs' views of the coarser image at finer scales 1 to 4 (8 and under at
-    #: decimation 2); a view costs a quarter of its pixels (docs/design/VIEWS.md, "The pooled
-    #: vote")
-    decimation: float = 1.0
+    #: the views are simulated on their image shrunk so that its shorter side is at most this
+    #: many px (0: always at full resolution; :func:`decimation_of`), ASIFT's low resolution
+    #: (Morel & Yu 2009, section 4), and the view pairs the vote chooses are made again at full
+    #: resolution for their full match. At and below 768 px (the 1 MP images of the gate and
+    #: of the null set) the views keep the image's resolution: at half resolution the oblique
+    #: pairs' footprints in the coarser image's views held too few points, and 6 of the gate's
+    #: 24 oblique runs were lost (docs/design/VIEWS.md, "The pooled vote"); a camera-size image
+    #: at the working size of 2048 px is viewed at half resolution, a quarter of the pixels
+    max_short_side_px: float = 768.0
     #: the views of the finer image are searched from this scale on (of the image's pixels):
     #: their levels are then made from the view decimated by 2 (``stages.scalespace``), and
     #: the finer levels, most of a view's cost, are never made. Every tilted and steep pair of
@@ -108,7 +109,7 @@ class ViewParams:
     BOUNDS: ClassVar[Mapping[str, Bounds]] = {
         "longitude_step_deg": POSITIVE,
         "antialias_c": NON_NEGATIVE,
-        "decimation": FACTOR,
+        "max_short_side_px": NON_NEGATIVE,
         "finer_from_scale": FACTOR,
         "edge_margin_px": NON_NEGATIVE,
         "full_searches": AT_LEAST_ONE,
@@ -144,8 +145,8 @@ class View:
     inside_distance: object = field(default=None, repr=False)
     #: (h, w) of the image viewed (None: unknown), where a map found through the view must hold
     source_shape: Optional[Tuple[int, int]] = None
-    #: image px per view px along the uncompressed direction (``ViewParams.decimation``; 1 for
-    #: the image itself): a scale s of the view's pixels is the scale s * scale of the image's
+    #: image px per view px along the uncompressed direction (:func:`decimation_of`; 1 for the
+    #: image itself): a scale s of the view's pixels is the scale s * scale of the image's
     scale: float = 1.0
 
     @property
@@ -223,7 +224,7 @@ def identity_view(high: np.ndarray, valid: Optional[np.ndarray] = None) -> View:
 
 
 class Source(NamedTuple):
-    """An image as its views are made from it: shrunk by ``scale`` (``ViewParams.decimation``),
+    """An image as its views are made from it: shrunk by ``scale`` (:func:`decimation_of`),
     where it shows the scene (None: everywhere) and the map from the image's pixels."""
 
     image: np.ndarray
@@ -247,7 +248,7 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
               params: ViewParams = ViewParams(), valid: Optional[np.ndarray] = None) -> View:
     """The view of ``high`` (H, W) float32 compressed by ``tilt`` along ``longitude_deg``.
 
-    The image is shrunk by ``params.decimation`` (:func:`shrunk`), turned by phi onto a canvas
+    The image is shrunk by :func:`decimation_of` (:func:`shrunk`), turned by phi onto a canvas
     that holds all of it, blurred along x by ``antialias_c * sqrt(t^2 - 1)`` px and resized
     along x by 1/t (``cv2.resize``'s centre-aligned convention: x -> (x + 0.5) / t - 0.5;
     :func:`compressed_x`). ``valid``: where the image shows the scene (None: everywhere); the
@@ -256,7 +257,22 @@ def tilt_view(high: np.ndarray, tilt: float, longitude_deg: float,
     """
     if tilt <= 1.0:
         return identity_view(high, valid)
-    return view_of(source_of(high, valid, params.decimation), tilt, longitude_deg, params)
+    return view_of(source_of(high, valid, decimation_of(high.shape, params)), tilt,
+                   longitude_deg, params)
+
+
+def decimation_of(shape: Sequence[int], params: ViewParams) -> float:
+    """How much an image of ``shape`` (H, W) is shrunk to make its views: its shorter side
+    brought to ``params.max_short_side_px`` when longer (1: full resolution).
+
+    >>> decimation_of((768, 1024), ViewParams()), decimation_of((1536, 2048), ViewParams())
+    (1.0, 2.0)
+    >>> decimation_of((1536, 2048), ViewParams(max_short_side_px=0))
+    1.0
+    """
+    short = float(min(shape[:2]))
+    limit = params.max_short_side_px
+    return short / limit if limit > 0 and short > limit else 1.0
 
 
 def view_of(source: Source, tilt: float, longitude_deg: float, params: ViewParams) -> View:

@@ -30,7 +30,6 @@ from typing import ClassVar, List, Mapping, Sequence, Tuple
 import numpy as np
 
 from ..checks import AT_LEAST_ONE, Bounds, POSITIVE, check_bounds
-from .decision import log10_binom
 
 #: Scales are indexed by third octaves: index round(3 log2 s) (1, 1.26, 1.59, 2, ... -> 0, 1, 2,
 #: 3, ...), as the default's scales; two scales within the same index are one
@@ -213,11 +212,17 @@ def _no_cells() -> Cells:
 
 def log10_nfa(cells: Cells, tried: int) -> np.ndarray:
     """Each cell's log10 number of false alarms among ``tried`` cells (every side's, every
-    direction's): ``log10(tried) + log10 C(n, k) + k log10 p``."""
-    out = np.empty(len(cells))
-    for i, (k, n, p) in enumerate(zip(cells.votes, cells.candidates, cells.chance)):
-        out[i] = log10_binom(int(n), int(k)) + int(k) * math.log10(max(float(p), 1e-300))
-    return out + math.log10(max(tried, 1))
+    direction's): ``log10(tried) + log10 C(n, k) + k log10 p``.
+
+    >>> c = Cells(*(np.array([0]),) * 3, np.array([3]), np.array([10]), np.array([0.01]), 100)
+    >>> round(float(log10_nfa(c, 100)[0]), 4) == round(2 + math.log10(120) - 6, 4)
+    True
+    """
+    n = np.asarray(cells.candidates, np.int64)
+    k = np.asarray(cells.votes, np.int64)
+    log_fact = np.concatenate([[0.0], np.cumsum(np.log10(np.arange(1, int(n.max(initial=0)) + 1)))])
+    binom = log_fact[n] - log_fact[k] - log_fact[n - k]
+    return binom + k * np.log10(np.maximum(cells.chance, 1e-300)) + math.log10(max(tried, 1))
 
 
 @dataclass(frozen=True)

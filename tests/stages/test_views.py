@@ -28,7 +28,7 @@ def test_a_bright_dot_lands_where_to_view_maps_it(tilt, phi):
     high = np.zeros((120, 160), np.float32)
     x, y = 97, 41
     high[y - 1:y + 2, x - 1:x + 2] = 255.0
-    view = tilt_view(high, tilt, phi, ViewParams(decimation=1.0))
+    view = tilt_view(high, tilt, phi)
     px = apply(view.to_view, np.array([[x, y]], float))[0]
     peak = np.unravel_index(np.argmax(view.image), view.image.shape)
     # the blurred dot's maximum lies within a pixel of the mapped centre
@@ -52,14 +52,14 @@ def test_points_near_the_empty_corners_are_dropped():
 
 @pytest.mark.parametrize("tilt,phi", [(2.0, 0.0), (4.0, 126.0)])
 def test_a_view_simulated_on_the_image_decimated_maps_points_as_its_scale_says(tilt, phi):
-    """At ``decimation`` 2 the view is made from the image shrunk by 2: a dot lands where
-    ``to_view`` maps it, within a view pixel, and the view's pixels are 2 image pixels along
-    its uncompressed direction (``View.scale``)."""
+    """An image whose shorter side is twice ``max_short_side_px`` has its views made from it
+    shrunk by 2: a dot lands where ``to_view`` maps it, within a view pixel, and the view's
+    pixels are 2 image pixels along its uncompressed direction (``View.scale``)."""
     high = np.zeros((240, 320), np.float32)
     x, y = 197, 81
     high[y - 2:y + 3, x - 2:x + 3] = 255.0
-    view = tilt_view(high, tilt, phi, ViewParams(decimation=2.0))
-    full = tilt_view(high, tilt, phi, ViewParams(decimation=1.0))
+    view = tilt_view(high, tilt, phi, ViewParams(max_short_side_px=120.0))
+    full = tilt_view(high, tilt, phi, ViewParams(max_short_side_px=0.0))
     assert view.scale == 2.0 and full.scale == 1.0 and view.source_shape == (240, 320)
     px = apply(view.to_view, np.array([[x, y]], float))[0]
     peak = np.unravel_index(np.argmax(view.image), view.image.shape)
