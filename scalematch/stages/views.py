@@ -64,12 +64,13 @@ class ViewParams:
     #: the views are simulated on their image shrunk so that its shorter side is at most this
     #: many px (0: always at full resolution; :func:`decimation_of`), ASIFT's low resolution
     #: (Morel & Yu 2009, section 4), and the view pairs the vote chooses are made again at full
-    #: resolution for their full match. At and below 768 px (the 1 MP images of the gate and
-    #: of the null set) the views keep the image's resolution: at half resolution the oblique
-    #: pairs' footprints in the coarser image's views held too few points, and 6 of the gate's
-    #: 24 oblique runs were lost (docs/design/VIEWS.md, "The pooled vote"); a camera-size image
-    #: at the working size of 2048 px is viewed at half resolution, a quarter of the pixels
-    max_short_side_px: float = 768.0
+    #: resolution for their full match. 512 px shrinks a 1 MP image (1024x768) by 1.5, a
+    #: camera-size image at the working size of 2048 px by 3, and leaves a 640x480 image as it
+    #: is: on the gate's tilted, steep and oblique pairs, the same pairs solved as with every
+    #: view at full resolution, 0.90x the time; at half resolution the oblique pairs'
+    #: footprints in the coarser image's views held too few points (6 of the gate's 24 oblique
+    #: runs lost; docs/design/VIEWS.md, "The pooled vote")
+    max_short_side_px: float = 512.0
     #: the views of the finer image are searched from this scale on (of the image's pixels):
     #: their levels are then made from the view decimated by 2 (``stages.scalespace``), and
     #: the finer levels, most of a view's cost, are never made. Every tilted and steep pair of
@@ -266,7 +267,9 @@ def decimation_of(shape: Sequence[int], params: ViewParams) -> float:
     brought to ``params.max_short_side_px`` when longer (1: full resolution).
 
     >>> decimation_of((768, 1024), ViewParams()), decimation_of((1536, 2048), ViewParams())
-    (1.0, 2.0)
+    (1.5, 3.0)
+    >>> decimation_of((480, 640), ViewParams())
+    1.0
     >>> decimation_of((1536, 2048), ViewParams(max_short_side_px=0))
     1.0
     """
