@@ -1,20 +1,20 @@
 """Features once per image: the tilted views of each image, described into one table that both
 orders of a search read.
 
-An image is the finer one in one direction of the search and the coarser one in the other, and
-its views serve both: as the finer image, every level of a view is probed (its
-``ProbeParams.points`` strongest points described); as the coarser image, the view's first
-level is described (its ``VIEWS_COARSER_POINTS`` strongest, for the vote). The pooled vote
-(:mod:`scalematch.stages.vote`) reads the table; the view pairs it chooses are matched in full
-with every point of the levels they need, detected again then (a level costs less to make than
-to keep).
+An image is the finer one in one order of the search and the coarser one in the other, and
+each of its views serves both: as the finer image, the view's levels are probed (from
+``ViewParams.finer_from_scale`` on, every ``ViewParams.vote_every``-th; the
+``ProbeParams.points`` strongest points of each described); as the coarser image, the view's
+first level is described (its ``VIEWS_COARSER_POINTS`` strongest). The pooled vote
+(:mod:`scalematch.stages.vote`) reads the tables; the view pairs it chooses are made again at
+full resolution and matched in full with every point of the levels they need (a level costs
+less to make again than to keep).
 
-A tilted view of a camera-size image is simulated on the image shrunk
-(:func:`stages.views.decimation_of`: the view's own pixels are then that many image pixels): a view searched from scale s on needs no finer
-pixels than the image decimated by s, and the levels finer than that are what a view costs
-(``ViewParams.max_short_side_px`` says what it solves). The image itself (the identity view) keeps
-its full resolution: its levels are those of the plain search, whose detection this module
-takes as it is (:func:`identity_rows`).
+The views of an image whose shorter side is over ``ViewParams.max_short_side_px`` are
+simulated on the image shrunk to it (:func:`stages.views.decimation_of`; a view pixel is then
+that many image pixels, ``View.scale``), ASIFT's low resolution for the vote. The image itself
+(the identity view) keeps its full resolution: its levels are those of the plain search,
+whose detection this module takes as it is (:class:`Roles`).
 """
 
 from __future__ import annotations
@@ -94,28 +94,24 @@ class ViewInfo(NamedTuple):
 
 @dataclass(frozen=True)
 class ImageViews:
-    """One image's views and their tables; index 0 is the image itself in both. The views'
-    images are not kept: a view chosen for a full match is made again
-    (:func:`stages.views.tilt_view`)."""
+    """One image's views and their tables; index 0 is the image itself. The views' images are
+    not kept: a view chosen for a full match is made again (:func:`stages.views.tilt_view`)."""
 
-    #: the views of the finer image's table
-    finer_views: Tuple[ViewInfo, ...]
-    #: the views of the coarser image's table (at full resolution)
-    coarser_views: Tuple[ViewInfo, ...]
-    #: every level of every view, the probe's points (the image as the finer one)
+    views: Tuple[ViewInfo, ...]
+    #: every level probed of every view, the probe's points (the image as the finer one)
     finer: Table = field(repr=False)
     #: the first level of every view, its strongest points (the image as the coarser one)
     coarser: Table = field(repr=False)
 
     @property
-    def finer_sides(self) -> np.ndarray:
-        """(V,) each finer view's longer side, its own px."""
-        return np.array([max(v.shape) for v in self.finer_views], np.float64)
+    def sides(self) -> np.ndarray:
+        """(V,) each view's longer side, its own px."""
+        return np.array([max(v.shape) for v in self.views], np.float64)
 
     @property
-    def coarser_shapes(self) -> np.ndarray:
-        """(V, 2) each coarser view's (H, W)."""
-        return np.array([v.shape for v in self.coarser_views], np.float64)
+    def shapes(self) -> np.ndarray:
+        """(V, 2) each view's (H, W)."""
+        return np.array([v.shape for v in self.views], np.float64)
 
 
 @dataclass(frozen=True)
@@ -200,25 +196,21 @@ def image_views(image: np.ndarray, valid: Optional[np.ndarray], roles: Roles,
     keys = list(keys) if roles.scales or roles.coarser_views else []
     source = source_of(image, valid, decimation_of(image.shape, params)) if keys else None
 
-    def one(key):
+    def one(key) -> Tuple[ViewInfo, List[Described], Optional[Described]]:
         view = view_of(source, *key, params)
-        info = ViewInfo.of(view)
-        finer = (info, view_rows(view, roles.scales, how)) if roles.scales else None
-        coarser = (info, first_level_rows(view, how)) if roles.coarser_views else None
+        probed = view_rows(view, roles.scales, how) if roles.scales else []
+        first = first_level_rows(view, how) if roles.coarser_views else None
         tick()
-        return finer, coarser
+        return ViewInfo.of(view), probed, first
 
     made = thread_map(one, keys)
-    as_finer = [m[0] for m in made if m[0] is not None]
-    as_coarser = [m[1] for m in made if m[1] is not None]
     finer = [(0, d) for d in roles.finer] + [
-        (k + 1, d) for k, (_, probed) in enumerate(as_finer) for d in probed]
+        (k + 1, d) for k, (_, probed, _) in enumerate(made) for d in probed]
     first = ([(0, identity_rows(roles.coarser, IDENTITY_COARSER_POINTS))]
              if roles.coarser is not None else []) + [
-        (k + 1, d) for k, (_, d) in enumerate(as_coarser)]
+        (k + 1, d) for k, (_, _, d) in enumerate(made) if d is not None]
     dim = next((d.desc.shape[1] for _, d in finer + first if d.desc.ndim == 2), 0)
-    me = ViewInfo.of(roles.identity)
-    return ImageViews((me,) + tuple(i for i, _ in as_finer), (me,) + tuple(i for i, _ in as_coarser),
+    return ImageViews((ViewInfo.of(roles.identity),) + tuple(info for info, _, _ in made),
                       Table.of(finer, dim), Table.of(first, dim))
 
 

@@ -695,11 +695,11 @@ def side_cells(finer: ImageViews, coarser: ImageViews, side: str, matcher, param
     if not found:
         return vote_cells(VoteCandidates(*(np.zeros(0),) * 3, np.zeros((0, 2)), np.zeros((0, 2)),
                                          np.zeros(0), np.zeros(0, np.int64),
-                                         np.zeros(0, np.int64)), finer.finer_sides,
-                          coarser.coarser_shapes, params)
+                                         np.zeros(0, np.int64)), finer.sides, coarser.shapes,
+                          params)
     joined = VoteCandidates(*(np.concatenate([getattr(x, f) for x in found])
                               for f in VoteCandidates.__dataclass_fields__))
-    return vote_cells(joined, finer.finer_sides, coarser.coarser_shapes, params)
+    return vote_cells(joined, finer.sides, coarser.shapes, params)
 
 
 def view_pair(search: Search, direction: Direction, images: Dict[Direction, ImageViews],
@@ -715,8 +715,8 @@ def view_pair(search: Search, direction: Direction, images: Dict[Direction, Imag
                                                      images[Direction.SWAPPED])
     lo_img, hi_img = work.coarser_finer(direction)
     lo_valid, hi_valid = work.valid(direction)
-    voted_f = finer_img.finer_views[ranked.finer_view]
-    voted_c = coarser_img.coarser_views[ranked.coarser_view]
+    voted_f = finer_img.views[ranked.finer_view]
+    voted_c = coarser_img.views[ranked.coarser_view]
     full = replace(cfg.views, max_short_side_px=0.0)
     f_view = plain_probed(search, direction, scales).view if ranked.finer_view == 0 else \
         tilt_view(hi_img, voted_f.tilt, voted_f.longitude_deg, full, hi_valid)

@@ -100,7 +100,7 @@ def ranked_passes(low, high, truth, config):
                 coarser, finer = d.coarser_finer(images[Direction.GIVEN], images[Direction.SWAPPED])
                 lo_img, hi_img = work.coarser_finer(d)
                 full = ViewParams(max_short_side_px=0.0)
-                fi, ci = finer.finer_views[r.finer_view], coarser.coarser_views[r.coarser_view]
+                fi, ci = finer.views[r.finer_view], coarser.views[r.coarser_view]
                 f_view = P.identity_view(hi_img) if r.finer_view == 0 else \
                     tilt_view(hi_img, fi.tilt, fi.longitude_deg, full)
                 c_view = P.identity_view(lo_img) if r.coarser_view == 0 else \
