@@ -18,6 +18,7 @@ from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams
 from .stages.guided import GuidedParams
 from .stages.matcher import MatcherParams
 from .stages.nodata import NoDataParams
+from .stages.pinning import PinParams
 from .stages.pixelcheck import PixelParams
 from .stages.probe import ProbeParams
 from .stages.refit import ModelCheckParams
@@ -137,6 +138,10 @@ class Config:
     #: the pooled vote over the views' pairs: which are matched in full
     vote: VoteParams = field(default_factory=VoteParams)
     model_check: ModelCheckParams = field(default_factory=ModelCheckParams)
+    #: an answer is claimed as its model only where its inliers pin it down: a map whose
+    #: expected grid error exceeds ``pin.tolerance_px`` gives way to the next simpler model they
+    #: pin (``stages.pinning``, ``stages.refit.pinned_model``)
+    pin: PinParams = field(default_factory=PinParams)
     #: where an image shows no scene (a canvas's corners, a declared no-data value): kept out of
     #: detection and of the pixel tests (``stages.nodata``; ``--nodata``)
     nodata: NoDataParams = field(default_factory=NoDataParams)

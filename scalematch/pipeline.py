@@ -42,8 +42,8 @@ from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import NoData, distance_inside, with_nan
 from .stages.pixelcheck import pixel_check
 from .stages.probe import probe_scores, select_scales
-from .stages.refit import (candidates_in_images, guided_refit, pooled_refit, refit_in_high,
-                           richer_model, union_homography)
+from .stages.refit import (Pinned, candidates_in_images, guided_refit, pinned_model,
+                           pooled_refit, refit_in_high, richer_model, union_homography)
 from .stages.rivals import EpipolarFit, off_plane
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
@@ -801,6 +801,14 @@ def grown_answer(attempt: Attempt, fit, search: Search):
                         search.mode.guided, spec, asked)
 
 
+def pinned_answer(attempt: Attempt, fit, search: Search) -> Tuple[Tuple, Pinned]:
+    """((t, inliers, model), how firmly its inliers pin it): an accepted answer ``fit``, or the
+    simpler model its inliers pin down (:func:`stages.refit.pinned_model`), at working size."""
+    coarser, finer = search.work.coarser_finer(attempt.step.direction)
+    return pinned_model(fit, finer.shape, coarser.shape, search.config.pin,
+                        fit_spec(search.config))
+
+
 def best_fitting(search: Search, attempts: Sequence[Attempt]):
     """(winner, its final fit, its pixel check): the matched attempt to report, or
     (None, None, None); the pixel check is None unless several were compared.
@@ -861,7 +869,8 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
     the probe, the steps), and the working size's: its factors, and the implied ratio and the
     footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``),
-    and the answer's parallax figures (``seen``, :func:`answer_parallax`).
+    and the answer's own figures (``seen``): its parallax (:func:`answer_parallax`) and how
+    firmly its inliers pin it (:func:`pinned_answer`).
     """
     records, plan, stopped = run.records, run.plan, run.stopped
     decided = shown.verdict.evidence
@@ -903,7 +912,9 @@ def build_result(search: Search, run: SearchRun) -> MatchResult:
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
     shows the first search made (the finer image itself, in the given order), with its reason.
     The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
-    repeated structure is refused there.
+    repeated structure is refused there. The accepted map, grown, is claimed as its model only
+    where its inliers pin it down (:func:`pinned_answer`); a simpler model they pin answers
+    otherwise.
     """
     if not run.attempts:  # an empty plan: no scale asked for is within reach of these images
         return unreachable(search, run)
@@ -911,13 +922,14 @@ def build_result(search: Search, run: SearchRun) -> MatchResult:
     shown = winner or best_refused(run.attempts) or run.attempts[0]
     if winner is None:
         return refused(search, run, shown)
-    final = None
+    final = pinned = None
     if model_of(fit[2]).has_ratio:
         final, refusal = judged_by_pixels(search, run, winner, fit, near)
         if refusal is not None:
             return refusal
         fit = grown_answer(winner, fit, search)
-    return answered(search, run, winner, fit, final)
+        fit, pinned = pinned_answer(winner, fit, search)
+    return answered(search, run, winner, fit, final, pinned)
 
 
 def _common(search: Search, run: SearchRun, shown: Attempt) -> dict:
@@ -997,13 +1009,18 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit,
 
 
 def answered(search: Search, run: SearchRun, winner: Attempt, fit,
-             final: Optional[FinalFigures]) -> MatchResult:
+             final: Optional[FinalFigures], pinned: Optional[Pinned] = None) -> MatchResult:
     """The match: the winner's final ``fit`` turned to map the finer image to the coarser one,
-    its ratio, angle and translation, and its evidence with the answer's parallax."""
+    its ratio, angle and translation, and its evidence with the answer's parallax and how
+    firmly its inliers pin it (``pinned``, :func:`pinned_answer`)."""
     t, inliers, model = fit
     has_ratio = model_of(model).has_ratio
     seen = answer_parallax(winner, t, model, search.config) if has_ratio else plane_parallax(
         inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
+    if pinned is not None:
+        work = search.work
+        seen = dict(seen, **pinned.figures(
+            work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
     if not has_ratio and len(inliers) >= model_of(model).min_sample:
         t = refine_fundamental(t, inliers[:, :2], inliers[:, 2:])  # LM on the Sampson error
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,

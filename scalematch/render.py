@@ -162,10 +162,12 @@ def verdict(result: MatchResult) -> str:
     """The one-line verdict of a match, for the command line and the captions alike.
 
     Matched: the model, ratio, rotation, inliers and best scale (to the per-scale table's three
-    significant digits), a tilted view and a swapped order when so; the fundamental matrix has
-    no ratio. The best scale is the finer image's: a step whose images were shrunk to their
-    working sizes (or a JPEG decoded reduced) can have searched the image that is the coarser
-    one in the files as the finer, and its scale in the files' pixels is then below 1
+    significant digits), a tilted view and a swapped order when so, and the richer model
+    fitted first when its inliers did not pin it down (``evidence.unpinned_model``); the
+    fundamental matrix has no ratio. The best scale is the finer image's: a step whose images
+    were shrunk to their working sizes (or a JPEG decoded reduced) can have searched the image
+    that is the coarser one in the files as the finer, and its scale in the files' pixels is
+    then below 1
     (``best_scale``, the table's ``s``): the verdict gives 1 / s, the scale at which the finer
     image was found. Not matched: the reason, and the best scale when there is one and the
     reason does not name the scale it is about already.
@@ -181,6 +183,11 @@ def verdict(result: MatchResult) -> str:
     ...                     inliers=np.zeros((760, 4)), resolution_ratio=2.0, rotation_deg=0.0,
     ...                     order="swapped"))  # a 16 MP JPEG decoded at half size, found finer
     'matched (similarity): ratio 2.000, rotation 0.0 deg, 760 inliers, best scale 1.59, order swapped (the first image is the finer one)'
+    >>> from scalematch.result import build_evidence
+    >>> loose = build_evidence(dict(unpinned_model="homography", unpinned_px=4.5, pin_px=0.9))
+    >>> verdict(MatchResult(matched=True, model="similarity", best_scale=8.0, evidence=loose,
+    ...                     inliers=np.zeros((11, 4)), resolution_ratio=8.0, rotation_deg=0.0))
+    'matched (similarity; the homography was not pinned down by its inliers, 4.50 px expected error): ratio 8.000, rotation 0.0 deg, 11 inliers, best scale 8'
     """
     s = result.best_scale
     if result.matched and 0 < s < 1:  # found at 1/s, the finer image's scale
@@ -206,9 +213,19 @@ def verdict(result: MatchResult) -> str:
     if not np.isnan(result.evidence.parallax_log10_nfa):  # a fundamental matrix was asked for
         plane = (", no parallax: the plane map answers (an epipolar geometry's epipole is not "
                  "fixed by its inliers)")
-    return (f"matched ({result.model}): ratio {result.resolution_ratio:.3f}, rotation "
+    return (f"matched ({model_said(result)}): ratio {result.resolution_ratio:.3f}, rotation "
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}"
             f"{plane}")
+
+
+def model_said(result: MatchResult) -> str:
+    """The model of a match, and the richer one fitted first when its inliers did not pin it
+    down (``evidence.unpinned_model``, ``stages.refit.pinned_model``)."""
+    e = result.evidence
+    if not e.unpinned_model:
+        return result.model
+    return (f"{result.model}; the {e.unpinned_model} was not pinned down by its inliers, "
+            f"{e.unpinned_px:.2f} px expected error")
 
 
 def evidence_line(result: MatchResult) -> str:

@@ -125,6 +125,15 @@ class Evidence:
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
     #: answers instead (``pipeline.without_parallax``; 0: no plane map passed)
     plane_inliers: int = 0
+    #: how firmly the answer's inliers pin its map (``stages.pinning.expected_error``): the
+    #: error they leave it free to make, the mean over the finer image's 21x21 grid of each
+    #: point's RMS position error, coarser px
+    pin_px: float = math.nan
+    #: the model fitted first that is not claimed because its inliers left it free to err by
+    #: more than ``pin.tolerance_px`` ("" when the answer is the model fitted), and its expected
+    #: grid error, coarser px (``stages.refit.pinned_model``)
+    unpinned_model: str = ""
+    unpinned_px: float = math.nan
     searches: int = 0  #: searches made (one per direction and view probed)
     search_order: Direction = Direction.GIVEN  #: the direction of the search shown
     view_tilt: float = 1.0  #: tilt of the simulated view of the search shown (1: the image)

@@ -1,7 +1,9 @@
-"""refit: the union homography (perspective pairs) on fabricated outcomes with a known map."""
+"""refit: the union homography (perspective pairs), guided growth and the pin test on fabricated
+outcomes and points with a known map."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -189,3 +191,80 @@ def test_guided_refit_keeps_a_fit_that_nothing_grows():
     t, inliers, model = guided_refit(fit, (480, 640), [_scale(high)], low, GuidedParams(),
                                      FitSpec("homography", Config().ransac))
     assert t is PERSPECTIVE and model == "homography" and len(inliers) == 0
+
+
+# ------------------------------------------------------------------------- pinned_model
+#: a ratio-16 similarity of a 640x480 finer image (footprint 40x30 coarser px), as a homography
+ZOOM16 = np.array([[0.0625, 0.0, 300.0], [0.0, 0.0625, 200.0], [0.0, 0.0, 1.0]])
+SHAPES = ((480, 640), (768, 1024))  #: the finer and the coarser image, (H, W)
+
+
+def _noisy_pairs(truth: np.ndarray, lo, hi, n: int, noise: float, seed: int) -> np.ndarray:
+    """(n, 4) pairs of ``truth`` from finer points uniform in the box ``lo``..``hi``, the
+    coarser points with Gaussian noise of std ``noise`` px."""
+    rng = np.random.default_rng(seed)
+    src = rng.uniform(lo, hi, (n, 2))
+    return np.hstack([src, apply(truth, src) + rng.normal(0.0, noise, (n, 2))])
+
+
+def _homography_of(pairs: np.ndarray):
+    est = estimate("homography", pairs[:, :2], pairs[:, 2:], Config().ransac, seed=0)
+    return est.transform, pairs[est.inliers], "homography"
+
+
+def _pinned(fit, config: Config = Config()):
+    from scalematch.stages.refit import pinned_model
+
+    return pinned_model(fit, *SHAPES, config.pin, FitSpec("homography", config.ransac, 0))
+
+
+def test_a_homography_its_crowded_inliers_do_not_pin_gives_way_to_a_simpler_model():
+    """30 pairs of a ratio-16 zoom, 0.4 px of noise, crowded in a 200x150 corner of the finer
+    image: the homography fitted to them leaves its far corners free (expected grid error 1.7
+    px, 4.4 px off); the affine map fitted to the same pairs is pinned (0.6 px) and answers,
+    0.3 px off."""
+    fit = _homography_of(_noisy_pairs(ZOOM16, (0, 0), (199, 149), 30, 0.4, seed=1))
+    assert _grid_error(fit[0], ZOOM16) > 3.0
+    (t, inliers, model), pinned = _pinned(fit)
+    tolerance = Config().pin.tolerance_px
+    assert model == "affine" and pinned.refused == "homography"
+    assert pinned.refused_px > 1.5 * tolerance and pinned.error_px < 0.7 * tolerance
+    assert len(inliers) == len(fit[1])
+    assert _grid_error(t, ZOOM16) < 1.0
+
+
+def test_a_homography_pinned_over_the_whole_image_is_kept():
+    fit = _homography_of(_noisy_pairs(ZOOM16, (0, 0), (639, 479), 30, 0.4, seed=1))
+    (t, _, model), pinned = _pinned(fit)
+    assert model == "homography" and t is fit[0]
+    assert pinned.refused == "" and pinned.error_px < 0.5 * Config().pin.tolerance_px
+
+
+def test_a_perspective_no_simpler_model_follows_keeps_its_homography():
+    """20 pairs of a strong perspective with 1 px of noise in the left third of the finer image:
+    the homography is loose (expected error 1.9 px), but an affine map fitted to its inliers
+    is loose by its misfit too (1.9 px, and 5.6 px off where the homography is 0.8): the
+    homography stays, as fitted."""
+    fit = _homography_of(_noisy_pairs(PERSPECTIVE, (0, 0), (213, 479), 20, 1.0, seed=0))
+    (t, inliers, model), pinned = _pinned(fit)
+    assert model == "homography" and t is fit[0] and inliers is fit[1]
+    assert pinned.refused == "" and pinned.error_px > 1.5 * Config().pin.tolerance_px
+
+
+def test_the_pin_test_off_or_a_similarity_answers_as_fitted():
+    crowded = _noisy_pairs(ZOOM16, (0, 0), (199, 149), 30, 0.4, seed=1)
+    fit = _homography_of(crowded)
+    off = Config(pin=replace(Config().pin, enabled=False))
+    assert _pinned(fit, off)[0] is fit
+    similarity = estimate("similarity", crowded[:, :2], crowded[:, 2:], Config().ransac)
+    fit = (similarity.transform, crowded, "similarity")
+    assert _pinned(fit)[0] is fit
+
+
+def test_the_pin_figures_are_given_in_the_coarser_images_own_px():
+    from scalematch.stages.refit import Pinned
+
+    figures = Pinned(0.5, "homography", 2.0).figures(factor=2.0)
+    assert figures == {"pin_px": 1.0, "unpinned_model": "homography", "unpinned_px": 4.0}
+    # none refused: the one NaN object, so that two evidences of one answer compare equal
+    assert Pinned(0.5).figures(factor=2.0)["unpinned_px"] is math.nan
