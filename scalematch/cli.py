@@ -425,12 +425,15 @@ def check_out_file(path: Path, option: str) -> None:
     except OSError as exc:
         raise InputError(f"cannot write {option} {path}: cannot create the folder {parent}: "
                          f"{exc.strerror or exc}")
-    existed = path.exists()
+    import tempfile  # imported where used: the command line starts faster
+
     try:
-        with open(path, "a"):
-            pass
-        if not existed:
-            path.unlink()  # leave nothing behind if the run stops before writing it
+        if path.exists():
+            with open(path, "a"):
+                pass
+        else:  # a file beside it, not the file itself: nothing appears at ``path`` and vanishes
+            with tempfile.NamedTemporaryFile(dir=parent, prefix=".scalematch-check-"):
+                pass
     except OSError as exc:
         raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
 
