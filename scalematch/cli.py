@@ -72,7 +72,7 @@ EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 #: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':
 #: medians, the two searches alternately on one 2-core machine): said in these words in
 #: --help, the slow "no"'s hint, README.md and docs/GUIDE.md (tests/test_docs.py)
-NO_VIEWS_SPEEDUP = "about 11 times sooner on 1 MP images, 3 times on 12-16 MP photos"
+NO_VIEWS_SPEEDUP = "about 3 times sooner on 1 MP images, 1.5 times on 12-16 MP photos"
 
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
 #: 78 columns less the help's indent of 2
@@ -663,15 +663,15 @@ def _search_options() -> List[Callable]:
                           "first, then the other; the JSON says which). 'given': LOW is the "
                           "coarser image."),
         click.option("--views/--no-views", "views", default=True, show_default=True,
-                     help="When nothing matches, simulate tilted views of the finer image, "
-                          "then of the coarser one (oblique shots; the coarser one's views solve "
-                          "a finer image seen more obliquely than its zoom): tilts 2, then 4, "
-                          "then 6 and 8, each pass only when the earlier ones found nothing. "
-                          "They are most of the time of a \"no\": with --no-views a \"no\" "
-                          f"comes {NO_VIEWS_SPEEDUP} (docs/design/SPEED.md; for archives of "
-                          "mostly unrelated pairs), but pairs only a tilted view solves are "
-                          "missed; --set \"views.passes=2;4\" leaves out the steepest pass "
-                          "(2.3x sooner)."),
+                     help="When nothing matches, simulate tilted views of both images "
+                          "(oblique shots; the coarser one's views solve a finer image seen "
+                          "more obliquely than its zoom): tilts 2, then 4, then 6 and 8, each "
+                          "pass one vote over all their pairs, and only when the earlier passes "
+                          "found nothing. They are most of the time of a \"no\": with "
+                          f"--no-views a \"no\" comes {NO_VIEWS_SPEEDUP} "
+                          "(docs/design/SPEED.md; for archives of mostly unrelated pairs), but "
+                          "pairs only a tilted view solves are missed; --set "
+                          "\"views.passes=2;4\" leaves out the steepest pass (1.6x sooner)."),
         click.option("--time-budget", type=float, default=None, metavar="SECONDS",
                      help="Start no further step of the search after SECONDS (the given "
                           "order's plain search always runs): a pair with no match is answered "
@@ -1025,9 +1025,9 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
-#: what answers sooner; a "no" on unrelated 12 and 16 MP photos takes 6.6-8.2 s as a whole
-#: process on a quiet 2-core machine, twice that when other jobs share it
-#: (docs/design/SPEED.md), on 1 MP images a median of about 2 s
+#: what answers sooner; a "no" on unrelated 12 and 16 MP photos takes a median 3.7 s (at most
+#: 4.0) as a whole process on a quiet 2-core machine, more when other jobs share it
+#: (docs/design/SPEED.md), on 1 MP images a median of about 0.8 s
 SLOW_NO_HINT_S = 10.0
 
 

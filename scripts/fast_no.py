@@ -74,7 +74,7 @@ def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity
 
 def configured(method: str) -> Config:
     """The Config of a method: a preset, and with "+path=value" the values of ``--set`` on it
-    (``first-look+views.first_look_follow=2``; ``scalematch.lab.regress.configured``)."""
+    (``tilt-4+views.full_searches=2``; ``scalematch.lab.regress.configured``)."""
     from scalematch.cli import set_path
     from scalematch.lab.regress import configured as preset_with
 
@@ -192,7 +192,7 @@ def main() -> None:
                     f"{len(BIG_PAIRS)} 12-16 MP unrelated pairs (BIG_PAIRS)")
     ap.add_argument("--methods", default=",".join(METHODS),
                     help="sift and Config presets, comma-separated, each with values set as "
-                         "+path=value (first-look+views.first_look_follow=2; the big pair: "
+                         "+path=value (tilt-4+views.full_searches=2; the big pair: "
                          "always default and no-views)")
     a = ap.parse_args()
     methods = tuple(m for m in a.methods.split(",") if m)
