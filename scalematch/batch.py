@@ -41,7 +41,7 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
                     List, Optional, Sequence, Set, Tuple)
 
 from .config import Config
-from .errors import internal_error
+from .errors import internal_error, interrupted
 from .imageio import grey_of_file
 from .pipeline import match, warm_up_blas
 from .result import dumps, error_record, to_jsonable
@@ -495,6 +495,8 @@ def match_pair(pair: Pair, config: Config, max_pixels: int) -> Dict[str, Any]:
     except ValueError as exc:  # ImageError included: a bad image, too small, constant
         error, kind = str(exc), INPUT
     except Exception as exc:  # noqa: BLE001 (a pair must never stop the batch; MemoryError too)
+        if interrupted(exc):  # Ctrl-C, worn by a library's error: it stops the batch
+            raise KeyboardInterrupt from exc
         error, kind = internal_error(exc), INTERNAL
     return error_line(pair, error, config, time.perf_counter() - t0, kind)
 

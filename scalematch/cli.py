@@ -35,7 +35,7 @@ import click
 import numpy as np
 
 from . import __version__
-from .errors import internal_error
+from .errors import internal_error, interrupted
 from .config import MAX_SCALES, MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
 from .result import MatchResult, dumps
@@ -498,6 +498,9 @@ class ScalematchGroup(click.Group):
             click.echo("interrupted", err=True)
             sys.exit(EXIT_INTERRUPTED)
         except Exception as exc:  # noqa: BLE001 (anything else is ours: exit 4, never 1)
+            if interrupted(exc):  # Ctrl-C, worn by a library's error raised as it unwound
+                click.echo("interrupted", err=True)
+                sys.exit(EXIT_INTERRUPTED)
             given = sys.argv[1:] if args is None else list(args)
             if "-v" in given or "--verbose" in given:
                 traceback.print_exc(file=sys.stderr)

@@ -25,3 +25,27 @@ def internal_error(exc: BaseException) -> str:
     if isinstance(exc, MemoryError) or "Insufficient memory" in text or "bad_alloc" in text:
         what = f"out of memory ({what})"
     return f"internal error, {what}"
+
+
+def interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` stands where a KeyboardInterrupt was: the interrupt is in its chain of
+    causes and contexts (a library that fails while Ctrl-C unwinds it raises its own error,
+    with the interrupt as its context), so Ctrl-C ends the run rather than being taken for an
+    error of the pair.
+
+    >>> try:
+    ...     try:
+    ...         raise KeyboardInterrupt
+    ...     finally:
+    ...         raise RuntimeError("release unlocked lock")
+    ... except RuntimeError as exc:
+    ...     print(interrupted(exc), interrupted(RuntimeError("a bug")))
+    True False
+    """
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False

@@ -931,3 +931,19 @@ def test_a_malformed_scheduler_address_in_a_real_process_is_one_line(images):
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert "Exception ignored" not in done.stderr
     assert time.monotonic() - t0 < 5  # generous; measured 0.5 s
+
+
+def test_a_ctrl_c_worn_by_a_library_error_stops_the_batch(images, monkeypatch):
+    # a lock released twice as Ctrl-C unwound a wait (threading's Condition): the error has
+    # the interrupt as its context, and must not be taken for the pair's internal error
+    def unwound(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        finally:
+            raise RuntimeError("release unlocked lock")
+
+    monkeypatch.setattr(batch, "match", unwound)
+    pair = Pair(str(images / "low.png"), str(images / "high.png"),
+                str(images / "low.png"), str(images / "high.png"))
+    with pytest.raises(KeyboardInterrupt):
+        real_match_pair(pair, Config(), DEFAULT_MAX_PIXELS)

@@ -162,8 +162,19 @@ def distinct_pairs(src: np.ndarray, dst: np.ndarray) -> Tuple[np.ndarray, np.nda
 
 
 def distinct_rows(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Row indices of the distinct (src, dst) position pairs (to 1e-3 px), in first order."""
+    """Row indices of the distinct (src, dst) position pairs (to 1e-3 px), in first order.
+
+    Rows sorted by a stable lexicographic sort, each group's first row kept: what
+    ``np.unique(axis=0, return_index=True)`` gives, without its structured-array view, whose
+    comparison turns an exception raised inside it (Ctrl-C's KeyboardInterrupt) into a
+    TypeError ("Cannot compare structured arrays unless they have a common dtype"): a batch
+    then recorded an internal error and went on instead of stopping.
+    """
     if len(src) == 0:
         return np.zeros(0, int)
-    _, first = np.unique(np.round(np.hstack([src, dst]), 3), axis=0, return_index=True)
-    return np.sort(first)
+    keys = np.round(np.hstack([src, dst]), 3)
+    order = np.lexsort(keys.T[::-1])  # stable: equal rows stay in their first order
+    ranked = keys[order]
+    starts = np.ones(len(keys), bool)
+    starts[1:] = np.any(ranked[1:] != ranked[:-1], axis=1)
+    return np.sort(order[starts])

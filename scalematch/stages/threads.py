@@ -64,7 +64,10 @@ def thread_map(fn: Callable[[T], R], items: Iterable[T]) -> List[R]:
         _workers.append(worker)
     results: List = [None] * len(items)
     errors: List[BaseException] = []
-    done = threading.Semaphore(0)
+    # a queue, not a threading.Semaphore: a Ctrl-C that lands inside a Semaphore's Condition
+    # wait can leave its lock released twice, and "RuntimeError: release unlocked lock" then
+    # stands where the KeyboardInterrupt was; SimpleQueue.get raises it as it is
+    done: SimpleQueue = SimpleQueue()
 
     def job(k: int) -> Callable[[], None]:
         def run() -> None:
@@ -73,14 +76,14 @@ def thread_map(fn: Callable[[T], R], items: Iterable[T]) -> List[R]:
             except BaseException as exc:  # noqa: BLE001 (raised again in the calling thread)
                 errors.append(exc)
             finally:
-                done.release()
+                done.put(k)
         return run
 
     for k in range(len(items)):
         _jobs.put(job(k))
     _run_queued()
     for _ in items:
-        done.acquire()
+        done.get()
     if errors:
         raise errors[0]
     return results

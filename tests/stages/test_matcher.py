@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scalematch.stages.matcher import Candidates, MatcherParams, match_descriptors
+from scalematch.stages.matcher import Candidates, MatcherParams, distinct_rows, match_descriptors
 
 LOW = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]], np.float32)
 HIGH = np.array([[1.0, 0.0], [4.5, 0.0], [0.0, 9.0]], np.float32)
@@ -154,3 +154,20 @@ def test_large_matches_in_chunks_and_threads_agree_with_brute_force(threads):
     assert (c.j.reshape(n_high, 2)[clear, 1] == order[clear, 1]).all()
     np.testing.assert_allclose(c.distance.reshape(n_high, 2), np.take_along_axis(d, order, 1),
                                atol=1e-4)
+
+
+def test_distinct_rows_keeps_the_first_of_each_repeated_position_pair():
+    # rows 0, 2 and 4 are one pair (within 1e-3 px; -0.0 is 0.0), rows 1 and 3 another
+    src = np.array([[1.0, 2.0], [5.0, 5.0], [1.0004, 2.0], [5.0, 5.0], [1.0, 2.0], [7.0, 1.0]])
+    dst = np.array([[0.0, 3.0], [1.0, 1.0], [-0.0, 3.0], [1.0, 1.0], [0.0, 3.0], [0.0, 3.0]])
+    assert distinct_rows(src, dst).tolist() == [0, 1, 5]
+
+
+def test_distinct_rows_is_what_numpy_unique_over_rows_gives():
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        n = int(rng.integers(1, 40))
+        src = rng.integers(0, 3, (n, 2)) + rng.choice([0.0, 0.0004, 0.3], (n, 2))
+        dst = rng.integers(-2, 2, (n, 2)).astype(float)
+        _, first = np.unique(np.round(np.hstack([src, dst]), 3), axis=0, return_index=True)
+        assert distinct_rows(src, dst).tolist() == sorted(first.tolist())

@@ -60,3 +60,14 @@ def test_an_error_in_a_piece_is_raised_in_the_caller(cv_threads):
 def test_nested_maps_run_serially_and_finish(cv_threads):
     out = thread_map(lambda x: sum(thread_map(lambda y: x * y, range(4))), range(5))
     assert out == [6 * x for x in range(5)]
+
+
+def test_a_keyboard_interrupt_in_a_piece_is_raised_as_itself(cv_threads):
+    def piece(x):
+        if x == 3:
+            raise KeyboardInterrupt
+        return x
+
+    with pytest.raises(KeyboardInterrupt):
+        thread_map(piece, range(8))
+    assert thread_map(lambda x: x + 1, range(4)) == [1, 2, 3, 4]  # the pool still works
