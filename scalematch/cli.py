@@ -401,14 +401,20 @@ class PlanBar:
 
 # --------------------------------------------------------------------------- output checks
 
-def check_out_dir(path: Path) -> None:
-    """Create ``path`` and make sure a file can be written in it, before the work starts."""
+def _write_probe(folder: Path) -> None:
+    """Create and remove a file in ``folder`` (raises ``OSError`` when none can be written);
+    nothing is left, and no name the run writes appears and vanishes."""
     import tempfile  # imported where used: the command line starts faster
 
+    with tempfile.NamedTemporaryFile(dir=folder, prefix=".scalematch-check-"):
+        pass
+
+
+def check_out_dir(path: Path) -> None:
+    """Create ``path`` and make sure a file can be written in it, before the work starts."""
     try:
         path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".scalematch-check-"):
-            pass
+        _write_probe(path)
     except OSError as exc:
         raise InputError(f"cannot write to the output directory {path}: "
                          f"{exc.strerror or exc}; choose another with --out-dir")
@@ -425,15 +431,12 @@ def check_out_file(path: Path, option: str) -> None:
     except OSError as exc:
         raise InputError(f"cannot write {option} {path}: cannot create the folder {parent}: "
                          f"{exc.strerror or exc}")
-    import tempfile  # imported where used: the command line starts faster
-
     try:
         if path.exists():
             with open(path, "a"):
                 pass
         else:  # a file beside it, not the file itself: nothing appears at ``path`` and vanishes
-            with tempfile.NamedTemporaryFile(dir=parent, prefix=".scalematch-check-"):
-                pass
+            _write_probe(parent)
     except OSError as exc:
         raise InputError(f"cannot write {option} {path}: {exc.strerror or exc}")
 

@@ -144,22 +144,23 @@ class Roles(NamedTuple):
     coarser_views: bool
 
 
-def strongest(kp: Keypoints, n: int) -> Keypoints:
-    """The ``n`` strongest of ``kp`` (sorted strongest first)."""
-    return Keypoints(s=kp.s, xy=kp.xy[:n], response=kp.response[:n])
-
-
 def view_levels(view: View, scales: Sequence[float], how: Describing) -> List[Level]:
     """The levels of ``view`` at ``scales`` (the scales in the image's pixels that the view
     serves: :func:`stages.views.view_scales`), in the view's own pixels."""
     return list(scale_space(view.image, view_scales(view, scales), **how.space))
 
 
-def first_level_points(view: View, how: Describing) -> Keypoints:
-    """The points of a view's first level as the coarser image's detector finds them."""
-    level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    return detect_on_level(level, how.harris_low, how.contrast, None, view.inside_distance,
-                           how.edge_margin_px)
+def first_level(view: View) -> Level:
+    """A view's first level: the view itself at s = 1."""
+    return Level(s=1.0, d=1.0, blur=0.0, image=view.image)
+
+
+def first_level_points(view: View, harris_low: HarrisParams, contrast: Optional[Contrast],
+                       edge_margin_px: float) -> Keypoints:
+    """The points of a view's first level as the coarser image's detector (``harris_low``)
+    finds them, away from the view's empty corners; ``contrast``: the image's own."""
+    return detect_on_level(first_level(view), harris_low, contrast, None, view.inside_distance,
+                           edge_margin_px)
 
 
 def view_rows(view: View, scales: Sequence[float], how: Describing) -> List[Described]:
@@ -173,15 +174,15 @@ def view_rows(view: View, scales: Sequence[float], how: Describing) -> List[Desc
         kp = detect_on_level(level, how.harris, how.contrast, None, view.inside_distance,
                              how.edge_margin_px)
         if len(kp):
-            probed.append(how.describe(level, strongest(kp, how.probe_points)))
+            probed.append(how.describe(level, kp.part(slice(how.probe_points))))
     return probed
 
 
 def first_level_rows(view: View, how: Describing) -> Described:
     """A tilted view's first level as the coarser image's, its ``VIEWS_COARSER_POINTS``
     strongest points described."""
-    level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    return how.describe(level, strongest(first_level_points(view, how), VIEWS_COARSER_POINTS))
+    kp = first_level_points(view, how.harris_low, how.contrast, how.edge_margin_px)
+    return how.describe(first_level(view), kp.part(slice(VIEWS_COARSER_POINTS)))
 
 
 def image_views(image: np.ndarray, valid: Optional[np.ndarray], roles: Roles,
@@ -206,17 +207,10 @@ def image_views(image: np.ndarray, valid: Optional[np.ndarray], roles: Roles,
     made = thread_map(one, keys)
     finer = [(0, d) for d in roles.finer] + [
         (k + 1, d) for k, (_, probed, _) in enumerate(made) for d in probed]
-    first = ([(0, identity_rows(roles.coarser, IDENTITY_COARSER_POINTS))]
+    first = ([(0, roles.coarser.of_strongest(IDENTITY_COARSER_POINTS))]
              if roles.coarser is not None else []) + [
         (k + 1, d) for k, (_, _, d) in enumerate(made) if d is not None]
     dim = next((d.desc.shape[1] for _, d in finer + first if d.desc.ndim == 2), 0)
     return ImageViews((ViewInfo.of(roles.identity),) + tuple(info for info, _, _ in made),
                       Table.of(finer, dim), Table.of(first, dim))
 
-
-def identity_rows(described: Described, n: int) -> Described:
-    """The rows of the ``n`` strongest points of ``described`` (rows of keypoints sorted
-    strongest first: ``index`` below ``n``)."""
-    keep = described.index < n
-    return Described(s=described.s, xy=described.xy[keep], index=described.index[keep],
-                     angle=described.angle[keep], desc=described.desc[keep])

@@ -27,7 +27,8 @@ from .geometry import answer_parts, finer_to_coarser, usable_ratio
 from .imageio import grey_levels
 from .result import (Direction, Evidence, MatchResult, NoDataSeen, Rejected, ScaleRow,
                      StepRecord, build_evidence)
-from .features import Describing, ImageViews, Roles, image_views
+from .features import (Describing, ImageViews, Roles, first_level, first_level_points,
+                       image_views)
 from .sharing import Measured, Memo, Meter
 from .search import (Attempt, ScaleOutcome, Step, coarser_viewed, out_of_time, overwhelming,
                      probe_best, search_plan, searched, skips, stop_reason, strongest)
@@ -240,11 +241,6 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
     return ScaleOutcome(row, best, best_src, best_dst, initial, high)
 
 
-def _part(kp: Keypoints, rows: slice) -> Keypoints:
-    """Some of the keypoints: ``slice(n)`` the ``n`` strongest (they are sorted strongest first)."""
-    return Keypoints(s=kp.s, xy=kp.xy[rows], response=kp.response[rows])
-
-
 @dataclass(frozen=True)
 class LowFeatures:
     """The coarser image described once, at s = 1 (docs/ALGORITHM.md step 1: I' at s = 1)."""
@@ -258,16 +254,9 @@ class LowFeatures:
         strongest points: what detecting and describing the same image at s = 1 with a cap of
         ``n_points`` gives (detection sorts strongest first and caps last; a point's
         descriptors depend on that point alone)."""
-        kp = Keypoints(s=1.0, xy=self.keypoints.xy[:n_points],
-                       response=self.keypoints.response[:n_points])
+        kp = self.keypoints.part(slice(n_points))
         d = self.described
-
-        def rows(n: int) -> Described:
-            keep = d.index < n
-            return Described(s=d.s, xy=d.xy[keep], index=d.index[keep], angle=d.angle[keep],
-                             desc=d.desc[keep])
-
-        return kp, rows(min(n_described, len(kp))), rows(len(kp))
+        return kp, d.of_strongest(min(n_described, len(kp))), d.of_strongest(len(kp))
 
 
 def describe_low(low: np.ndarray, search: "Search",
@@ -393,7 +382,7 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
         else:
             first = grads if view.is_identity and level.s == 1.0 else None
             kp = _detect(view, level, config, contrast, first)
-            part = _part(kp, slice(config.probe.points)) if probing else kp
+            part = kp.part(slice(config.probe.points)) if probing else kp
             detected.append(Detected(kp, search.mode.describe(level, part),
                                      level if keep else None))
         tick()
@@ -450,7 +439,7 @@ def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequen
         if full is not None:
             desc = full
         elif probed.probing and len(kp) > config.probe.points:  # the probe described the strongest
-            rest = search.mode.describe(level, _part(kp, slice(config.probe.points, None)))
+            rest = search.mode.describe(level, kp.part(slice(config.probe.points, None)))
             desc = _joined(desc, rest, config.probe.points)
         return _full_scale(level, kp, desc, low, search)
 
@@ -469,8 +458,6 @@ def finish_view(probed: Probed, low: LowFeatures, search: Search, scales: Sequen
             outcomes.append(ScaleOutcome(row, None, np.zeros((0, 2)), np.zeros((0, 2)), 0))
         tick()
     return outcomes
-
-
 
 
 def run_step(search: Search, step: Step,
@@ -541,10 +528,8 @@ def describe_coarser_view(view: View, search: Search, contrast: Optional[Contras
     ``harris_low``), its points away from the view's empty corners; ``contrast``: the coarser
     image's own (the detector adapts to it as for the image itself)."""
     config = search.config
-    level = Level(s=1.0, d=1.0, blur=0.0, image=view.image)
-    kp = detect_on_level(level, config.harris_low, contrast, None, view.inside_distance,
-                         config.views.edge_margin_px)
-    return LowFeatures(view.image, search.mode.describe(level, kp), kp)
+    kp = first_level_points(view, config.harris_low, contrast, config.views.edge_margin_px)
+    return LowFeatures(view.image, search.mode.describe(first_level(view), kp), kp)
 
 
 def plain_probed(search: Search, direction: Direction, scales: Sequence[float]) -> Probed:
@@ -692,14 +677,7 @@ def side_cells(finer: ImageViews, coarser: ImageViews, side: str, matcher, param
             found.append(VoteCandidates(f_rows.view[i], part.view[j], f_rows.s[i] / part.s[j],
                                         f_rows.xy[i], part.xy[j], part.angle[j] - f_rows.angle[i],
                                         f_rows.point[i], part.point[j]))
-    if not found:
-        return vote_cells(VoteCandidates(*(np.zeros(0),) * 3, np.zeros((0, 2)), np.zeros((0, 2)),
-                                         np.zeros(0), np.zeros(0, np.int64),
-                                         np.zeros(0, np.int64)), finer.sides, coarser.shapes,
-                          params)
-    joined = VoteCandidates(*(np.concatenate([getattr(x, f) for x in found])
-                              for f in VoteCandidates.__dataclass_fields__))
-    return vote_cells(joined, finer.sides, coarser.shapes, params)
+    return vote_cells(VoteCandidates.joined(found), finer.sides, coarser.shapes, params)
 
 
 def view_pair(search: Search, direction: Direction, images: Dict[Direction, ImageViews],
@@ -757,8 +735,8 @@ def detect_chosen(view: View, scales: Sequence[float], wanted: Sequence[int], se
             detected.append(Detected(Keypoints.empty(level.s), None, None))
             continue
         kp = _detect(view, level, config, contrast)
-        detected.append(Detected(kp, search.mode.describe(level, _part(
-            kp, slice(config.probe.points))), level))
+        detected.append(Detected(kp, search.mode.describe(level, kp.part(
+            slice(config.probe.points))), level))
     detected += [Detected(Keypoints.empty(s_), None, None) for s_ in scales[len(detected):]]
     usable = tuple(n for n in wanted if detected[n].probe is not None)
     return Probed(view, tuple(detected), usable, usable, math.inf, True)

@@ -4,9 +4,10 @@ A match is searched for progressively (Mishkin, Matas & Perdoch 2015, "MODS"): f
 finer image itself, in the given order, then in the other (with the automatic order), and only
 when neither finds a match, passes of simulated tilted views of both images, each pass only
 when the earlier ones found nothing, and each in both orders at once: one pooled vote over
-every view pair of the pass (:mod:`scalematch.features`, :mod:`scalematch.stages.vote`). The views of the finer image reach a finer image seen more
-obliquely than the coarser one; the views of the coarser image reach a finer image that is the
-oblique one (docs/design/VIEWS.md, "Views of the coarser image").
+every view pair of the pass (:mod:`scalematch.features`, :mod:`scalematch.stages.vote`). The
+views of the finer image reach a finer image seen more obliquely than the coarser one; the
+views of the coarser image reach a finer image that is the oblique one (docs/design/VIEWS.md,
+"Views of the coarser image").
 :func:`search_plan` writes that down as a tuple of :class:`Step`;
 :func:`scalematch.pipeline.match` runs it with a short loop, asking :func:`skips` before a
 step and :func:`stop_reason` after it. Nothing here touches pixels: the plan and the rule are

@@ -7,7 +7,7 @@ import pytest
 
 from scalematch import Config
 from scalematch.features import (IDENTITY_COARSER_POINTS, VIEWS_COARSER_POINTS, Describing,
-                                 Roles, Table, identity_rows, image_views)
+                                 Roles, Table, image_views)
 from scalematch.modes import mode_of
 from scalematch.stages.descriptors import Described
 from scalematch.stages.detector import image_contrast
@@ -71,10 +71,10 @@ def test_a_large_image_is_viewed_shrunk(raccoon):
     assert views.views[0].scale == 1.0
 
 
-def test_identity_rows_keep_the_strongest_points_and_both_their_orientations():
+def test_the_strongest_rows_keep_the_strongest_points_and_both_their_orientations():
     d = Described(1.0, np.arange(10.0).reshape(5, 2), np.array([0, 0, 1, 2, 3]), np.zeros(5),
                   np.eye(5, 4, dtype=np.float32))
-    kept = identity_rows(d, 2)
+    kept = d.of_strongest(2)
     assert kept.index.tolist() == [0, 0, 1] and kept.xy.shape == (3, 2)
 
 

@@ -200,6 +200,14 @@ class Described:
     def __len__(self) -> int:
         return int(self.xy.shape[0])
 
+    def of_strongest(self, n: int) -> "Described":
+        """The rows of the ``n`` strongest keypoints (keypoints sorted strongest first: ``index``
+        below ``n``), every orientation of each: what describing only those gives, since a
+        point's descriptors depend on that point alone."""
+        keep = self.index < n
+        return Described(s=self.s, xy=self.xy[keep], index=self.index[keep],
+                         angle=self.angle[keep], desc=self.desc[keep])
+
 
 _REMAP_ROWS = 16384
 

@@ -164,6 +164,11 @@ class Keypoints:
     def empty(s: float) -> "Keypoints":
         return Keypoints(s=s, xy=np.zeros((0, 2)), response=np.zeros(0, np.float32))
 
+    def part(self, rows: slice) -> "Keypoints":
+        """Some of the keypoints: ``slice(n)`` the ``n`` strongest (detection sorts them
+        strongest first)."""
+        return Keypoints(s=self.s, xy=self.xy[rows], response=self.response[rows])
+
 
 @dataclass(frozen=True)
 class Contrast:

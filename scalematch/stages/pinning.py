@@ -32,6 +32,7 @@ import numpy as np
 
 from ..checks import Bounds, NON_NEGATIVE, POSITIVE, check_bounds
 from ..geometry import apply, as_matrix3, grid
+from .epipolar import normalising_transform
 
 #: Free parameters of each model whose error is measured (a homography's 3x3 matrix is defined
 #: up to scale: eight)
@@ -69,14 +70,6 @@ class PinParams:
 
     def __post_init__(self) -> None:
         check_bounds("pin", self, self.BOUNDS)
-
-
-def _normaliser(xy: np.ndarray) -> Tuple[np.ndarray, float]:
-    """(centroid, scale) that bring ``xy`` (N, 2) to the origin at a mean distance of sqrt(2)
-    (Hartley's normalisation: the normal matrix of a homography is then well conditioned)."""
-    c = xy.mean(axis=0)
-    d = float(np.mean(np.linalg.norm(xy - c, axis=1)))
-    return c, (np.sqrt(2.0) / d if d > 0 else 1.0)
 
 
 def jacobian(model: str, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -143,9 +136,8 @@ def point_covariances(model: str, t: np.ndarray, inliers: np.ndarray, points: np
     p = PARAMETERS[model]
     if 2 * len(src) < p:
         return None
-    (cs, ks), (cd, kd) = _normaliser(src), _normaliser(dst)
-    to_n = np.array([[ks, 0.0, -ks * cs[0]], [0.0, ks, -ks * cs[1]], [0.0, 0.0, 1.0]])
-    from_d = np.array([[kd, 0.0, -kd * cd[0]], [0.0, kd, -kd * cd[1]], [0.0, 0.0, 1.0]])
+    to_n, from_d = normalising_transform(src), normalising_transform(dst)
+    kd = from_d[0, 0]  # the coarser coordinates' isotropic scale
     tn = from_d @ as_matrix3(t) @ np.linalg.inv(to_n)
     tn = tn / tn[2, 2] if model == "homography" else tn[:2]
     j = jacobian(model, tn, apply(to_n, src))

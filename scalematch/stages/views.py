@@ -5,9 +5,9 @@ change of viewpoint is an affine map, and every affine map with a positive deter
 similarity after a compression by a *tilt* t >= 1 along some direction (its *longitude* phi):
 ``A = lambda R(psi) [R(phi)^T diag(1/t, 1) R(phi)]``. The scale search of the paper absorbs
 the similarity; these views absorb the compression. Each view is the image shrunk by
-:func:`decimation_of` (camera-size images), turned by phi, blurred along x by ``c sqrt(t^2 - 1)`` (Morel & Yu's
-anti-aliasing, c = 0.8) and shrunk along x by t; ``to_view`` (2x3) maps an image pixel to its
-pixel in the view.
+:func:`decimation_of` (camera-size images), turned by phi, blurred along x by
+``c sqrt(t^2 - 1)`` (Morel & Yu's anti-aliasing, c = 0.8) and shrunk along x by t;
+``to_view`` (2x3) maps an image pixel to its pixel in the view.
 
 The search first runs without any view, and adds the views only when the images themselves
 found nothing (Mishkin, Matas & Perdoch 2015, "MODS"), so ordinary pairs cost no more than

@@ -24,7 +24,7 @@ decision (:mod:`scalematch.stages.decision`) like any other.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import ClassVar, List, Mapping, Sequence, Tuple
 
 import numpy as np
@@ -50,9 +50,10 @@ class VoteParams:
     shift_bins: float = 4.0
     #: a cell is matched in full only when its log10 NFA is at most this: one false alarm
     #: expected over the whole vote at 0. Measured on the gate's tilted, steep and oblique
-    #: pairs (true cells at -4.8 to -179) and its unrelated and same-photo pairs (the best
-    #: cell of each at -7.1 to +1.3): the bound sends most unrelated pairs to no full match at
-    #: all, and the decision judges the rest (docs/design/VIEWS.md, "The pooled vote")
+    #: pairs (the right view pairs' best cells at -6.6 to -170) and its unrelated and
+    #: same-photo pairs (the best cell of each at -8.1 to 0.0, median -3.0): the bound sends
+    #: about half the null pairs to no full match at all, and the decision judges the rest
+    #: (``scripts/vote_ranking.py``; docs/design/VIEWS.md, "The pooled vote")
     max_log_nfa: float = -3.0
     #: fewest distinct votes a cell needs to be counted (two points fix a similarity)
     min_votes: int = 3
@@ -86,6 +87,15 @@ class Candidates:
 
     def __len__(self) -> int:
         return int(self.s.shape[0])
+
+    @staticmethod
+    def joined(parts: Sequence["Candidates"]) -> "Candidates":
+        """``parts`` as one set of candidates, in their order (none: an empty set)."""
+        if not parts:
+            ints, xy = np.zeros(0, np.int64), np.zeros((0, 2))
+            return Candidates(ints, ints, np.zeros(0), xy, xy, np.zeros(0), ints, ints)
+        return Candidates(*(np.concatenate([getattr(part, f.name) for part in parts])
+                            for f in fields(Candidates)))
 
 
 @dataclass(frozen=True)
@@ -212,7 +222,8 @@ def _no_cells() -> Cells:
 
 def log10_nfa(cells: Cells, tried: int) -> np.ndarray:
     """Each cell's log10 number of false alarms among ``tried`` cells (every side's, every
-    direction's): ``log10(tried) + log10 C(n, k) + k log10 p``.
+    direction's): ``log10(tried) + log10 C(n, k) + k log10 p`` (``decision.log10_binom``'s
+    binomial, over arrays through one table of log-factorials).
 
     >>> c = Cells(*(np.array([0]),) * 3, np.array([3]), np.array([10]), np.array([0.01]), 100)
     >>> round(float(log10_nfa(c, 100)[0]), 4) == round(2 + math.log10(120) - 6, 4)

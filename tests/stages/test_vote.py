@@ -95,3 +95,12 @@ def test_the_cells_of_a_group_cover_the_coarser_view_and_a_footprint_around_it()
                            VoteParams())
     assert cells[0] == 12 * 30 * 24 and p[0] == pytest.approx(8 / cells[0])
     assert scale_index(np.array([4.0]))[0] == 6
+
+
+def test_candidates_joined_keep_every_part_in_order_and_none_is_empty():
+    one = Candidates(np.array([1]), np.array([0]), np.array([2.0]), np.zeros((1, 2)),
+                     np.ones((1, 2)), np.array([0.5]), np.array([7]), np.array([8]))
+    two = Candidates.joined([one, one])
+    assert len(two) == 2 and two.finer_point.tolist() == [7, 7]
+    assert len(Candidates.joined([])) == 0 and len(vote(Candidates.joined([]), np.ones(1),
+                                                        np.ones((1, 2)))) == 0
