@@ -249,12 +249,68 @@ def _flat(obj: Any, prefix: str = "") -> Dict[str, Any]:
     return out
 
 
-def config_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
-    """The parameters that differ, as "model homography (now similarity)", by dotted path."""
-    a, b = _flat(recorded), _flat(now)
-    absent = "absent"
-    return [f"{k} {json.dumps(a.get(k, absent))} (now {json.dumps(b.get(k, absent))})"
-            for k in sorted(set(a) | set(b)) if a.get(k, absent) != b.get(k, absent)]
+#: The command-line option that sets each recorded parameter directly (``scalematch match
+#: --help``); any other parameter is said as ``--set PATH=VALUE``
+#: (the threshold options too: ``cli.THRESHOLD_OPTIONS``, which a test keeps in step)
+OPTION_OF_PATH = {"model": "--model", "seed": "--seed", "order": "--order",
+                  "time_budget_s": "--time-budget", "nodata.rule": "--nodata",
+                  "harris.threshold": "--harris-threshold",
+                  "harris_low.threshold": "--harris-threshold", "matcher.ratio": "--ratio-test",
+                  "ransac.threshold_px": "--ransac-threshold",
+                  "ransac.max_iters": "--ransac-iterations",
+                  "decision.min_inliers": "--min-inliers", "decision.max_log_nfa": "--max-log-nfa"}
+
+
+def _option_text(path: str, value: Any) -> str:
+    """One recorded parameter as the option that gives it (``--model homography``,
+    ``--no-views``, ``--set ransac.threshold_px=2.0``)."""
+    if path == "views.enabled":
+        return "--views" if value else "--no-views"
+    if path == "scales" and isinstance(value, list):
+        return "--scales " + ",".join(f"{s:g}" for s in value)
+    if path in ("low_max_side", "high_max_side"):
+        return f"--working-size {value or 0}"
+    text = value if isinstance(value, str) else json.dumps(value)
+    if path in OPTION_OF_PATH:
+        return f"{OPTION_OF_PATH[path]} {text}"
+    return f"--set {path}={text}"
+
+
+def options_of(recorded: Dict[str, Any]) -> List[str]:
+    """The matching options that give the recorded configuration ``recorded`` (a result line's
+    ``config``), as a user types them: its mode, then what differs from that mode's defaults on
+    the command line (where tilted views are on unless ``--no-views``).
+
+    >>> options_of(config_json(Config.preset("paper")))
+    ['--mode paper', '--no-views']
+    >>> options_of(config_json(replace(Config(), model="homography")))
+    ['--model homography']
+    """
+    mode = recorded.get("mode", "default")
+    try:
+        base = Config.preset(mode)
+    except ValueError:
+        base = Config()
+    base = replace(base, views=replace(base.views, enabled=True))  # the command line's default
+    a, b = _flat(config_json(base)), _flat(recorded)
+    said = [] if mode == "default" else [f"--mode {mode}"]
+    for k in sorted(set(a) | set(b)):
+        if k == "mode" or a.get(k) == b.get(k) or k not in b:
+            continue
+        text = _option_text(k, b[k])
+        if text not in said:
+            said.append(text)
+    return said
+
+
+def _differing_options(recorded: Dict[str, Any], now: Dict[str, Any]) -> str:
+    """What a batch output's options and this run's differ by, in options as typed: "made
+    with --mode paper; this run: no matching options"."""
+    then, this = options_of(recorded), options_of(now)
+    gone = [o for o in then if o not in this]
+    new = [o for o in this if o not in then]
+    return (f"made with {' '.join(gone) or 'no matching options'}; this run: "
+            f"{' '.join(new) or 'no matching options'}")
 
 
 def _result_key(line: bytes) -> Optional[Tuple[Tuple[str, str], Dict[str, Any]]]:
@@ -293,10 +349,9 @@ def _result_lines(fh: Any, path: Path, config: Dict[str, Any]
                 f"be new or the output of an earlier batch (left unchanged)")
         key, obj = found
         if "config" in obj and obj["config"] != config:
-            changes = config_changes(obj["config"], config)
             raise BatchError(
-                f"{path} holds results made with other options ({'; '.join(changes[:3])}"
-                f"{'; ...' if len(changes) > 3 else ''}); resume with the same "
+                f"{path} holds results made with other options "
+                f"({_differing_options(obj['config'], config)}); resume with the same "
                 f"options or write to another file")
         yield line, key, "error" in obj
 

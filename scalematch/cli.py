@@ -176,6 +176,10 @@ def parse_scales(text: str) -> Tuple[float, ...]:
     Traceback (most recent call last):
     ...
     ValueError: scales '1-16:0.001' are 15001 scales, more than the 64 searched at most; take a larger step ("1-16:0.25" is 61)
+    >>> parse_scales("1-16:1e-300")
+    Traceback (most recent call last):
+    ...
+    ValueError: scales '1-16:1e-300' are about 1.5e+301 scales, more than the 64 searched at most; take a larger step ("1-16:0.25" is 61)
     """
     out: List[float] = []
     forms = 'use e.g. "1-8", "2-12:0.5" or "1,2,3.5"'
@@ -222,10 +226,14 @@ def _scale_range(item: str, room: int) -> List[float]:
                          f"{hi_txt}-{lo_txt}")
     if not step > 0:
         raise ValueError(f"the step of scales {item!r} must be more than 0")
-    n = int(np.floor((hi - lo) / step + 1e-9)) + 1
-    if n > room:
-        raise ValueError(f"scales {item!r} are {n} scales, more than the {MAX_SCALES} searched "
+    span = (hi - lo) / step  # inf where the step is too small for a float to count the steps
+    count = math.floor(span + 1e-9) + 1 if math.isfinite(span) else math.inf
+    if count > room:
+        many = (f"{count} scales" if count < 1e6 else f"about {count:.1e} scales"
+                if math.isfinite(count) else "more scales than a float can count")
+        raise ValueError(f"scales {item!r} are {many}, more than the {MAX_SCALES} searched "
                          f"at most; take a larger step (\"1-16:0.25\" is 61)")
+    n = int(count)
     return [round(lo + k * step, 6) for k in range(n)]
 
 
@@ -366,6 +374,15 @@ def scale_table(result: MatchResult) -> str:
 def _show_progress(quiet: bool) -> bool:
     try:
         return not quiet and sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _is_terminal(stream: Any) -> bool:
+    """Whether ``stream`` writes to a terminal. A batch's lines on a terminal are its progress:
+    a bar on stderr beside them would run into them (stdout and stderr share the screen)."""
+    try:
+        return stream.isatty()
     except (AttributeError, ValueError):
         return False
 
@@ -618,7 +635,7 @@ def exit_codes_in_help(*codes: int,
                 lines += [indent + row for row in table.split("\n")]
             else:
                 lines.append(line)
-        f.__doc__ = "\n".join(lines)
+        f.__doc__ = "\n".join(lines).replace("{no_views_speedup}", NO_VIEWS_SPEEDUP)
         return f
     return decorate
 
@@ -847,16 +864,17 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     # the outputs are checked before the match, not after a minute's work, and before the
     # inputs are read: an output never overwrites an input
     _check_not_inputs(out_dir, json_file, (low, high))
-    with _json_of_input_error(json_path, json_file, low, high, config):
+    with _json_of_error(json_path, json_file, low, high, config):
         low_read, high_read = _load(low, high, config, max_pixels)
         grey = _greys(low, high, low_read, high_read)  # a constant image: named, nothing made
     factors = (float(low_read.factor), float(high_read.factor))
     with _removed_if_empty(_check_writable(out_dir, json_file)), \
-            _json_of_input_error(json_path, json_file, low, high, config):
+            _json_of_error(json_path, json_file, low, high, config):
         result = _match_images(*grey, config, factors, quiet)
-    if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
-        _write_json(result.to_json(low, high, low_read.shape, high_read.shape,
-                                   warnings=(low_read.warning, high_read.warning)), json_file)
+        if json_path:  # only when asked: every inlier is written (0.1 s for 1,700 of them)
+            _write_json(result.to_json(low, high, low_read.shape, high_read.shape,
+                                       warnings=(low_read.warning, high_read.warning)),
+                        json_file)
     written: Dict[str, Path] = {}
     if out_dir is not None:
         written = _write_pictures(out_dir, low, high, low_read.image, high_read.image, result,
@@ -871,26 +889,42 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
 
 
 @contextlib.contextmanager
-def _json_of_input_error(json_path: Optional[str], json_file: Optional[Path], low: str,
-                         high: str, config: Config) -> Iterator[None]:
-    """With ``--json``, the record of an input error raised inside (``result.error_record``,
-    as a batch writes it), so that a script reading the JSON learns why rather than finding
-    nothing; the error goes on (exit 2), and nothing more is written when the JSON cannot be
-    written either."""
+def _json_of_error(json_path: Optional[str], json_file: Optional[Path], low: str,
+                   high: str, config: Config) -> Iterator[None]:
+    """With ``--json``, the record of an error raised inside (``result.error_record``, as a
+    batch writes it), so that a script reading the JSON learns why rather than finding nothing:
+    kind "input" for a bad input (exit 2), "internal" for an unexpected error (exit 4: out of
+    memory, a bug). The error goes on, and nothing more is written when the JSON cannot be
+    written either. Ctrl-C writes nothing: it is not an answer about the pair."""
     try:
         yield
     except InputError as exc:
-        if json_path:
-            from .result import dumps, error_record
-
-            text = dumps(error_record(low, high, exc.format_message(), "input", config), 2)
-            try:
-                if json_file is not None:
-                    check_out_file(json_file, "--json")
-                _write_json(text + "\n", json_file)
-            except click.ClickException:
-                pass
+        _write_error_json(json_path, json_file, low, high, config, exc.format_message(), "input")
         raise
+    except (click.ClickException, click.Abort):
+        raise
+    except Exception as exc:  # noqa: BLE001 (recorded, then passed on: exit 4 in main)
+        if not interrupted(exc):
+            _write_error_json(json_path, json_file, low, high, config, internal_error(exc),
+                              "internal")
+        raise
+
+
+def _write_error_json(json_path: Optional[str], json_file: Optional[Path], low: str, high: str,
+                      config: Config, message: str, kind: str) -> None:
+    """The error record of ``--json`` where it can still be written (best effort: the error
+    that brought it here matters more than one that writing it meets)."""
+    if not json_path:
+        return
+    try:
+        from .result import dumps, error_record
+
+        text = dumps(error_record(low, high, message, kind, config), 2)
+        if json_file is not None:
+            check_out_file(json_file, "--json")
+        _write_json(text + "\n", json_file)
+    except Exception:  # noqa: BLE001 (a full disk, memory gone: the first error is the one said)
+        pass
 
 
 def _check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
@@ -1144,37 +1178,37 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     expected, say. A repeated row is matched once. Each line is the JSON of
     "scalematch LOW HIGH --json" (without indentation), written and flushed as soon as the pair
     is done, in the order pairs finish. Its "low" and "high" are the coarser and the finer image
-    as found: with "order": "swapped", "low" is the file of the CSV's high column. A pair that cannot be matched (missing file, bad image)
-    gets a line with "error" and the batch goes on; the line's "error_kind" is "input" (the
-    pair's files or values) or "internal" (an unexpected error: out of memory, a bug). When a
-    worker process is killed by the system (out of memory), the workers are started again and
-    the pairs in flight tried again, one at a time; a pair whose worker died twice gets an
-    internal error line.
+    as found: with "order": "swapped", "low" is the file of the CSV's high column. A pair that
+    cannot be matched (missing file, bad image) gets a line with "error" and the batch goes on;
+    its "error_kind" is "input" (the pair's files or values) or "internal" (out of memory, a
+    bug). A worker killed by the system (out of memory) is started again and its pair tried
+    again alone; a pair whose worker died twice gets an internal error line. --jobs beyond the
+    machine's cores runs one worker a core.
 
     Resuming: with --output, running the same command again after an interruption (Ctrl-C,
     kill, power cut) skips the pairs already in the file (delete a line to redo its pair), error
     lines included; with --retry-errors the pairs of the CSV whose line is an error are matched
     again (a fixed image, more memory), their error lines removed first. The options must be
-    the same: a file holding results made with other options is refused (exit 2), never mixed.
+    the same: a file holding results made with other options is refused (exit 2), never mixed
+    (so each example below writes its own file; the third resumes the second's).
 
-    An archive of mostly unrelated pairs: most of a "no" is spent on tilted views; with
-    --no-views a "no" comes about 11 times sooner on 1 MP images, 3 times on 12-16 MP
-    photos (docs/design/SPEED.md), but oblique pairs that only a tilted view solves are missed.
+    An archive of mostly unrelated pairs: with --no-views a "no" comes {no_views_speedup}
+    (docs/design/SPEED.md), but oblique pairs only a tilted view solves are missed.
 
     \b
     Examples:
       scalematch batch pairs.csv > results.jsonl
-      scalematch batch pairs.csv --output results.jsonl --jobs 4 --mode paper
-      scalematch batch pairs.csv --output results.jsonl --retry-errors
-      scalematch batch archive.csv --output results.jsonl --no-views
-      scalematch batch pairs.csv --output results.jsonl --scheduler tcp://host:8786
+      scalematch batch pairs.csv --output paper.jsonl --jobs 2 --mode paper
+      scalematch batch pairs.csv --output paper.jsonl --jobs 2 --mode paper --retry-errors
+      scalematch batch archive.csv --output archive.jsonl --no-views
+      scalematch batch pairs.csv --output cluster.jsonl --scheduler tcp://host:8786
 
     \b
     Exit codes (4 before 3 when a pair of this run had an internal error):
     {exit_codes}
     """
-    ctx = click.get_current_context()
-    if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
+    jobs_given = click.get_current_context().get_parameter_source("jobs")
+    if scheduler is not None and jobs_given != click.core.ParameterSource.DEFAULT:
         raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
                                "workers' threads set the parallelism.")
     if retry_errors and output is None:
@@ -1183,9 +1217,9 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     max_pixels, _ = kwargs.pop("max_pixels"), kwargs.pop("verbose")  # -v: the group reads it
     config = _config_from(kwargs)
     plan, client = _batch_plan(pairs_csv, output, retry_errors, scheduler, config)
-    if not quiet:
-        for note in _batch_notes(plan, pairs_csv, output):
-            click.echo(note, err=True)
+    for note in () if quiet else _batch_notes(plan, pairs_csv, output):
+        click.echo(note, err=True)
+    jobs = _local_workers(jobs, quiet or client is not None)
     counts = _write_batch(plan, _batch_lines(list(plan.todo), config, max_pixels, jobs, client),
                           output, quiet, client)
     if not quiet:
@@ -1193,6 +1227,40 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     code = _batch_exit_code(plan, counts)
     if code != EXIT_MATCHED:
         sys.exit(code)
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity, where the system tells it)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return max(os.cpu_count() or 1, 1)
+
+
+def workers_for(jobs: int, cores: int) -> Tuple[int, str]:
+    """(worker processes, what to say of it): at most one per core. Each match already keeps
+    a core busy, so more workers than cores only share them, each holding its images in
+    memory (--jobs 64 on 2 cores: about 30 workers, 4.1 GB, and slower, 14.1 s against 9.8 s
+    for 30 pairs).
+
+    >>> workers_for(64, 2)
+    (2, '--jobs 64: this machine has 2 cores, so 2 worker processes run')
+    >>> workers_for(2, 8)
+    (2, '')
+    """
+    if jobs <= cores:
+        return jobs, ""
+    return cores, (f"--jobs {jobs}: this machine has {cores} {plural(cores, 'core')}, so {cores} worker "
+                   f"{'process runs' if cores == 1 else 'processes run'}")
+
+
+def _local_workers(jobs: int, quiet: bool) -> int:
+    """The worker processes of ``--jobs``, at most one a core (:func:`workers_for`), said once
+    on stderr when fewer than asked (unless ``quiet``)."""
+    jobs, note = workers_for(jobs, available_cores())
+    if note and not quiet:
+        click.echo(note, err=True)
+    return jobs
 
 
 def _batch_plan(pairs_csv: Path, output: Optional[Path], retry_errors: bool,
@@ -1247,7 +1315,7 @@ def _batch_notes(plan: Plan, pairs_csv: Path, output: Optional[Path]) -> List[st
 def _write_batch(plan: Plan, lines: Iterator[Dict[str, Any]], output: Optional[Path],
                  quiet: bool, client: Any) -> Counts:
     """Write each of ``lines`` to ``output`` (appended; stdout when None) as it comes, with a
-    progress bar unless ``quiet``; the ``batch.Counts`` of the lines. Ctrl-C exits 130 with how
+    progress bar unless ``quiet`` (or the lines go to a terminal: they show the progress); the ``batch.Counts`` of the lines. Ctrl-C exits 130 with how
     many pairs were done. The workers, the file and the Dask ``client`` are closed at the end,
     however it comes."""
     from . import batch
@@ -1255,7 +1323,8 @@ def _write_batch(plan: Plan, lines: Iterator[Dict[str, Any]], output: Optional[P
     counts = batch.Counts()
     out_fh = open(output, "a") if output is not None else sys.stdout
     bar = click.progressbar(length=len(plan.todo), label="matching pairs", file=sys.stderr,
-                            show_pos=True) if _show_progress(quiet) else None
+                            show_pos=True) if _show_progress(quiet) and not (
+        output is None and _is_terminal(sys.stdout)) else None
     try:
         if bar is not None:
             bar.__enter__()

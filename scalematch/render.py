@@ -65,6 +65,10 @@ TEXT_SCALE_PER_PX = 1.0 / 1150
 MIN_TEXT_SCALE = 0.35
 #: Footprint outline thickness per pixel of the picture's shorter side (at least 2 px).
 OUTLINE_PER_PX = 1.0 / 300
+#: Radius of an inlier's circle on a fundamental matrix's overlay, in outline thicknesses
+#: (:func:`_outline_thickness`): 3 px circles of 1 px were specks on a 2,500 px picture seen
+#: whole; sized with the picture, they read the same at any size (at least 6 px, 2 px thick)
+DOT_RADIUS_PER_THICKNESS = 3
 #: A footprint narrower and lower than this share of the picture gets an inset: its region
 #: enlarged in a free corner. At ratio 8 to 16 the finer image covers a few hundredths of the
 #: coarser one, too little to see whether the two agree
@@ -409,16 +413,17 @@ def _draw_inlier_dots(out: np.ndarray, result: MatchResult) -> str:
     matrix), and draw the epipolar lines of ``EPIPOLAR_LINES_DRAWN`` of them, spread over
     the list; the caption line that says so."""
     pairs = np.asarray(result.inliers, np.float64).reshape(-1, 4)
+    thick = _outline_thickness(*out.shape[:2])
     for x, y in pairs[:, 2:4]:
-        cv2.circle(out, (int(round(x * 16)), int(round(y * 16))), 3 * 16, INLIER_DOT, 1,
-                   cv2.LINE_AA, shift=4)
+        cv2.circle(out, (int(round(x * 16)), int(round(y * 16))),
+                   DOT_RADIUS_PER_THICKNESS * thick * 16, INLIER_DOT, thick, cv2.LINE_AA, shift=4)
     shown = np.unique(np.linspace(0, len(pairs) - 1, EPIPOLAR_LINES_DRAWN).round().astype(int))
     lines = 0
     for x, y in pairs[shown, :2] if len(pairs) else ():
         ends = line_ends(np.asarray(result.transform, np.float64) @ (x, y, 1.0),
                          (out.shape[1], out.shape[0]))
         if ends is not None:
-            cv2.line(out, ends[0], ends[1], EPIPOLAR_LINE, 1, cv2.LINE_AA)
+            cv2.line(out, ends[0], ends[1], EPIPOLAR_LINE, max(1, thick // 2), cv2.LINE_AA)
             lines += 1
     return (f"dots = inliers in the low image, lines = the epipolar lines of {lines} of them "
             f"(a {result.model} matrix has no overlay)")
@@ -574,9 +579,9 @@ def size_label(width: int, height: int, factor: float) -> str:
     return f"{width}x{height}" + (f" (the file at 1/{factor:g})" if factor != 1.0 else "")
 
 
-def drawn_note(factor: float) -> str:
+def drawn_note(factor: float, name: str = "low") -> str:
     """The overlay footer's note when the low image is drawn at another size than its file's
-    (``factor``: file px per drawn px): the overlay has the size of the low image as drawn (the
+    (``factor``: file px per drawn px; ``name``: what the footer calls it): the overlay has the size of the low image as drawn (the
     high one is warped onto it at that size, so how it was decoded does not show).
 
     >>> drawn_note(2.0), drawn_note(1.0), drawn_note(0.25)
@@ -585,20 +590,28 @@ def drawn_note(factor: float) -> str:
     if factor == 1.0:
         return ""
     if factor < 1.0:
-        return f"   low drawn {1.0 / factor:g}x enlarged"
-    return f"   low drawn at 1/{factor:g} of its file size"
+        return f"   {name} drawn {1.0 / factor:g}x enlarged"
+    return f"   {name} drawn at 1/{factor:g} of its file size"
 
 
 def overlay_footer(low_name: str, high_name: str, turned: bool, factor: float) -> str:
-    """The overlay's footer: which file is drawn as which (``turned``: a "no" whose refused
-    candidate takes the images the other way round from the order given, which the JSON
-    keeps, is drawn as the candidate takes them, and says so), and how the low one is drawn.
+    """The overlay's footer: which file is drawn as which, and how the coarser one is drawn.
 
+    ``low_name``, ``high_name``: the files drawn as the coarser and as the finer image. A match
+    names them low and high, as its JSON does (the coarser and the finer image as found). A "no"
+    whose refused candidate takes the images the other way round from the order given
+    (``turned``; its JSON keeps the order given) names them by their part in the picture, so
+    the second file given is never called "low".
+
+    >>> overlay_footer("a.png", "b.png", False, 1.0)
+    'low: a.png   high: b.png'
     >>> overlay_footer("b.png", "a.png", True, 1.0)
-    'low: b.png   high: a.png   (as the refused candidate takes them)'
+    'coarser: b.png   finer: a.png   (the refused candidate takes the second image given as the coarser one)'
     """
-    why = "   (as the refused candidate takes them)" if turned else ""
-    return f"low: {low_name}   high: {high_name}{why}{drawn_note(factor)}"
+    if turned:
+        return (f"coarser: {low_name}   finer: {high_name}   (the refused candidate takes the "
+                f"second image given as the coarser one){drawn_note(factor, 'coarser')}")
+    return f"low: {low_name}   high: {high_name}{drawn_note(factor)}"
 
 
 def overlay_zoom(shape) -> int:

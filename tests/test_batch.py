@@ -26,7 +26,7 @@ import pytest
 from scalematch import batch
 from scalematch.batch import match_pair as real_match_pair  # the worker's own
 from scalematch.batch import (NOTHING_DONE, BatchError, Counts, Done, Pair, after_worker_death,
-                              bounded, config_changes, config_json, cut_torn_line,
+                              bounded, config_json, cut_torn_line,
                               drop_error_lines, errors_to_retry, plan_run, read_pairs,
                               resume_output, scan_output, unique_pairs)
 from scalematch.config import Config
@@ -163,14 +163,24 @@ def test_scan_output_refuses_a_file_with_other_lines(tmp_path, text):
 def test_scan_output_refuses_results_of_other_options(tmp_path):
     other = config_json(Config(model="homography"))
     out = write(tmp_path / "r.jsonl", _line("a", "b", config=other))
-    with pytest.raises(BatchError, match='model "homography" \\(now "similarity"\\)'):
+    with pytest.raises(BatchError, match="made with --model homography; this run: no matching"):
         scan_output(out, config_json(Config()))
 
 
-def test_config_changes_names_every_difference_by_path():
-    old = {"model": "affine", "ransac": {"threshold_px": 2.0, "max_iters": 10}, "gone": 1}
-    new = {"model": "affine", "ransac": {"threshold_px": 3.0, "max_iters": 10}}
-    assert config_changes(old, new) == ['gone 1 (now "absent")', "ransac.threshold_px 2.0 (now 3.0)"]
+def test_options_of_says_a_configuration_as_the_options_that_give_it():
+    from scalematch.batch import OPTION_OF_PATH, options_of
+    from scalematch.cli import THRESHOLD_OPTIONS, build_config
+
+    def typed(mode="default", model=None, scales=None, seed=None, *settings):
+        return config_json(build_config(mode, model, scales, seed, {}, settings))
+
+    assert options_of(typed("paper", None, None, None, "views.enabled=True")) == ["--mode paper"]
+    assert options_of(typed("default", "affine", "1-8", 3, "views.enabled=False",
+                            "ransac.threshold_px=2", "guided.radius_px=5")) == [
+        "--set guided.radius_px=5.0", "--model affine", "--ransac-threshold 2.0",
+        "--scales 1,2,3,4,5,6,7,8", "--seed 3", "--no-views"]
+    for _, paths, _, _ in THRESHOLD_OPTIONS:  # every threshold option is said as typed
+        assert all(p in OPTION_OF_PATH for p in paths), paths
 
 
 def test_drop_error_lines_removes_only_those_asked_and_keeps_every_other_byte(tmp_path):
@@ -623,9 +633,12 @@ def test_resume_with_other_options_is_refused_and_left_untouched(images, tmp_pat
     before = out.read_bytes()
     last = assert_one_line_error(run("batch", pairs, "--output", out, "--model", "affine"),
                                  "other options")
-    assert 'model "similarity" (now "affine")' in last
+    assert "(made with no matching options; this run: --model affine)" in last
     assert_one_line_error(run("batch", pairs, "--output", out, "--ransac-threshold", "2"),
-                          "ransac.threshold_px 3.0 (now 2.0)")
+                          "this run: --ransac-threshold 2.0)")
+    paper = assert_one_line_error(run("batch", pairs, "--output", out, "--mode", "paper"),
+                                  "other options")
+    assert "this run: --mode paper)" in paper and "min_points" not in paper
     assert out.read_bytes() == before
     assert run("batch", pairs, "--output", out, "-q").exit_code == 0  # same options: resumes
     assert out.read_bytes() == before
@@ -947,3 +960,98 @@ def test_a_ctrl_c_worn_by_a_library_error_stops_the_batch(images, monkeypatch):
                 str(images / "low.png"), str(images / "high.png"))
     with pytest.raises(KeyboardInterrupt):
         real_match_pair(pair, Config(), DEFAULT_MAX_PIXELS)
+
+
+def test_the_help_examples_run_one_after_the_other_in_one_folder(tmp_path):
+    """A user tries batch --help's examples in turn in one folder: none is refused (the second
+    and third wrote one file with other options, exit 2), and each writes a line per pair."""
+    import re
+    import shlex
+
+    root = Path(__file__).resolve().parents[1]
+    row = f"{root}/data/demo_low.png,{root}/data/demo_high.png\n"
+    for name in ("pairs.csv", "archive.csv"):
+        write(tmp_path / name, row)
+    help_text = run("batch", "--help").output
+    examples = re.findall(r"^\s+(scalematch batch .*)$", help_text, re.M)
+    assert len(examples) >= 4
+    ran = 0
+    for example in examples:
+        if "--scheduler" in example:
+            continue  # needs a Dask cluster
+        words = shlex.split(example)
+        target = words.index(">") if ">" in words else None
+        args = words[1:target]
+        args = [str(tmp_path / a) if a.endswith(".csv") else a for a in args]
+        if "--output" in args:
+            k = args.index("--output") + 1
+            args[k] = str(tmp_path / args[k])
+        result = run(*args, "-q")
+        assert result.exit_code == 0, (example, result.output)
+        if target is not None:
+            write(tmp_path / words[target + 1], result.stdout)
+        ran += 1
+    assert ran == len(examples) - 1
+    for name in ("results.jsonl", "paper.jsonl", "archive.jsonl"):
+        lines = (tmp_path / name).read_text().splitlines()
+        assert len(lines) == 1 and json.loads(lines[0])["matched"] is True, name
+
+
+def _on_a_terminal(args, cwd: Path) -> str:
+    """What ``scalematch ARGS`` shows on a terminal that is both its stdout and its stderr."""
+    import pty
+
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "scalematch.cli", *map(str, args)],
+                                stdout=slave, stderr=slave, stdin=subprocess.DEVNULL, cwd=cwd)
+        os.close(slave)
+        shown = b""
+        while True:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:  # the terminal closed: the process is done
+                break
+            if not chunk:
+                break
+            shown += chunk
+        assert proc.wait(timeout=120) == 0, shown
+    finally:
+        os.close(master)
+    return shown.decode(errors="replace")
+
+
+def test_batch_lines_on_a_terminal_do_not_run_into_a_progress_bar(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    pairs = write(tmp_path / "pairs.csv",
+                  f"{root}/data/demo_low.png,{root}/data/demo_high.png\n"
+                  f"{root}/data/demo_high.png,{root}/data/demo_low.png\n")
+    shown = _on_a_terminal(["batch", pairs], tmp_path)
+    lines = [line.strip("\r") for line in shown.replace("\r\n", "\n").split("\n")]
+    records = [line for line in lines if '"matched"' in line]
+    assert len(records) == 2 and all(line.startswith("{") for line in records), shown
+    assert "matching pairs" not in shown
+    assert lines[-1] == "" and "2 pairs: 2 matched" in shown
+
+
+def test_more_jobs_than_cores_run_one_worker_a_core_and_say_so_once(monkeypatch, tmp_path):
+    started = []
+    real_pool = batch.run_pool
+
+    def pool(pairs, config, max_pixels, jobs, task=None):
+        started.append(jobs)
+        return real_pool(pairs, config, max_pixels, jobs, task)
+
+    monkeypatch.setattr("scalematch.cli.available_cores", lambda: 2)
+    monkeypatch.setattr(batch, "run_pool", pool)
+    root = Path(__file__).resolve().parents[1]
+    pairs = write(tmp_path / "pairs.csv",
+                  f"{root}/data/demo_low.png,{root}/data/demo_high.png\n"
+                  f"{root}/data/demo_high.png,{root}/data/demo_low.png\n"
+                  f"{root}/data/demo_low.png,{root}/data/demo_low.png\n")
+    result = run("batch", pairs, "--jobs", "64", "--output", tmp_path / "r.jsonl")
+    assert result.exit_code == 0, result.output
+    assert started == [2]
+    notes = [line for line in result.stderr.splitlines() if "--jobs 64" in line]
+    assert notes == ["--jobs 64: this machine has 2 cores, so 2 worker processes run"]
+    assert len((tmp_path / "r.jsonl").read_text().splitlines()) == 3

@@ -317,6 +317,9 @@ MEANINGLESS = [("--ransac-threshold", "-1", "ransac.threshold_px must be > 0"),
                ("--scales", "1-16:0.001", "--scales 1-16:0.001: scales '1-16:0.001' are 15001 "
                                           "scales, more than the 64 searched at most"),
                ("--scales", "1-1e300:0.5", "more than the 64 searched at most"),
+               # a count beyond a million said in its order of magnitude, not 300 digits
+               ("--scales", "1-16:1e-300", "are about 1.5e+301 scales, more than the 64"),
+               ("--scales", "1-16:1e-320", "are more scales than a float can count"),
                ("--scales", "1-inf", "--scales 1-inf: scales '1-inf' are not finite numbers"),
                ("--scales", ",".join(str(1 + k / 10) for k in range(65)),
                 "scales: at most 64 are searched, got 65"),
@@ -620,6 +623,38 @@ def test_out_of_memory_exits_4_not_1(big_pair):
     assert lines[0].endswith("(-v shows the traceback)")
     loud = run_limited(*big_pair, "--working-size", "0", "-v")
     assert loud.returncode == 4 and "Traceback (most recent call last)" in loud.stderr
+
+
+@needs_pipeline
+def test_out_of_memory_still_writes_the_json_error_record(big_pair, tmp_path):
+    js = tmp_path / "out" / "result.json"
+    limited = run_limited(*big_pair, "--working-size", "0", "-q", "--json", js)
+    assert limited.returncode == 4, (limited.returncode, limited.stderr)
+    record = json.loads(js.read_text())
+    assert record["matched"] is False and record["error_kind"] == "internal"
+    assert record["error"].startswith("internal error, out of memory")
+    assert record["low"]["path"] == str(big_pair[0])
+
+
+def test_an_unexpected_error_is_recorded_in_the_json_and_ctrl_c_is_not(monkeypatch, flat_pair,
+                                                                        tmp_path):
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr("scalematch.cli._run_match", broken)
+    js = tmp_path / "result.json"
+    assert run(*flat_pair, "-q", "--json", js).exit_code == 4
+    record = json.loads(js.read_text())
+    assert (record["error_kind"], record["error"]) == ("internal",
+                                                       "internal error, RuntimeError: a bug")
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("scalematch.cli._run_match", stopped)
+    js2 = tmp_path / "interrupted.json"
+    assert run(*flat_pair, "-q", "--json", js2).exit_code == 130
+    assert not js2.exists()
 
 
 # --------------------------------------------------------------------------- outputs vs inputs

@@ -184,3 +184,25 @@ def test_the_no_views_figure_is_said_the_same_everywhere():
                        timings={"total": SLOW_NO_HINT_S + 1},
                        search=(step, replace(step, view_pass=1, views=5)))
     assert NO_VIEWS_SPEEDUP in slow_no_hint(slow)
+
+
+def test_the_batch_examples_of_readme_then_guide_run_in_one_folder(tmp_path):
+    """A new user runs the README's batch example, then the guide's, in one checkout: the
+    guide's must not resume the README's file (it did: "resuming: 2 of 2", and its CSV columns
+    never appeared)."""
+    def batch_block(page: str) -> Block:
+        return next(b for b in BLOCKS if b.page == page and b.lang in SHELLS
+                    and "scalematch batch" in b.text and not b.marks)
+
+    cwd = _workdir(tmp_path)
+    for page in ("README.md", "docs/GUIDE.md"):
+        text = batch_block(page).text
+        if page == "README.md":  # the quick start's batch lines, after its activation
+            text = "\n".join(line for line in text.splitlines()
+                             if line.startswith(("mkdir", "printf", "scalematch batch")))
+        run = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", text], cwd=cwd, env=_env(),
+                             capture_output=True, text=True, timeout=TIMEOUT_S,
+                             stdin=subprocess.DEVNULL)
+        assert run.returncode == 0, (page, run.stderr[-2000:])
+        assert "resuming" not in run.stderr.splitlines()[0], (page, run.stderr)
+    assert "('demo', 'given')" in run.stdout and "('swapped', 'swapped')" in run.stdout

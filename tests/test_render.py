@@ -449,3 +449,21 @@ def test_a_degenerate_fits_ratio_is_none_in_the_table_and_the_json():
     assert math.isnan(row.ratio) and disagrees(row, DecisionParams())
     res = dataclasses.replace(collapsed_fit_result(), scales=(row,))
     assert json.loads(res.to_json("a.png", "b.png"))["scales"][0]["ratio"] is None
+
+
+def test_a_fundamental_matrix_marks_its_inliers_in_proportion_to_the_picture():
+    """On a 2,500 px picture an inlier's circle is seen when the picture is seen whole: its
+    extent grows with the picture (a 3 px circle was a speck there), and stays small on a
+    small one."""
+    from scalematch.render import INLIER_DOT
+
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
+    for shape in ((1900, 2500), (360, 480)):
+        low = np.full(shape, 90, np.uint8)
+        res = dataclasses.replace(make_result(f, model="fundamental"),
+                                  inliers=np.array([[10.0, 20.0, shape[1] / 2, shape[0] / 2]]))
+        picture = overlay(low, low, res)[-shape[0]:]
+        dot = np.abs(picture.astype(int) - INLIER_DOT).sum(axis=2) < 60
+        ys, xs = np.nonzero(dot)
+        extent = xs.max() - xs.min() + 1
+        assert min(shape) / 80 <= extent <= min(shape) / 10, (shape, extent)

@@ -664,9 +664,8 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
         if len(second.inliers) >= k:  # grown (or kept): the refit map and its inliers
             t, pairs = second.transform, second.inliers
     if lnfa > params.max_log_nfa:
-        return no(f"the best transform ({k} inliers of {w.n} candidates at scale "
-                  f"{shown:.3g}) "
-                  f"could arise by chance (log10 NFA {lnfa:.1f} > {params.max_log_nfa:g})",
+        return no(f"the best transform ({_inliers_said(k, len(pairs))} of {w.n} candidates at "
+                  f"scale {shown:.3g}) could arise by chance ({_count_said(lnfa, w.m, params)})",
                   "chance")
     if not spec.has_ratio:  # no footprint to check
         return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
@@ -679,6 +678,30 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     if refusal is not None:
         return no(*refusal)
     return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
+
+
+def _inliers_said(k: int, matches: int) -> str:
+    """The inliers counted, as a reason says them: with the matches they stand for when an
+    epipolar geometry counted them one to one (:func:`one_to_one`), so that the reason and the
+    ``rejected`` block (its ``n_inliers`` are the matches) give the same figures.
+
+    >>> _inliers_said(6, 6), _inliers_said(6, 7)
+    ('6 inliers', '6 inliers counted one to one (7 matches)')
+    """
+    return f"{k} inliers" if k == matches else \
+        f"{k} inliers counted one to one ({matches} matches)"
+
+
+def _count_said(lnfa: float, m: int, params: DecisionParams) -> str:
+    """The a-contrario figure of a refusal: its log10 NFA against the bound, or, where no more
+    inliers than the minimal sample ``m`` fit (the count is infinite; null in the JSON), that.
+
+    >>> _count_said(-1.04, 2, DecisionParams()), _count_said(math.inf, 8, DecisionParams())
+    ('log10 NFA -1.0 > -2', 'no more inliers than the 8 a fit is drawn from: none beyond chance')
+    """
+    if math.isfinite(lnfa):
+        return f"log10 NFA {lnfa:.1f} > {params.max_log_nfa:g}"
+    return f"no more inliers than the {m} a fit is drawn from: none beyond chance"
 
 
 #: The figures the tests have reached (``Evidence``'s names; :func:`build_evidence` makes the

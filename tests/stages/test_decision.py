@@ -446,3 +446,30 @@ def test_a_footprint_mostly_outside_is_confirmed_by_the_second_look_at_any_count
     assert good.evidence.pixel_margin == 0.3
     flat = decide(outcomes, *shapes, **_params(Config()), look=_look(grown=6, margin=0.0))
     assert not flat.matched and flat.test == "footprint inside"
+
+
+def test_a_refused_epipolar_geometry_says_the_figures_its_record_gives():
+    """Matches sharing a point count once for an epipolar geometry: the reason gives that count
+    and the matches it stands for (``rejected.n_inliers``), and a count too small to be beyond
+    chance in words, not as "log10 NFA inf" (null in the JSON)."""
+    from scalematch.config import Config
+    from scalematch.result import ScaleRow
+    from scalematch.search import ScaleOutcome
+    from scalematch.stages.decision import decide
+    from scalematch.stages.estimator import Estimate
+
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 400, (40, 2))
+    dst = rng.uniform(0, 400, (40, 2))
+    dst[1:3] = dst[0]  # three finer points matched to one coarser point
+    inl = np.arange(40) < 9
+    est = Estimate("fundamental", np.eye(3), inl, np.where(inl, 0.5, 50.0))
+    row = ScaleRow(s=1.0, ratio=math.nan, points=40, initial=40, kept=40, inliers=9,
+                   outlier_pct=77.5)
+    config = Config(model="fundamental")
+    d = decide([ScaleOutcome(row, est, src, dst, 40)], (480, 640), (480, 640),
+               **_params(config))
+    assert not d.matched and d.test == "chance"
+    assert "7 inliers counted one to one (9 matches) of 40 candidates" in d.reason
+    assert "inf" not in d.reason and "none beyond chance" in d.reason
+    assert d.evidence.inliers == 7 and len(d.candidate_inliers) == 9
