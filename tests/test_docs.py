@@ -206,3 +206,42 @@ def test_the_batch_examples_of_readme_then_guide_run_in_one_folder(tmp_path):
         assert run.returncode == 0, (page, run.stderr[-2000:])
         assert "resuming" not in run.stderr.splitlines()[0], (page, run.stderr)
     assert "('demo', 'given')" in run.stdout and "('swapped', 'swapped')" in run.stdout
+
+
+#: Figures the docs and the help give in more than one place: (name, pattern whose groups are
+#: the figure). Each is measured by the command its page names beside it (docs/design/SPEED.md
+#: gives the commands); measured again, it changes everywhere, never in one place only.
+REPEATED_FIGURES = (
+    ("--no-views sooner", r"about ([\d.]+) times sooner on 1 MP images,? ([\d.]+) times on "
+                          r"12-16 MP"),
+    ("tilt-4 sooner", r"tilt-4`? \(a \"no\" ([\d.]+) times sooner|([\d.]+) times sooner \(a "
+                      r"median"),
+    ("SIFT's 12-16 MP no", r"SIFT(?:'s)? ([\d.]+(?: to [\d.]+)? s) and ([\d.]+(?: to [\d.]+)? "
+                           r"GB)"),
+    ("null set, in process", r"median (?:\"no\" of )?([\d.]+) s against SIFT's ([\d.]+) s in "
+                             r"the same runs"),
+    ("12-16 MP no", r"a median ([\d.]+ s) \(at most ([\d.]+ s)\) and ([\d.]+ MB)"),
+)
+#: Where the figures are said: the pages of users and maintainers, the code's help texts
+FIGURE_PAGES = ("README.md", "docs/GUIDE.md", "docs/DESIGN.md", "docs/design/SPEED.md",
+                "scalematch/cli.py", "scalematch/config.py")
+
+
+def test_a_figure_said_in_several_places_has_one_value():
+    from click.testing import CliRunner
+
+    from scalematch.cli import cli
+
+    def flat(text: str) -> str:
+        return " ".join(text.replace("#", " ").split())
+
+    texts = {page: flat((ROOT / page).read_text()) for page in FIGURE_PAGES}
+    for command in ("match", "batch"):
+        texts[f"{command} --help"] = flat(CliRunner().invoke(cli, [command, "--help"]).output)
+    for name, pattern in REPEATED_FIGURES:
+        said = {}
+        for where, text in texts.items():
+            for m in re.finditer(pattern, text, re.I):
+                said.setdefault(tuple(g for g in m.groups() if g is not None), []).append(where)
+        assert said, f"{name}: said nowhere (pattern {pattern!r})"
+        assert len(said) == 1, f"{name} has {len(said)} values: {said}"
