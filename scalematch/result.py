@@ -59,7 +59,7 @@ class Evidence:
 
     Made only by :func:`build_evidence`, once per search decided
     (:mod:`scalematch.stages.decision`) and once for the answer
-    (:func:`scalematch.pipeline.evidence_of`: the decision's figures, the final transform's
+    (:func:`scalematch.answer.evidence_of`: the decision's figures, the final transform's
     pixel tests, the search's own figures and the working size's).
     """
 
@@ -154,7 +154,7 @@ def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
     part's over an earlier one's; a figure no part gives keeps its default (NaN or 0: not
     reached). The decision's tests, the pixel tests of the final map, the search and the
     working size each give their figures (``stages.decision.decide``,
-    ``pipeline.evidence_of``).
+    ``answer.evidence_of``).
 
     >>> e = build_evidence({"inliers": 12, "log10_nfa": -20.0}, {"log10_nfa": -21.5})
     >>> e.inliers, e.log10_nfa, math.isnan(e.final_ncc)

@@ -18,14 +18,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Optional, Sequence, Tuple
+from typing import Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .result import Direction, ScaleRow, StepRecord
 from .stages.decision import Decision
 from .stages.descriptors import Described
-from .stages.estimator import Estimate, model_of
+from .config import Config
+from .stages.estimator import Estimate, FitSpec, model_of
 from .stages.views import View, view_plan
 
 #: (tilt, longitude in degrees) of a view; (1, 0) is the image itself.
@@ -249,3 +250,20 @@ def searched(records: Sequence[StepRecord]) -> str:
     if any(r.view_pass > 0 for r in records):
         what.append("tilted views of both images")
     return ", ".join(what)
+
+
+@dataclass(frozen=True)
+class SearchRun:
+    """What running a search plan gave (``pipeline.run_plan``): every attempt, the steps' records,
+    the plan, why it stopped, and seconds per step by name (and "total")."""
+
+    attempts: Tuple[Attempt, ...]
+    records: Tuple[StepRecord, ...]
+    plan: Tuple[Step, ...]
+    stopped: str
+    timings: Dict[str, float]
+
+
+def fit_spec(config: Config) -> FitSpec:
+    """How the search fits its transforms: the model asked for, RANSAC and the seed."""
+    return FitSpec(config.model, config.ransac, config.seed)

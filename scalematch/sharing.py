@@ -7,7 +7,8 @@ does not need this module read:
 * :class:`Memo`: each direction's coarser image described once, each direction's finer image
   detected once (the views' vote reads both), each image's contrast measured once;
 * :class:`Measured`: an image's contrast and the gradients it was measured from;
-* :class:`Meter`: the progress of the plan, counted across threads.
+* :class:`Meter`: the progress of the plan, counted across threads;
+* :class:`Search`: what every step of one search shares, these among it.
 
 The threads themselves are :mod:`scalematch.stages.threads`'.
 """
@@ -20,8 +21,11 @@ from typing import TYPE_CHECKING, Callable, Dict, NamedTuple, Optional
 
 import numpy as np
 
+from .config import Config
+from .modes import Mode
 from .result import Direction
 from .stages.detector import Contrast, Gradients, gradients, image_contrast
+from .working import WorkImages
 
 if TYPE_CHECKING:  # the pipeline's own records, named in annotations only
     from .pipeline import LowFeatures, Probed
@@ -96,3 +100,20 @@ class Meter:
     def finish(self) -> None:
         if self.done < self.total:
             self.tick(self.total - self.done)
+
+
+@dataclass(frozen=True)
+class Search:
+    """What every step of one search shares, built once by :func:`scalematch.pipeline.match`: the images at
+    their working size, the configuration, the mode's strategy (:func:`scalematch.modes.mode_of`),
+    what the steps compute once (``memo``) and the progress meter.
+
+    The scales a step searches are its own (``Step.scales``: its direction's, within reach);
+    the functions that detect or match take them as ``scales``, never from ``config``.
+    """
+
+    work: WorkImages = field(repr=False)
+    config: Config
+    mode: Mode
+    memo: Memo = field(repr=False)
+    meter: Meter = field(repr=False)

@@ -207,7 +207,7 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
         return result
     g = shown_scale(work, result.evidence.search_order)
     rows = tuple(replace(r, s=r.s * g, ratio=r.ratio * g) for r in result.scales)
-    # the evidence is in these pixels already (pipeline.evidence_of)
+    # the evidence is in these pixels already (answer.evidence_of)
     out = replace(result, scales=rows, best_scale=result.best_scale * g, config=config)
     if not result.matched:
         return _rejected_mapped(out, _to_original(f_low), _to_original(f_high), turn=True)

@@ -192,7 +192,7 @@ class DecisionParams:
     #: the scene shows parallax (``Evidence.parallax``: a 3-D scene, the answer the map of its
     #: dominant plane) when an epipolar geometry explains at least this many of the answer's
     #: outliers among its scale's candidates (``stages.rivals.off_plane``, counted for the
-    #: answer by ``pipeline.answer_parallax``; recorded, never decisive) ...
+    #: answer by ``answer.answer_parallax``; recorded, never decisive) ...
     parallax_min_points: int = 10
     #: ... and this share of its inliers: measured 0 to 2 off-plane points on 15 zoom pairs of
     #: real photos, 118 beside 42 inliers on the desk scene of ../shared/data/ef/zoom
@@ -794,7 +794,7 @@ def _rival_test(w: Winner, finer_shape, figs: Figures, params: DecisionParams,
     """What the candidates the winner leaves over show: a second transform of the same scale
     and angle (a repeated structure, refused: :func:`repeats`). (figures with its own,
     refusal). The points off the plane (parallax) are counted once, for the answer's own map
-    (``pipeline.answer_parallax``), not for every winner decided."""
+    (``answer.answer_parallax``), not for every winner decided."""
     best, k = w.outcome, w.k
     est = best.estimate
     inl = est.inliers
@@ -939,7 +939,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
     transform of comparable support, which :func:`decide` refuses) is unique by its geometry;
     its pixel figures are recorded, not decisive: an occluder, parallax or relighting lowers
     them where the points prove the map (``judged_by`` says which test decided).
-    ``near``: the pixel check of ``t`` when it was measured already (``pipeline.best_fitting``).
+    ``near``: the pixel check of ``t`` when it was measured already (``answer.best_fitting``).
     ``pixel``: the pixel tests' parameters (``Config.pixel``).
     """
     t, log10_nfa, vouched = claim.transform, claim.log10_nfa, claim.vouched

@@ -60,7 +60,7 @@ class GuidedParams:
     #: refit inlier threshold, low px; None: the robust fit's own (``RansacParams.threshold_px``)
     threshold_px: Optional[float] = None
     max_rounds: int = 5  #: guided rounds at most (each: match, refit, recount)
-    #: an accepted answer is grown (``pipeline.grown_answer``) when it has fewer inliers than
+    #: an accepted answer is grown (``answer.grown_answer``) when it has fewer inliers than
     #: this: there its map is loose away from them. On the Oxford and perspective pairs (lab
     #: real-pairs, both orders) the answers under 30 inliers were 0.82 px off (median), 0.52
     #: once grown (graf 1->5 0.97 -> 0.28 px; a perspective facade 4.9 px off as a similarity,

@@ -12,7 +12,7 @@ Six refinements, in this order, each keeping the answer unless the evidence says
    answer that explains clearly fewer of them (perspective: each scale matches the part of the
    footprint at its own local ratio, so only the union sees the whole of it;
    docs/design/VIEWS.md, "Perspective pairs").
-5. :func:`guided_refit`, once the answer is accepted (``pipeline.grown_answer``): the paper's
+5. :func:`guided_refit`, once the answer is accepted (``answer.grown_answer``): the paper's
    step (iv), "establish many other matches once this matrix is known": every described point
    of every scale matched in full is predicted by the answer and matched among the coarser
    points near its prediction (guided matching, :mod:`scalematch.stages.guided`); the answer
@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Tuple
+from typing import Any, ClassVar, Dict, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -93,7 +93,12 @@ class ModelCheckParams:
             one_of("model_check", "models", name, MODELS)
 
 
-Refit = Tuple[np.ndarray, np.ndarray, str]  #: (transform, inliers (N, 4), model)
+class Fit(NamedTuple):
+    """A map and what supports it, at one stage of the answer (found, refit, grown, pinned)."""
+
+    transform: np.ndarray  #: finer px -> coarser px: (2, 3), or (3, 3) for a homography or F
+    inliers: np.ndarray  #: (N, 4) x, y finer; x, y coarser
+    model: str  #: the model of ``transform`` (``Config.model``'s names)
 
 
 def _back(view: Optional[View], xy: np.ndarray) -> np.ndarray:
@@ -109,7 +114,7 @@ def candidates_in_images(view: View, best, coarser: Optional[View] = None
 
 
 def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
-                  coarser: Optional[View] = None) -> Refit:
+                  coarser: Optional[View] = None) -> Fit:
     """The winning view's match in the images' own pixels.
 
     The view's similarity composed with the views' compressions is an affine map; it is refit
@@ -119,7 +124,7 @@ def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
     """
     asked, ransac, seed = spec.model, spec.ransac, spec.seed
     if view.is_identity and coarser is None:
-        return verdict.transform, verdict.inliers, asked
+        return Fit(verdict.transform, verdict.inliers, asked)
     src = to_high(view, verdict.inliers[:, :2])
     dst = _back(coarser, verdict.inliers[:, 2:4])
     model = "homography" if asked == "homography" else "affine"
@@ -128,19 +133,20 @@ def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
     cand_src, cand_dst = candidates_in_images(view, best, coarser)
     est = estimate(model, cand_src, cand_dst, ransac, seed=seed)
     if est.transform is not None and est.n_inliers >= len(src):
-        return est.transform, np.hstack([cand_src[est.inliers], cand_dst[est.inliers]]), model
+        return Fit(est.transform, np.hstack([cand_src[est.inliers], cand_dst[est.inliers]]), model)
     est = estimate(model, src, dst, ransac, seed=seed)
     if est.transform is None or est.n_inliers < MIN_SAMPLE[model] + 1:
         composed = compose(verdict.transform, view.to_view)
         if coarser is not None:
             composed = compose(invert(coarser.to_view), composed)
-        return composed, np.hstack([src, dst]), "affine" if composed.shape == (2, 3) else model
+        return Fit(composed, np.hstack([src, dst]),
+                   "affine" if composed.shape == (2, 3) else model)
     inl = est.inliers
-    return est.transform, np.hstack([src[inl], dst[inl]]), model
+    return Fit(est.transform, np.hstack([src[inl], dst[inl]]), model)
 
 
-def richer_model(fit: Refit, view: View, best, check: ModelCheckParams, ransac: RansacParams,
-                 seed: int) -> Refit:
+def richer_model(fit: Fit, view: View, best, check: ModelCheckParams, ransac: RansacParams,
+                 seed: int) -> Fit:
     """A richer model when the similarity explains too little of the winning scale.
 
     The candidates of the winning scale are refit with each of ``check.models``;
@@ -157,7 +163,7 @@ def richer_model(fit: Refit, view: View, best, check: ModelCheckParams, ransac: 
             continue
         if check.clearly_more(est.n_inliers, k):
             inl = est.inliers
-            return est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer
+            return Fit(est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer)
     return fit
 
 
@@ -172,8 +178,8 @@ def _pooled(view: View, outcomes: Sequence,
                           _back(coarser, np.vstack([o.dst for o in done])))
 
 
-def pooled_refit(fit: Refit, view: View, outcomes: Sequence, ransac: RansacParams,
-                 coarser: Optional[View] = None) -> Refit:
+def pooled_refit(fit: Fit, view: View, outcomes: Sequence, ransac: RansacParams,
+                 coarser: Optional[View] = None) -> Fit:
     """``fit`` refined on the candidates of every scale matched in full.
 
     The neighbouring scales of a true match find the same transform (the paper's Table 1) from
@@ -193,11 +199,11 @@ def pooled_refit(fit: Refit, view: View, outcomes: Sequence, ransac: RansacParam
         return fit
     keep = residuals(model, est.transform, inliers[:, :2], inliers[:, 2:4]) <= \
         ransac.threshold_px
-    return est.transform, inliers[keep], model
+    return Fit(est.transform, inliers[keep], model)
 
 
-def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelCheckParams,
-                     spec: FitSpec, coarser: Optional[View] = None) -> Refit:
+def union_homography(fit: Fit, view: View, outcomes: Sequence, check: ModelCheckParams,
+                     spec: FitSpec, coarser: Optional[View] = None) -> Fit:
     """A homography fitted to the candidates of every scale matched in full, when it explains
     clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
     same pooled pairs count for both, so a plain zoom pair, where the similarity explains them
@@ -228,13 +234,13 @@ def union_homography(fit: Refit, view: View, outcomes: Sequence, check: ModelChe
         return fit
     if check.clearly_more(est.n_inliers, before):
         inl = est.inliers
-        return est.transform, np.hstack([src[inl], dst[inl]]), "homography"
+        return Fit(est.transform, np.hstack([src[inl], dst[inl]]), "homography")
     return fit
 
 
-def guided_refit(fit: Refit, source_shape: Tuple[int, int], outcomes: Sequence,
+def guided_refit(fit: Fit, source_shape: Tuple[int, int], outcomes: Sequence,
                  low: Described, guided: GuidedParams, spec: FitSpec,
-                 check: Optional[ModelCheckParams] = None) -> Refit:
+                 check: Optional[ModelCheckParams] = None) -> Fit:
     """``fit`` grown by guided matching at every scale matched in full
     (:func:`scalematch.stages.guided.grow_rounds`, as the decision's second look grows one): kept
     unless its guided matches explain more pairs than its own inliers, and the inliers
@@ -276,7 +282,7 @@ def guided_refit(fit: Refit, source_shape: Tuple[int, int], outcomes: Sequence,
             model, best_t, best_in = m, alt_t, alt_in
     if model == "similarity":  # its own inliers pin it: growth adds only looser matches
         return fit
-    return best_t, best_in, model
+    return Fit(best_t, best_in, model)
 
 
 #: The models a map can give way to where its inliers do not pin it down, richest first
@@ -302,8 +308,8 @@ class Pinned:
                 "unpinned_px": self.refused_px * factor if self.refused else math.nan}
 
 
-def pinned_model(fit: Refit, finer_shape: Tuple[int, int], coarser_shape: Tuple[int, int],
-                 params: PinParams, spec: FitSpec) -> Tuple[Refit, Pinned]:
+def pinned_model(fit: Fit, finer_shape: Tuple[int, int], coarser_shape: Tuple[int, int],
+                 params: PinParams, spec: FitSpec) -> Tuple[Fit, Pinned]:
     """``fit``, or the simpler model its inliers pin down: the answer's last refinement.
 
     A map whose expected grid error (:func:`scalematch.stages.pinning.expected_error`, over the
@@ -334,5 +340,5 @@ def pinned_model(fit: Refit, finer_shape: Tuple[int, int], coarser_shape: Tuple[
             continue
         px = expected_error(simpler, est.transform, inliers, finer_shape, params, coarser_shape)
         if px <= params.tolerance_px:
-            return (est.transform, inliers[est.inliers], simpler), Pinned(px, model, first)
+            return Fit(est.transform, inliers[est.inliers], simpler), Pinned(px, model, first)
     return fit, Pinned(first)

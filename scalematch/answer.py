@@ -1,0 +1,333 @@
+"""The answer: everything after the search, from its attempts to one :class:`MatchResult`.
+
+The search (:mod:`scalematch.pipeline`, the plan of :mod:`scalematch.search`) hands over every
+attempt it made, each decided (:func:`scalematch.stages.decision.decide`). Here the answer is
+made of them, in this order (:func:`build_result`):
+
+1. the best fit: the matched attempt whose map, refit in the finer image's own pixels
+   (:func:`final_fit`: :mod:`scalematch.stages.refit`), lines the pixels up best
+   (:func:`best_fitting`); with none, the "no" of the strongest refused attempt
+   (:func:`refused`), or of an empty plan (:func:`unreachable`);
+2. the pixel tests of that final map (:func:`judged_by_pixels`:
+   :func:`scalematch.stages.decision.final_checks`), which may still refuse it;
+3. the map grown by guided matching (:func:`grown_answer`) and claimed as the model its
+   inliers pin down (:func:`pinned_answer`: :mod:`scalematch.stages.pinning`);
+4. the match itself, turned to map the finer image to the coarser one (:func:`answered`),
+   with its evidence assembled once (:func:`evidence_of`).
+
+Every result here is at working size; :func:`scalematch.working.in_original` brings it to the
+images' own pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, replace
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+from .config import Config
+from .geometry import answer_parts, finer_to_coarser
+from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
+from .search import Attempt, SearchRun, fit_spec, probe_best, searched, strongest
+from .sharing import Search
+from .stages.decision import (Claim, FinalFigures, figures, final_checks, plane_parallax,
+                              unique_threshold)
+from .stages.epipolar import refine_fundamental
+from .stages.estimator import model_of, residuals
+from .stages.matcher import distinct_pairs
+from .stages.pixelcheck import pixel_check
+from .stages.refit import (Fit, Pinned, candidates_in_images, guided_refit, pinned_model,
+                           pooled_refit, refit_in_high, richer_model, union_homography)
+from .stages.rivals import EpipolarFit, off_plane
+from .working import WorkImages, shown_scale
+
+__all__ = ["build_result"]
+
+
+def final_fit(attempt: Attempt, config: Config) -> Fit:
+    """A matched attempt's transform refit in the images' own pixels."""
+    best = attempt.winning_outcome()
+    view, coarser = attempt.view, attempt.coarser_view
+    spec = fit_spec(config)
+    fit = refit_in_high(view, attempt.verdict, best, spec, coarser)
+    # a fit through a coarser view is affine already
+    fit = richer_model(fit, view, best, config.model_check, spec.ransac, spec.seed)
+    fit = pooled_refit(fit, view, attempt.outcomes, spec.ransac, coarser)
+    return union_homography(fit, view, attempt.outcomes, config.model_check, spec, coarser)
+
+
+def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
+    """An accepted answer ``fit`` (:func:`final_fit`) grown by guided
+    matching over every scale matched in full (:func:`stages.refit.guided_refit`): the paper's
+    step (iv), "establish many other matches once this matrix is known", for an answer of
+    fewer than ``GuidedParams.grow_below_inliers`` inliers. It follows the decision and the pixel
+    tests, which judge the map the search found: growth spreads a repeated structure's copy as
+    readily as the truth. In the default mode only (the paper's jets have no guided distance
+    of their own)."""
+    config = search.config
+    if search.mode.orientation is None or len(fit.inliers) >= search.mode.guided.grow_below_inliers:
+        return fit
+    if not attempt.view.is_identity or attempt.coarser_view is not None:
+        return fit  # a view's points and orientations are in the view's frame
+    spec = fit_spec(config)
+    asked = config.model_check if spec.model == "similarity" else None  # as richer_model
+    return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
+                        search.memo.coarser[attempt.step.direction].described,
+                        search.mode.guided, spec, asked)
+
+
+def pinned_answer(attempt: Attempt, fit: Fit, search: Search) -> Tuple[Fit, Pinned]:
+    """(the fit, how firmly its inliers pin it): an accepted answer ``fit``, or the
+    simpler model its inliers pin down (:func:`stages.refit.pinned_model`), at working size."""
+    coarser, finer = search.work.coarser_finer(attempt.step.direction)
+    return pinned_model(fit, finer.shape, coarser.shape, search.config.pin,
+                        fit_spec(search.config))
+
+
+def best_fitting(search: Search, attempts: Sequence[Attempt]):
+    """(winner, its final fit, its pixel check): the matched attempt to report, or
+    (None, None, None); the pixel check is None unless several were compared.
+
+    One matched attempt is the answer. When several matched (a weak plain match and a view
+    of the pass that confirms it), each is refit and the one whose final transform lines the
+    pixels up best (ZNCC, :func:`stages.pixelcheck.pixel_check`) wins; the lowest log10 NFA
+    (:func:`search.strongest`) decides where the pixels cannot (no overlap, no ratio). The NFA
+    alone favours few candidates that all agree: on a smooth least-textured crop (popos_jad
+    x3; docs/design/DECISION.md, "The final map: fitting best, and better than its
+    neighbours") a t = 2 view's affine map, 11 inliers of 12 candidates
+    at log10 NFA -43, 48 px off, beat the plain similarity of 11 inliers that was right; its
+    pixels: ZNCC 0.963 against 0.996.
+    """
+    config, work = search.config, search.work
+    matched = [a for a in attempts if a.matched]
+    if len(matched) <= 1 or not model_of(config.model).has_ratio:
+        winner = strongest(attempts)
+        return winner, (final_fit(winner, config) if winner is not None else None), None
+    fits = [final_fit(a, config) for a in matched]
+    checks = [pixel_check(*work.shown(a.step.direction), fit.transform, config.pixel)
+              for a, fit in zip(matched, fits)]
+
+    def fitness(k: int) -> Tuple[float, float]:
+        ncc = checks[k].ncc
+        return (ncc if math.isfinite(ncc) else -math.inf,
+                -matched[k].verdict.evidence.log10_nfa)
+
+    k = max(range(len(matched)), key=fitness)
+    return matched[k], fits[k], checks[k]
+
+
+def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
+    """The refused search whose best transform is strongest (lowest log10 NFA), among those
+    made on the images themselves (a view's transform is in the view's pixels): a "no" shows
+    it (``MatchResult.rejected``); None when no search found a transform to refuse."""
+    refused = [a for a in attempts if not a.matched and a.verdict.candidate is not None
+               and a.view.is_identity and a.coarser_view is None]
+    return min(refused, key=lambda a: a.verdict.evidence.log10_nfa, default=None)
+
+
+def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction: Direction,
+                       test: str, log10_nfa: float, figures_: dict) -> Rejected:
+    """A refused transform (finer working px -> coarser working px, found in ``direction``) as
+    the ``rejected`` block of a "no", turned round as a match would be (``finer_to_coarser``);
+    ``figures_``: the refusing test's figures, as the test saw them (at working size)."""
+    t, inliers, swapped = finer_to_coarser(np.asarray(t, np.float64), inliers,
+                                           direction is Direction.SWAPPED)
+    return Rejected(t, model, inliers, log10_nfa, test, figures_,
+                    Direction.SWAPPED if swapped else Direction.GIVEN)
+
+
+def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
+                work: WorkImages, seen: Optional[dict] = None) -> Evidence:
+    """The one :class:`Evidence` of a search's answer, assembled here from its parts: the
+    decision's figures for the search ``shown`` (:func:`stages.decision.decide`), the pixel
+    tests of the final transform when it faced them (``final``,
+    :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
+    the probe, the steps), and the working size's: its factors, and the implied ratio and the
+    footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``),
+    and the answer's own figures (``seen``): its parallax (:func:`answer_parallax`) and how
+    firmly its inliers pin it (:func:`pinned_answer`).
+    """
+    records, plan, stopped = run.records, run.plan, run.stopped
+    decided = shown.verdict.evidence
+    direction = shown.step.direction
+    g = shown_scale(work, direction) * shown.view.scale
+    f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
+    searched_ = dict(searches=sum(r.views for r in records), search_order=direction,
+                     view_tilt=shown.shown_view.tilt,
+                     view_longitude_deg=shown.shown_view.longitude_deg,
+                     view_of="coarser" if shown.coarser_view is not None else "finer",
+                     probe_score=shown.probe,
+                     probe_best=probe_best([r.probe_best for r in records]),
+                     steps_run=len(records), steps_planned=len(plan), stopped=stopped)
+    sized = dict(low_working_factor=work.f_low, high_working_factor=work.f_high,
+                 implied_ratio=decided.implied_ratio * g,
+                 footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
+    return build_evidence(asdict(decided), asdict(final) if final is not None else {},
+                          searched_, sized, seen or {})
+
+
+def out_of_reach(config: Config, work: WorkImages) -> str:
+    """Why an empty plan searched nothing: at every scale of ``config.scales`` the finer image
+    of either order would span fewer than ``config.min_footprint_px`` coarser pixels
+    (:func:`scalematch.search.within_reach`)."""
+    sizes = " and ".join(f"{w}x{h}" for h, w in (work.low.shape, work.high.shape))
+    floor = f"under {config.min_footprint_px:g} px of the coarser one"
+    if max(max(work.low.shape), max(work.high.shape)) < config.min_footprint_px:
+        return f"the images are too small ({sizes} px): the finer one would span {floor}"
+    scales = ", ".join(f"{s:g}" for s in config.scales)
+    return (f"no scale searched fits these images ({sizes} px at working size): at every scale "
+            f"searched ({scales}) the finer image would span {floor}; try smaller scales "
+            f"(--scales)")
+
+
+def build_result(search: Search, run: SearchRun) -> MatchResult:
+    """The one :class:`MatchResult` of a search, at working size (``working.in_original`` next),
+    its evidence assembled once (:func:`evidence_of`).
+
+    A match shows the strongest matched attempt, refit in the finer image's pixels; no match
+    shows the first search made (the finer image itself, in the given order), with its reason.
+    The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
+    repeated structure is refused there. The accepted map, grown, is claimed as its model only
+    where its inliers pin it down (:func:`pinned_answer`); a simpler model they pin answers
+    otherwise.
+    """
+    if not run.attempts:  # an empty plan: no scale asked for is within reach of these images
+        return unreachable(search, run)
+    winner, fit, near = best_fitting(search, run.attempts)
+    shown = winner or best_refused(run.attempts) or run.attempts[0]
+    if winner is None:
+        return refused(search, run, shown)
+    final = pinned = None
+    if model_of(fit.model).has_ratio:
+        final, refusal = judged_by_pixels(search, run, winner, fit, near)
+        if refusal is not None:
+            return refusal
+        fit = grown_answer(winner, fit, search)
+        fit, pinned = pinned_answer(winner, fit, search)
+    return answered(search, run, winner, fit, final, pinned)
+
+
+def _common(search: Search, run: SearchRun, shown: Attempt) -> dict:
+    """What every result of a search holds: a "no" has no best scale (NaN, null in the JSON),
+    as it has no ratio; its refused candidate is told in ``rejected``."""
+    return dict(model=search.config.model, best_scale=math.nan,
+                scales=rows_of(shown), timings=run.timings,
+                config=search.config, search=run.records,
+                covariance_used=search.mode.covariance_used)
+
+
+def rows_of(attempt: Attempt) -> Tuple[ScaleRow, ...]:
+    """The per-scale rows of an attempt in the finer image's scales: a view simulated on the
+    image shrunk (``View.scale``) has its rows' scales and ratios in its own pixels."""
+    k = attempt.view.scale
+    return tuple(o.row if k == 1.0 else replace(o.row, s=o.row.s * k, ratio=o.row.ratio * k)
+                 for o in attempt.outcomes)
+
+
+def unreachable(search: Search, run: SearchRun) -> MatchResult:
+    """The "no" of an empty plan: no scale asked for is within reach of these images."""
+    config, work = search.config, search.work
+    return MatchResult(
+        matched=False, model=config.model, reason=out_of_reach(config, work),
+        timings=run.timings, config=config, search=run.records,
+        covariance_used=search.mode.covariance_used,
+        evidence=build_evidence(dict(steps_planned=len(run.plan), stopped=run.stopped,
+                                     low_working_factor=work.f_low,
+                                     high_working_factor=work.f_high)))
+
+
+def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
+    """The "no" of a search whose every attempt was refused: the reason of the one ``shown``
+    and, when it had a transform on the images themselves, that transform as ``rejected``."""
+    config, records, verdict = search.config, run.records, shown.verdict
+    searches = sum(r.views for r in records)
+    more = f" ({searches} searches: {searched(records)})" if searches > 1 else ""
+    if run.stopped == "time budget":
+        more += (f"; the time budget of {config.time_budget_s:g} s ran out after "
+                 f"{len(records)} of {len(run.plan)} steps")
+    has_candidate = shown.verdict.candidate is not None and shown.view.is_identity and \
+        shown.coarser_view is None and not shown.matched
+    rejected = None if not has_candidate else rejected_candidate(
+        verdict.candidate, verdict.candidate_inliers, config.model, shown.step.direction,
+        verdict.test, verdict.evidence.log10_nfa,
+        figures(verdict.test, verdict.evidence, config.decision))
+    return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
+                       evidence=evidence_of(shown, run, None, search.work),
+                       **_common(search, run, shown))
+
+
+def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
+                     near) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
+    """(the pixel tests' figures, None) for a winner's refit ``fit`` that passes them
+    (:func:`stages.decision.final_checks`), or (figures, the "no" that refuses it)."""
+    config, verdict = search.config, winner.verdict
+    t, inliers, model = fit
+    coarse, fine = search.work.shown(winner.step.direction)
+    # a plain match of few inliers is confirmed by the first pass of views
+    # (search.stop_reason); without one (no views, or the time budget spent), the
+    # pixels must show it more clearly unique
+    unconfirmed = winner.step.view_pass == 0 and \
+        verdict.evidence.inliers < config.views.confirm_below_inliers and \
+        not any(r.view_pass > 0 for r in run.records)
+    claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2], unconfirmed=unconfirmed)
+    final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
+                                       pixel=config.pixel)
+    if not reason:
+        return final, None
+    applied = replace(config.decision,  # the uniqueness ratio it faced
+                      min_unique_ratio=unique_threshold(config.decision, unconfirmed))
+    return final, MatchResult(
+        matched=False, reason=reason, rejected=rejected_candidate(
+            t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
+            figures(test, verdict.evidence, applied, final)),
+        evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
+
+
+def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
+             final: Optional[FinalFigures], pinned: Optional[Pinned] = None) -> MatchResult:
+    """The match: the winner's final ``fit`` turned to map the finer image to the coarser one,
+    its ratio, angle and translation, and its evidence with the answer's parallax and how
+    firmly its inliers pin it (``pinned``, :func:`pinned_answer`)."""
+    t, inliers, model = fit
+    has_ratio = model_of(model).has_ratio
+    seen = answer_parallax(winner, t, model, search.config) if has_ratio else plane_parallax(
+        inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
+    if pinned is not None:
+        work = search.work
+        seen = dict(seen, **pinned.figures(
+            work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
+    if not has_ratio and len(inliers) >= model_of(model).min_sample:
+        t = refine_fundamental(t, inliers[:, :2], inliers[:, 2:])  # LM on the Sampson error
+    t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
+                                           has_ratio)
+    ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
+        math.nan, math.nan, (math.nan, math.nan))
+    return MatchResult(**dict(_common(search, run, winner), model=model,
+                              best_scale=winner.verdict.best_scale * winner.view.scale),
+                       matched=True, transform=t, resolution_ratio=ratio, rotation_deg=angle,
+                       translation=tr, inliers=inliers,
+                       evidence=evidence_of(winner, run, final, search.work, seen),
+                       order=Direction.SWAPPED if swapped else Direction.GIVEN)
+
+
+def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config) -> dict:
+    """The parallax figures (``Evidence.parallax_points``, ``parallax``) of the answer's own
+    map ``t`` (the images' pixels at working size, the finer image's to the coarser one's),
+    over every candidate of its winning scale. Counted against the map answered, not the
+    scale's similarity: a plane seen in perspective (Oxford graf 1 -> 2, wall 1 -> 3) leaves
+    true matches off a similarity that an epipolar geometry explains (551 and 1598 such
+    points), which its homography, the answer, holds (8 and 3)."""
+    params = config.decision
+    src, dst = candidates_in_images(attempt.view, attempt.winning_outcome(),
+                                    attempt.coarser_view)
+    if len(src) == 0:
+        return {}
+    held = residuals(model, t, src, dst) <= config.ransac.threshold_px
+    fit = EpipolarFit(params.parallax_threshold_px, params.parallax_min_candidates,
+                      params.parallax_confidence)
+    n = off_plane(src, dst, held, fit, config.seed, t, params.parallax_max_offset)
+    k = len(distinct_pairs(src[held], dst[held])[0])
+    return {"parallax_points": n,
+            "parallax": n >= max(params.parallax_min_points, params.parallax_share * k)}
