@@ -37,7 +37,7 @@ import numpy as np
 from . import __version__
 from .errors import internal_error, interrupted
 from .config import MAX_SCALES, MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, decoder_stderr_caught, grey_of_file
 from .result import MatchResult, dumps
 
 if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
@@ -840,6 +840,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
+    click.get_current_context().with_resource(decoder_stderr_caught())  # stderr is ours
     if quiet and verbose:
         raise click.UsageError("-q (--quiet) and -v (--verbose) exclude each other; give one.")
     config = _config_from(kwargs)
@@ -1174,6 +1175,7 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     {exit_codes}
     """
     ctx = click.get_current_context()
+    ctx.with_resource(decoder_stderr_caught())  # stderr is ours: the decoders' words are caught
     if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
         raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
                                "workers' threads set the parallelism.")
