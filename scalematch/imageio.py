@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import mmap
 import os
 import stat
 import sys
@@ -51,8 +52,8 @@ from typing import Any, Iterator, List, NamedTuple, Optional, Tuple
 import cv2
 import numpy as np
 
-from .headers import (IMAGE_SIGNATURES, JPEG_SOI, PNG_SIGNATURE, TIFF_SIGNATURES, BadHeader,
-                      Header, header, header_may_follow, png_chunk_problem)
+from .headers import (IMAGE_SIGNATURES, JPEG_SOI, MAX_TIFF_PAGES, PNG_SIGNATURE, TIFF_SIGNATURES,
+                      BadHeader, Header, header, header_may_follow, png_chunk_problem, tiff_pages)
 from .stages.detector import MIN_SIDE_PX
 
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
@@ -176,7 +177,9 @@ def _levels_problem(img: np.ndarray) -> str:
 def grey_of_file(image: np.ndarray, path: str | Path) -> np.ndarray:
     """The grey levels (:func:`to_grey`) of ``image``, decoded from the file ``path``;
     ``ImageError`` naming the file when they leave nothing to match (a constant image, NaN
-    or infinite values), as :func:`grey_levels` would without its name.
+    or infinite values), as :func:`grey_levels` would without its name. Of a TIFF of several
+    pages only the first is decoded, and a blank first page is common (a cover, a mask): the
+    message then says so.
 
     >>> grey_of_file(np.full((30, 40), 7, np.uint8), "flat.png")
     Traceback (most recent call last):
@@ -186,8 +189,30 @@ def grey_of_file(image: np.ndarray, path: str | Path) -> np.ndarray:
     grey = to_grey(image)
     problem = _levels_problem(grey)
     if problem:
+        pages = _pages(Path(path))
+        if pages > 1:  # the page read may not be the one the user looks at
+            more = " or more" if pages >= MAX_TIFF_PAGES else ""
+            raise ImageError(f"{path}: image {problem}; the file is a TIFF of {pages}{more} "
+                             f"pages and only the first is read: save the page wanted as an "
+                             f"image file of its own")
         raise ImageError(f"{path}: image {problem}")
     return grey
+
+
+def _pages(p: Path) -> int:
+    """The pages of the file ``p`` when it is a TIFF (:func:`scalematch.headers.tiff_pages`,
+    the file mapped, not read); 1 for another format or a file that cannot be opened again."""
+    try:
+        fd, size = _open_regular(p)
+    except ImageError:
+        return 1
+    try:
+        with mmap.mmap(fd, size, access=mmap.ACCESS_READ) as data:
+            return max(tiff_pages(data), 1)
+    except (OSError, ValueError):  # emptied since it was read, cannot be mapped
+        return 1
+    finally:
+        os.close(fd)
 
 
 def _orient(img: np.ndarray, orientation: int) -> np.ndarray:

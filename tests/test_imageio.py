@@ -256,6 +256,26 @@ def test_a_jpeg_pillow_refuses_has_its_size_read_from_its_frame_header():
     assert header(bytes(data)).size == (64, 48)
 
 
+def test_the_pages_of_a_tiff_are_counted_as_opencv_counts_them(tmp_path):
+    """Classic TIFF and BigTIFF of 3 pages, as OpenCV counts them; a chain of directories that
+    loops, or points outside the file or past any file, ends the count; not a TIFF: 0."""
+    from scalematch.headers import PNG_SIGNATURE, tiff_pages
+
+    pages = [Image.fromarray(np.full((30, 40), 60 * k, np.uint8)) for k in range(3)]
+    for big in (False, True):
+        path = tmp_path / f"pages-{big}.tif"
+        pages[0].save(path, "TIFF", save_all=True, append_images=pages[1:], big_tiff=big)
+        data = path.read_bytes()
+        assert data[2:3] == (b"+" if big else b"*")
+        assert tiff_pages(data) == cv2.imcount(str(path)) == 3
+    last = struct.pack("<HI", 0, 0)
+    assert tiff_pages(b"II*\x00" + struct.pack("<IHI", 8, 0, 14) + last) == 2
+    assert tiff_pages(b"MM\x00*" + struct.pack(">IHI", 8, 0, 8)) == 1  # back to itself
+    assert tiff_pages(b"II*\x00" + struct.pack("<IHI", 8, 0, 999)) == 1  # beyond the file
+    assert tiff_pages(b"II+\x00" + struct.pack("<HHQ", 8, 0, 2 ** 64 - 1)) == 0
+    assert tiff_pages(b"II*") == tiff_pages(PNG_SIGNATURE) == 0
+
+
 @pytest.mark.parametrize("case, needle", [
     ("missing", "no such file"),
     ("directory", "is a directory"),
