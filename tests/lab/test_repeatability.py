@@ -211,7 +211,7 @@ def test_command_usage_errors(tmp_path, monkeypatch):
     assert res.exit_code == 2 and "WxH" in res.output
     monkeypatch.setenv("SCALEMATCH_SHARED", str(tmp_path))
     res = runner.invoke(repeatability_command, ["--out-dir", str(tmp_path / "o")])
-    assert res.exit_code == 1 and "no photos" in res.output
+    assert res.exit_code == 2 and "data/photos, which is not there" in res.output
 
 
 def test_python_dash_m_help():
