@@ -1106,7 +1106,8 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
 
     if client is not None:
         return batch.run_dask(pairs, config, max_pixels, client)
-    if jobs == 1 or len(pairs) <= 1:
+    if jobs == 1 or len(pairs) <= 1:  # decoded here: stderr is ours, the decoders' words caught
+        click.get_current_context().with_resource(decoder_stderr_caught())
         return batch.run_serial(pairs, config, max_pixels)
     return batch.run_pool(pairs, config, max_pixels, jobs)
 
@@ -1175,7 +1176,6 @@ def batch_command(pairs_csv: Path, output: Optional[Path], retry_errors: bool, j
     {exit_codes}
     """
     ctx = click.get_current_context()
-    ctx.with_resource(decoder_stderr_caught())  # stderr is ours: the decoders' words are caught
     if scheduler is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
         raise click.UsageError("--jobs is for local processes; with --scheduler the Dask "
                                "workers' threads set the parallelism.")
