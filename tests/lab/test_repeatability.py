@@ -192,6 +192,7 @@ def test_run_study_is_seeded_and_skips_bad_files(tmp_path):
 # ---- command line ---------------------------------------------------------------------------
 
 def test_command_prints_table_and_writes_files(tmp_path):
+    pytest.importorskip("matplotlib")  # repeatability.png needs the lab extra
     out = tmp_path / "out"
     res = CliRunner().invoke(repeatability_command, [
         str(RACCOON), "--factors", "1,2", "--crop", "240x180", "--out-dir", str(out), "--silent"])
