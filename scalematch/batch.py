@@ -42,7 +42,7 @@ from typing import (Any, Callable, Collection, Dict, FrozenSet, Hashable, Iterab
 
 from .config import Config
 from .errors import internal_error, interrupted
-from .imageio import grey_of_file
+from .imageio import catch_decoder_stderr, grey_of_file
 from .pipeline import match, warm_up_blas
 from .result import dumps, error_record, to_jsonable
 from .working import read_pair
@@ -682,6 +682,7 @@ def _init_worker(parent_pid: int) -> None:
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     cv2.setNumThreads(1)
+    catch_decoder_stderr()  # its stderr is its own: the decoders' words go in the pair's line
     warm_up_blas()
 
 

@@ -37,7 +37,7 @@ import numpy as np
 from . import __version__
 from .errors import internal_error, interrupted
 from .config import MAX_SCALES, MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, grey_of_file
+from .imageio import DEFAULT_MAX_PIXELS, Decoded, ImageError, decoder_stderr_caught, grey_of_file
 from .result import MatchResult, dumps
 
 if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
@@ -857,6 +857,7 @@ def match_command(low: str, high: str, out_dir: Optional[Path], json_path: Optio
     Exit codes:
     {exit_codes}
     """
+    click.get_current_context().with_resource(decoder_stderr_caught())  # stderr is ours
     if quiet and verbose:
         raise click.UsageError("-q (--quiet) and -v (--verbose) exclude each other; give one.")
     config = _config_from(kwargs)
@@ -1139,7 +1140,8 @@ def _batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
 
     if client is not None:
         return batch.run_dask(pairs, config, max_pixels, client)
-    if jobs == 1 or len(pairs) <= 1:
+    if jobs == 1 or len(pairs) <= 1:  # decoded here: stderr is ours, the decoders' words caught
+        click.get_current_context().with_resource(decoder_stderr_caught())
         return batch.run_serial(pairs, config, max_pixels)
     return batch.run_pool(pairs, config, max_pixels, jobs)
 

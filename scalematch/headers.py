@@ -394,6 +394,44 @@ def tiff_header(data: bytes) -> Optional[Header]:
     return Header((tags[256], tags[257]), orientation if 1 <= orientation <= 8 else 1, -1)
 
 
+#: Most pages (image file directories) of a TIFF counted by :func:`tiff_pages`: a chain of them
+#: is followed one offset at a time, and a hostile file's chain may be as long as the file has
+#: room for 6-byte directories; a real stack of pages (a scan, a microscope series) has fewer
+MAX_TIFF_PAGES = 10_000
+
+
+def tiff_pages(data: bytes) -> int:
+    """The pages of the TIFF file whose bytes are ``data`` (a ``bytes``-like: an ``mmap`` of the
+    file will do): its image file directories, following the chain of next-directory offsets
+    from the first, classic TIFF or BigTIFF. The walk stops at a 0 offset (the last page), at a
+    directory seen before (a loop), at one not within ``data``, or at ``MAX_TIFF_PAGES``. 0 when
+    ``data`` is no TIFF. OpenCV decodes the first page only.
+
+    >>> one = struct.pack("<HI", 0, 0)  # a directory of no entry, and no next one
+    >>> tiff_pages(b"II*\\x00" + struct.pack("<IHI", 8, 0, 14) + one)
+    2
+    >>> tiff_pages(b"II*\\x00" + struct.pack("<IHI", 8, 0, 8))  # a loop
+    1
+    """
+    if bytes(data[:4]) not in TIFF_SIGNATURES:
+        return 0
+    order = "<" if bytes(data[:2]) == b"II" else ">"
+    big = bytes(data[2:4]) in (b"+\x00", b"\x00+")
+    offset, count, entry = ("Q", "Q", 20) if big else ("I", "H", 12)
+    seen = set()
+    try:
+        at = struct.unpack_from(order + offset, data, 8 if big else 4)[0]
+        while at and at not in seen and len(seen) < MAX_TIFF_PAGES:
+            n = struct.unpack_from(order + count, data, at)[0]
+            after = struct.unpack_from(order + offset, data,
+                                       at + struct.calcsize(count) + entry * n)[0]
+            seen.add(at)
+            at = after
+    except (struct.error, OverflowError):  # a directory not within ``data``: the pages before
+        pass
+    return len(seen)
+
+
 # --------------------------------------------------------------------------- text headers
 
 #: The size line of a Radiance HDR file: "-Y 480 +X 640" (rows first) or "+X 640 -Y 480".

@@ -17,12 +17,18 @@ decodes the pixels (faster than Pillow, and holding the image once: docs/design/
 "Decoding: OpenCV, not Pillow").
 
 The decoders' own words: libpng, libjpeg and libtiff write what they find wrong straight to the
-process's stderr (file descriptor 2, past ``sys.stderr``). It is caught while a file is decoded
-(:func:`native_stderr`) and said once, in this module's words, naming the file: a file the
-decoder refuses is an ``ImageError`` that quotes the decoder; a file it decodes while saying
-something (a damaged JPEG: "Corrupt JPEG data: premature end of data segment") is used as
-decoded, and what the decoder said is its warning (``Decoded.warning``; an ``ImageWarning``
-from :func:`read_image` and :func:`read_grey`).
+process's stderr (file descriptor 2, past ``sys.stderr``), and OpenCV gives no other way to
+hear them. Descriptor 2 belongs to the whole process, so by default the library leaves it
+alone: the decoders' lines reach stderr as they write them, a file the decoder refuses (OpenCV
+gives no image) is an ``ImageError`` saying the file is corrupt, and a file it decodes while
+saying something is used as decoded. A process that owns its stderr turns on
+:func:`catch_decoder_stderr` (the command line does, while a command runs, and the batch's
+worker processes): each decode then catches those lines (:func:`native_stderr`) and says them
+once, in this module's words, naming the file: a file the decoder refuses is an ``ImageError``
+that quotes the decoder; a file it decodes while saying something (a damaged JPEG: "Corrupt
+JPEG data: premature end of data segment") is used as decoded, and what the decoder said is
+its warning (``Decoded.warning``; an ``ImageWarning`` from :func:`read_image` and
+:func:`read_grey`).
 
 The EXIF orientation (JPEG, WebP, PNG ``eXIf`` before the pixels, TIFF) is read from the header
 and applied here (the file is decoded with ``IMREAD_IGNORE_ORIENTATION``), so the result does
@@ -33,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import mmap
 import os
 import stat
 import sys
@@ -45,8 +52,8 @@ from typing import Any, Iterator, List, NamedTuple, Optional, Tuple
 import cv2
 import numpy as np
 
-from .headers import (IMAGE_SIGNATURES, JPEG_SOI, PNG_SIGNATURE, TIFF_SIGNATURES, BadHeader,
-                      Header, header, header_may_follow, png_chunk_problem)
+from .headers import (IMAGE_SIGNATURES, JPEG_SOI, MAX_TIFF_PAGES, PNG_SIGNATURE, TIFF_SIGNATURES,
+                      BadHeader, Header, header, header_may_follow, png_chunk_problem, tiff_pages)
 from .stages.detector import MIN_SIDE_PX
 
 #: Largest image decoded by default, in pixels (100 megapixels: ~400 MB as float32 grey).
@@ -170,7 +177,9 @@ def _levels_problem(img: np.ndarray) -> str:
 def grey_of_file(image: np.ndarray, path: str | Path) -> np.ndarray:
     """The grey levels (:func:`to_grey`) of ``image``, decoded from the file ``path``;
     ``ImageError`` naming the file when they leave nothing to match (a constant image, NaN
-    or infinite values), as :func:`grey_levels` would without its name.
+    or infinite values), as :func:`grey_levels` would without its name. Of a TIFF of several
+    pages only the first is decoded, and a blank first page is common (a cover, a mask): the
+    message then says so.
 
     >>> grey_of_file(np.full((30, 40), 7, np.uint8), "flat.png")
     Traceback (most recent call last):
@@ -180,8 +189,30 @@ def grey_of_file(image: np.ndarray, path: str | Path) -> np.ndarray:
     grey = to_grey(image)
     problem = _levels_problem(grey)
     if problem:
+        pages = _pages(Path(path))
+        if pages > 1:  # the page read may not be the one the user looks at
+            more = " or more" if pages >= MAX_TIFF_PAGES else ""
+            raise ImageError(f"{path}: image {problem}; the file is a TIFF of {pages}{more} "
+                             f"pages and only the first is read: save the page wanted as an "
+                             f"image file of its own")
         raise ImageError(f"{path}: image {problem}")
     return grey
+
+
+def _pages(p: Path) -> int:
+    """The pages of the file ``p`` when it is a TIFF (:func:`scalematch.headers.tiff_pages`,
+    the file mapped, not read); 1 for another format or a file that cannot be opened again."""
+    try:
+        fd, size = _open_regular(p)
+    except ImageError:
+        return 1
+    try:
+        with mmap.mmap(fd, size, access=mmap.ACCESS_READ) as data:
+            return max(tiff_pages(data), 1)
+    except (OSError, ValueError):  # emptied since it was read, cannot be mapped
+        return 1
+    finally:
+        os.close(fd)
 
 
 def _orient(img: np.ndarray, orientation: int) -> np.ndarray:
@@ -422,6 +453,36 @@ NATIVE_LINES, NATIVE_LINE_CHARS = 3, 200
 #: File descriptor 2 belongs to the whole process: one decode at a time has it redirected (a
 #: block inside another, in the same thread, redirects it again and gives it back to the outer).
 _STDERR_LOCK = threading.RLock()
+#: Whether each decode catches what the native decoders write on descriptor 2
+#: (:func:`catch_decoder_stderr`); off: a library must not take its caller's stderr, whose
+#: other threads would have their lines caught and quoted as the decoder's
+_catching = False
+
+
+def catch_decoder_stderr(on: bool = True) -> bool:
+    """Whether each decode in this process, from now on, catches what the native decoders write
+    on file descriptor 2 and says it in this module's words (``on``); the setting it replaces.
+
+    Off by default. While a decode catches them, descriptor 2 points at a temporary file
+    (:func:`native_stderr`) and OpenCV's own log is silenced, for the whole process: whatever
+    another thread writes to stderr meanwhile is lost (caught, and quoted as the decoder's).
+    Turn it on only in a process whose stderr is its own and quiet while it decodes: the
+    command line (it decodes before its progress bar starts), a worker process.
+    """
+    global _catching
+    before, _catching = _catching, bool(on)
+    return before
+
+
+@contextlib.contextmanager
+def decoder_stderr_caught() -> Iterator[None]:
+    """:func:`catch_decoder_stderr` on while the block runs, as it was after (a command run
+    inside a caller's process leaves the setting as it found it)."""
+    before = catch_decoder_stderr(True)
+    try:
+        yield
+    finally:
+        catch_decoder_stderr(before)
 
 
 @contextlib.contextmanager
@@ -618,21 +679,17 @@ def _decode(p: Path, raw: bytearray, head: Header, max_pixels: int, min_side: in
 def _imdecode(p: Path, raw: bytearray, flags: int, size: Tuple[int, int]
               ) -> Tuple[np.ndarray, str]:
     """OpenCV's decode of ``raw`` (the bytes of ``p``, an image of ``size`` (w, h) px) with
-    ``flags``, its log silenced and what the native decoder says on stderr caught: (the image,
-    the decoder's words quoted by :func:`decoder_words`, "" when it said nothing).
-    ``ImageError`` quoting the decoder when it gives no image; ``MemoryError`` when that is for
-    want of memory."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        with native_stderr() as said:
-            img = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags)
-    except cv2.error as exc:
-        if "Insufficient memory" in str(exc):
-            raise MemoryError(f"{p}: no memory to decode the image") from exc
-        img = None
-    finally:
-        cv2.utils.logging.setLogLevel(level)
+    ``flags``: (the image, the decoder's words quoted by :func:`decoder_words`, "" when it said
+    nothing or they were not caught). They are caught, OpenCV's log silenced meanwhile, only
+    where :func:`catch_decoder_stderr` is on. ``ImageError`` (quoting the decoder when its
+    words were caught) when it gives no image; ``MemoryError`` when that is for want of memory.
+    """
+    said: List[str] = []
+    if _catching:
+        with native_stderr() as said, _opencv_log_silenced():
+            img = _cv_decode(p, raw, flags)
+    else:
+        img = _cv_decode(p, raw, flags)
     words = decoder_words(said)
     if img is None:
         _room_for(p, size)  # out of memory is not a corrupt file
@@ -641,6 +698,31 @@ def _imdecode(p: Path, raw: bytearray, flags: int, size: Tuple[int, int]
                              f"says {words}; the file is corrupt, copy or download it again")
         raise _corrupt(p)
     return img, words
+
+
+def _cv_decode(p: Path, raw: bytearray, flags: int) -> Optional[np.ndarray]:
+    """``cv2.imdecode`` of ``raw`` (the bytes of ``p``) with ``flags``: None when OpenCV gives
+    no image or raises; ``MemoryError`` when it raises for want of memory."""
+    try:
+        return cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), flags)
+    except cv2.error as exc:
+        if "Insufficient memory" in str(exc):
+            raise MemoryError(f"{p}: no memory to decode the image") from exc
+        return None
+
+
+@contextlib.contextmanager
+def _opencv_log_silenced() -> Iterator[None]:
+    """OpenCV's log silenced while the block runs (its lines would be caught with the
+    decoder's, as if the decoder said them), its level as it was after. The level is the
+    process's: only under :func:`native_stderr`'s lock, so two threads do not each restore
+    the other's silence."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
 
 
 def read_image(path: str | Path, max_pixels: int = DEFAULT_MAX_PIXELS,

@@ -390,6 +390,24 @@ def test_a_constant_image_is_named_and_leaves_no_out_dir(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_tiff_whose_first_page_is_blank_says_it_has_pages(tmp_path):
+    """OpenCV decodes a TIFF's first page only: a blank first page (the page the user looks at
+    is another) is exit 2 in one line that says how many pages the file has, which one was
+    read and what to do; a one-page constant TIFF is refused in the words of any constant
+    image."""
+    texture = cv2.imread(str(DEMO_LOW), cv2.IMREAD_GRAYSCALE)
+    pages = tmp_path / "pages.tif"
+    assert cv2.imwritemulti(str(pages), [np.zeros_like(texture), texture])
+    last = assert_one_line_error(run(pages, DEMO_HIGH, "-q"))
+    assert last == (f"Error: {pages}: image is constant (every pixel 0): there is nothing to "
+                    f"match in it; the file is a TIFF of 2 pages and only the first is read: "
+                    f"save the page wanted as an image file of its own")
+    one = tmp_path / "one.tif"
+    assert cv2.imwrite(str(one), np.zeros_like(texture))
+    last = assert_one_line_error(run(one, DEMO_HIGH, "-q"))
+    assert last == f"Error: {one}: image is constant (every pixel 0): there is nothing to match in it"
+
+
 def test_a_refused_match_removes_the_out_dir_it_made(tmp_path, monkeypatch, flat_pair):
     """An input the match itself refuses (after the folders of -o are made) leaves none of
     them behind; a folder that was there stays."""

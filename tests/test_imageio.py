@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import warnings
 import zlib
 from pathlib import Path
 
@@ -14,8 +15,8 @@ import pytest
 
 from PIL import Image
 
-from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, ImageWarning, header, read_grey,
-                                read_image, read_reduced, to_bgr8, to_grey)
+from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, ImageWarning, decoder_stderr_caught,
+                                header, read_grey, read_image, read_reduced, to_bgr8, to_grey)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -255,6 +256,26 @@ def test_a_jpeg_pillow_refuses_has_its_size_read_from_its_frame_header():
     assert header(bytes(data)).size == (64, 48)
 
 
+def test_the_pages_of_a_tiff_are_counted_as_opencv_counts_them(tmp_path):
+    """Classic TIFF and BigTIFF of 3 pages, as OpenCV counts them; a chain of directories that
+    loops, or points outside the file or past any file, ends the count; not a TIFF: 0."""
+    from scalematch.headers import PNG_SIGNATURE, tiff_pages
+
+    pages = [Image.fromarray(np.full((30, 40), 60 * k, np.uint8)) for k in range(3)]
+    for big in (False, True):
+        path = tmp_path / f"pages-{big}.tif"
+        pages[0].save(path, "TIFF", save_all=True, append_images=pages[1:], big_tiff=big)
+        data = path.read_bytes()
+        assert data[2:3] == (b"+" if big else b"*")
+        assert tiff_pages(data) == cv2.imcount(str(path)) == 3
+    last = struct.pack("<HI", 0, 0)
+    assert tiff_pages(b"II*\x00" + struct.pack("<IHI", 8, 0, 14) + last) == 2
+    assert tiff_pages(b"MM\x00*" + struct.pack(">IHI", 8, 0, 8)) == 1  # back to itself
+    assert tiff_pages(b"II*\x00" + struct.pack("<IHI", 8, 0, 999)) == 1  # beyond the file
+    assert tiff_pages(b"II+\x00" + struct.pack("<HHQ", 8, 0, 2 ** 64 - 1)) == 0
+    assert tiff_pages(b"II*") == tiff_pages(PNG_SIGNATURE) == 0
+
+
 @pytest.mark.parametrize("case, needle", [
     ("missing", "no such file"),
     ("directory", "is a directory"),
@@ -326,37 +347,52 @@ def jpeg_with_a_cut_scan(img: np.ndarray) -> bytes:
 
 def test_a_png_with_a_bad_crc_is_refused_in_one_line_quoting_libpng(tmp_path, bgr, capfd):
     """libpng refuses the file and says why on the process's stderr ("libpng error: IDAT: CRC
-    error"): its words come once, in the error naming the file, and nothing reaches stderr."""
+    error"). Where the decoders' words are caught: they come once, in the error naming the
+    file, and nothing reaches stderr. By default (a library leaves its caller's stderr alone):
+    the file is refused as corrupt, and libpng's line reaches stderr as libpng writes it."""
     path = write(tmp_path / "crc.png", png_with_bad_idat_crc(bgr))
-    with pytest.raises(ImageError) as err:
+    with decoder_stderr_caught(), pytest.raises(ImageError) as err:
         read_grey(path)
     assert str(err.value) == (f'{path}: cannot decode the image: the PNG decoder says "IDAT: CRC '
                               f'error"; the file is corrupt, copy or download it again')
     assert capfd.readouterr().err == ""
+    with pytest.raises(ImageError) as err:
+        read_grey(path)
+    assert str(err.value) == (f"{path}: cannot decode the image (the file looks truncated or "
+                              f"corrupt); copy or download it again")
+    assert capfd.readouterr().err == "libpng error: IDAT: CRC error\n"
 
 
 def test_a_damaged_jpeg_that_decodes_is_used_with_one_warning(tmp_path, bgr, capfd):
-    """The same warning at full and at reduced size, as ``Decoded.warning`` and as an
-    ``ImageWarning`` of read_grey; the image as libjpeg decodes it (the top intact, the rest
-    grey); nothing from libjpeg on stderr. A truncated JPEG (no end-of-image marker) is still
-    refused."""
+    """Where the decoders' words are caught: the same warning at full and at reduced size, as
+    ``Decoded.warning`` and as an ``ImageWarning`` of read_grey; the image as libjpeg decodes
+    it (the top intact, the rest grey); nothing from libjpeg on stderr. A truncated JPEG (no
+    end-of-image marker) is still refused. By default: the same image, no warning of
+    scalematch's, libjpeg's line on stderr as libjpeg writes it."""
     data = jpeg_with_a_cut_scan(bgr)
     path = write(tmp_path / "cut-scan.jpg", data)
     said = (f'{path}: the JPEG decoder says "Corrupt JPEG data: premature end of data segment"; '
             f'the image is used as decoded (copy or download the file again if it is damaged)')
-    full, reduced = read_reduced(path, None), read_reduced(path, at_least=40)
-    assert (full.factor, reduced.factor) == (1, 4)
-    assert full.warning == reduced.warning == said
-    with pytest.warns(ImageWarning) as caught:
-        grey = read_grey(path)
-    assert [str(w.message) for w in caught] == [said]
-    assert caught[0].filename == __file__  # the warning points at the caller's line
-    intact = to_grey(cv2.imdecode(np.frombuffer(jpeg_bytes(bgr), np.uint8), cv2.IMREAD_COLOR))
-    assert np.abs(grey[:16] - intact[:16]).max() < 1.0  # the first row of blocks, as decoded
-    assert read_reduced(write(tmp_path / "good.jpg", jpeg_bytes(bgr)), None).warning == ""
-    with pytest.raises(ImageError, match="truncated"):
-        read_grey(write(tmp_path / "truncated.jpg", data[:-2]))
+    with decoder_stderr_caught():
+        full, reduced = read_reduced(path, None), read_reduced(path, at_least=40)
+        assert (full.factor, reduced.factor) == (1, 4)
+        assert full.warning == reduced.warning == said
+        with pytest.warns(ImageWarning) as caught:
+            grey = read_grey(path)
+        assert [str(w.message) for w in caught] == [said]
+        assert caught[0].filename == __file__  # the warning points at the caller's line
+        intact = to_grey(cv2.imdecode(np.frombuffer(jpeg_bytes(bgr), np.uint8),
+                                      cv2.IMREAD_COLOR))
+        assert np.abs(grey[:16] - intact[:16]).max() < 1.0  # the first row of blocks, as decoded
+        assert read_reduced(write(tmp_path / "good.jpg", jpeg_bytes(bgr)), None).warning == ""
+        with pytest.raises(ImageError, match="truncated"):
+            read_grey(write(tmp_path / "truncated.jpg", data[:-2]))
     assert capfd.readouterr().err == ""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(read_grey(path), grey)
+    assert read_reduced(path, None).warning == ""
+    assert capfd.readouterr().err == "Corrupt JPEG data: premature end of data segment\n" * 2
 
 
 def test_native_stderr_catches_fd_2_and_gives_it_back(capfd):
@@ -391,12 +427,62 @@ def test_threads_decoding_damaged_files_each_get_their_own_words(tmp_path, bgr, 
             return str(exc)
 
     paths = [jpeg, png] * 40
-    with ThreadPoolExecutor(4) as pool:
+    with decoder_stderr_caught(), ThreadPoolExecutor(4) as pool:
         out = list(pool.map(said, paths))
     for path, text in zip(paths, out):
         assert text.startswith(f"{path}: "), text
         assert ("premature end" in text) == (path == jpeg) and ("CRC" in text) == (path == png)
     assert capfd.readouterr().err == ""
+
+
+#: A program using the library: a thread says its progress on descriptor 2 (numbered lines)
+#: while the main thread reads damaged files, whose decoders write there too; then the number
+#: of lines the thread wrote, on stdout.
+TALKING_THREAD = """
+import os, sys, threading, time, warnings
+from scalematch import ImageError, read_grey
+
+warnings.simplefilter("ignore")
+done, said = threading.Event(), [0]
+
+def talk():
+    while not done.is_set():
+        os.write(2, b"<progress %d>\\n" % said[0])
+        said[0] += 1
+        time.sleep(0.0001)
+
+thread = threading.Thread(target=talk)
+thread.start()
+for _ in range(int(sys.argv[1])):
+    for path in sys.argv[2:]:
+        try:
+            read_grey(path)
+        except ImageError:
+            pass
+done.set()
+thread.join()
+print(said[0])
+"""
+
+
+def test_the_library_leaves_the_callers_stderr_alone(tmp_path):
+    """By default a read does not take descriptor 2 from the process: every line another
+    thread writes there while damaged files are read (which libpng and libjpeg talk about on
+    stderr) reaches stderr, none caught and none lost."""
+    import re
+    import subprocess
+    import sys
+
+    demo = cv2.imread(str(ROOT / "data" / "demo_low.png"), cv2.IMREAD_COLOR)
+    crc = write(tmp_path / "crc.png", png_with_bad_idat_crc(demo))
+    cut = write(tmp_path / "cut-scan.jpg", jpeg_with_a_cut_scan(demo))
+    run = subprocess.run([sys.executable, "-c", TALKING_THREAD, "60", crc, cut],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    written = int(run.stdout)
+    arrived = [int(n) for n in re.findall(r"<progress (\d+)>", run.stderr)]
+    assert written > 0 and arrived == list(range(written))
+    assert run.stderr.count("IDAT: CRC error") == run.stderr.count("premature end of data") == 60
 
 
 def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, bgr):
@@ -405,7 +491,8 @@ def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, 
     set up, as pytest sets it up): a PNG with a bad CRC, a TIFF of 16003 samples per pixel
     (which Pillow logs as it gives up) and a truncated JPEG are exit 2 with one "Error:" line
     naming the file; a JPEG whose scan is cut short is matched as decoded, silent under -q,
-    its warning in the JSON (and in a batch line), one "Warning:" line without -q."""
+    its warning in the JSON (and in a batch line, matched here or by a worker process), one
+    "Warning:" line without -q."""
     import json
     import subprocess
     import sys
@@ -447,12 +534,13 @@ def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, 
     said = cli(cut, high, "--no-views").stderr.splitlines()
     assert said[0] == f"Warning: {warning}" and len(said) == 2, said  # then the verdict
     pairs = write(tmp_path / "pairs.csv", f"{cut},{high}\n{crc},{high}\n".encode())
-    batch = cli("batch", pairs, "--no-views", "-q")
-    assert batch.returncode == 3 and batch.stderr == "", batch.stderr
-    lines = [json.loads(line) for line in batch.stdout.splitlines()]  # as the pairs finish
-    failed, done = sorted(lines, key=lambda line: "error" not in line)
-    assert failed["error"].startswith(f"{crc}: cannot decode the image: the PNG decoder says")
-    assert {done["low"]["warning"], done["high"]["warning"]} == {warning, None}
+    for jobs in ("1", "2"):  # in this process, and in worker processes
+        batch = cli("batch", pairs, "--no-views", "-q", "--jobs", jobs)
+        assert batch.returncode == 3 and batch.stderr == "", batch.stderr
+        lines = [json.loads(line) for line in batch.stdout.splitlines()]  # as pairs finish
+        failed, done = sorted(lines, key=lambda line: "error" not in line)
+        assert failed["error"].startswith(f"{crc}: cannot decode the image: the PNG decoder says")
+        assert {done["low"]["warning"], done["high"]["warning"]} == {warning, None}
 
 
 def test_to_bgr8_layouts(bgr):

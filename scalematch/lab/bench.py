@@ -46,7 +46,7 @@ import cv2
 import numpy as np
 
 from .baselines import BASELINES, MIN_INLIERS, make_detector, match_baseline
-from .datasets import boat_pairs, find_shared, list_photos, scene_of
+from .datasets import boat_pairs, find_shared, list_photos, require_shared, scene_of
 from .evaluation import SUCCESS_PX, is_success, reprojection_error, similarity_floor
 from ..geometry import similarity_parts
 from ..imageio import read_grey
@@ -907,6 +907,7 @@ def bench_command(ctx, shared, out_dir, crop, ratios, photos, seed, methods, unr
     Example: scalematch lab bench --photos 10 --methods sift,orb,akaze,brisk
     """
     log = (lambda s: None) if silent else (lambda s: click.echo(s, err=True))
+    shared = require_shared(shared)
     try:
         report = run_benchmark(shared=shared, out_dir=out_dir, ratios=ratios, photos=photos,
                                seed=seed, methods=methods, unrelated=unrelated, jobs=jobs,

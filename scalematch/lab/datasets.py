@@ -30,15 +30,48 @@ BOAT_LOW_INDICES = (2, 3, 4, 5, 6)
 PathLike = Union[str, Path]
 
 
-def find_shared(env: Optional[dict] = None) -> Optional[Path]:
-    """The shared folder: ``$SCALEMATCH_SHARED``, else ``<repo root>/../shared``; None if absent."""
+#: The command line's exit code of bad input or usage (``scalematch.cli.EXIT_BAD_INPUT``): a lab
+#: command whose data is not where it looked was not told where the data is; not 1, which the
+#: command line keeps for "no reliable match" (and the lab's gates for a failed gate)
+EXIT_NO_DATA = 2
+#: How to point a lab command with a ``--shared`` option at the shared folder
+POINT_WITH_OPTION = f"point at the shared folder with --shared DIR or {SHARED_ENV}=DIR"
+
+
+class SharedDataMissing(click.ClickException):
+    """The shared data a lab command needs is not where it looked: ``Error: ...`` on stderr,
+    saying where it looked and how to point at the folder, and exit 2 (``EXIT_NO_DATA``)."""
+
+    exit_code = EXIT_NO_DATA
+
+
+def shared_place(env: Optional[dict] = None) -> Tuple[Path, str]:
+    """Where the shared folder is looked for, and what says so: the folder of
+    ``$SCALEMATCH_SHARED`` when it is set, else ``<repo root>/../shared``."""
     env = os.environ if env is None else env
     value = env.get(SHARED_ENV)
     if value:
-        p = Path(value).expanduser()
-        return p if p.is_dir() else None
-    p = Path(__file__).resolve().parents[3] / "shared"
-    return p if p.is_dir() else None
+        return Path(value).expanduser(), f"from ${SHARED_ENV}"
+    return (Path(__file__).resolve().parents[3] / "shared",
+            f"../shared beside the repository, as ${SHARED_ENV} is not set")
+
+
+def find_shared(env: Optional[dict] = None) -> Optional[Path]:
+    """The shared folder: ``$SCALEMATCH_SHARED``, else ``<repo root>/../shared``; None if absent."""
+    place, _ = shared_place(env)
+    return place if place.is_dir() else None
+
+
+def require_shared(shared: Optional[PathLike] = None, subdir: PathLike = "data/photos",
+                   point: str = POINT_WITH_OPTION) -> Path:
+    """The shared folder a lab command reads: ``shared`` (its ``--shared``), else where
+    :func:`find_shared` looks; ``SharedDataMissing`` when its ``subdir`` (the part the command
+    needs) is not there, saying where it looked and how to point at the folder (``point``)."""
+    place, why = (Path(shared), "from --shared") if shared is not None else shared_place()
+    if (place / subdir).is_dir():
+        return place
+    raise SharedDataMissing(f"the shared data is missing: this command reads {place / subdir}, "
+                            f"which is not there ({why}); {point}")
 
 
 def shared_subfolder(subdir: PathLike, shared: Optional[PathLike] = None) -> Optional[Path]:
@@ -101,16 +134,16 @@ def study_photos(images, n_photos: Optional[int], silent: bool):
     """(paths, progress) of a study command: the images given, else the shared photos, the
     first ``n_photos`` of them; ``progress(name)`` prints "[k/N] name" (None when silent).
 
-    Raises ``click.ClickException`` when there is no photo.
+    Raises ``SharedDataMissing`` when there is no photo.
     """
+    point = f"give image paths, or point at the shared folder with {SHARED_ENV}=DIR"
     if images:
         paths = [Path(p) for p in images]
     else:
-        shared = find_shared()
-        paths = list_photos(shared) if shared is not None else []
+        paths = list_photos(require_shared(point=point))
     if not paths:
-        raise click.ClickException("no photos: give image paths, or set SCALEMATCH_SHARED to a "
-                                   "folder with data/photos")
+        place, why = shared_place()
+        raise SharedDataMissing(f"no photos in {place / 'data' / 'photos'} ({why}); {point}")
     if n_photos is not None:
         paths = paths[:n_photos]
     total = len(paths)

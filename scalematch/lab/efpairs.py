@@ -38,7 +38,7 @@ import numpy as np
 from ..geometry import epipolar_distances as geometric_distances
 from ..result import Direction
 from .baselines import RATIO_TEST, detect_and_describe, make_detector, ratio_matches, to_uint8
-from .datasets import shared_option, shared_subfolder
+from .datasets import require_shared, shared_option, shared_subfolder
 
 PathLike = Union[str, Path]
 
@@ -408,10 +408,7 @@ def ef_pairs_command(shared, pairs, methods, seed, out_dir, write_doc, silent):
     import datetime as _dt
     import sys
 
-    folder = ef_folder(shared)
-    if folder is None:
-        raise click.ClickException("../shared/data/ef is absent: this benchmark needs its pairs "
-                                   "(set SCALEMATCH_SHARED or --shared)")
+    folder = require_shared(shared, EF_SUBDIR) / EF_SUBDIR
     names = [n.strip() for n in pairs.split(",") if n.strip()] or pair_names(folder)
     known = pair_names(folder)
     for n in names:

@@ -50,7 +50,7 @@ import cv2
 import numpy as np
 
 from ..geometry import apply, compose, invert
-from .datasets import find_shared, list_photos, scene_of
+from .datasets import find_shared, list_photos, require_shared, scene_of
 from .synthetic import (HIGH_SIZE, LOW_MAX, _translation, choose_crop, make_zoom_pair,
                         pair_rng)
 
@@ -1067,7 +1067,7 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
         raise ValueError(f"mode must be one of {NULL_MODES}, got {mode!r}")
     shared_path = Path(shared) if shared is not None else find_shared()
     if shared_path is None or not (shared_path / "data" / "photos").is_dir():
-        raise ValueError("the shared data folder was not found: pass --shared or set "
+        raise ValueError("the shared data folder was not found: pass shared=... or set "
                          "SCALEMATCH_SHARED to the folder holding data/photos")
     paths = list_photos(shared_path)
     if photos is not None:
@@ -1302,6 +1302,7 @@ def nulls_command(ctx, shared, out_dir, ratios, photos, seed, mode, jobs, limit,
         raise click.BadParameter("give ratios >= 1, e.g. 2,4,8,16", param_hint="--ratios")
     if sample and limit is None:
         limit = 3
+    shared = require_shared(shared)
     try:
         report = run_nulls(shared=shared, out_dir=out_dir, ratios=ratio_list, photos=photos,
                            seed=seed, mode=mode, jobs=jobs, limit=limit, sift=sift,

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
-from .datasets import find_shared, list_photos, scene_of, shared_option
+from .datasets import list_photos, require_shared, scene_of, shared_option
 from .evaluation import is_success, reprojection_error
 from .synthetic import (OBLIQUE_CASES, SPREADS, TILTS, make_oblique_pair,
                         make_perspective_pair, make_tilted_pair, pair_rng, pairs_from_photos,
@@ -596,9 +596,7 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
     import datetime as _dt
     import sys
 
-    shared = shared or find_shared()
-    if shared is None:
-        raise click.ClickException("../shared is absent: this benchmark needs its photos")
+    shared = require_shared(shared, "data")  # its photos, and its Oxford sequences
     wanted = [s.strip() for s in sets.split(",") if s.strip()]
     wanted = [x for s in wanted for x in (REALISTIC_SETS if s == "realistic" else (s,))]
     known = SET_ORDER + EXTRA_SETS + REALISTIC_SETS

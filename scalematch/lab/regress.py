@@ -49,7 +49,7 @@ import click
 import numpy as np
 
 from ..geometry import as_matrix3
-from .datasets import find_shared, list_photos, scene_of
+from .datasets import SharedDataMissing, list_photos, require_shared, scene_of
 from .evaluation import SUCCESS_PX
 from .synthetic import (FLAT_KINDS, FLAT_RATIOS, OBLIQUE_CASES, SPREADS, TILTS, high_size_for,
                         make_flat_pair, make_oblique_pair, make_perspective_pair,
@@ -666,13 +666,13 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
             configured(preset, Config, set_path)
         except (KeyError, ValueError, TypeError, click.ClickException) as exc:
             raise click.BadParameter(str(exc), param_hint="--preset") from None
-    shared = shared or find_shared()
-    if shared is None or not (Path(shared) / "data" / "photos").is_dir():
-        msg = "the shared folder (../shared or $SCALEMATCH_SHARED) is absent: the gate needs it"
+    try:
+        shared = require_shared(shared)
+    except SharedDataMissing as exc:
         if if_shared:
-            click.echo(f"regress: skipped: {msg}", err=True)
+            click.echo(f"regress: skipped: {exc.message}", err=True)
             return
-        raise click.ClickException(msg)
+        raise
     log = lambda s: click.echo(s, err=True)
     meta_old, baseline = read_baseline(baseline_path)
     # the code as it is when the workers import it (a commit made during the run is not it)

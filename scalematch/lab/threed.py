@@ -50,7 +50,7 @@ import numpy as np
 from ..render import line_ends
 from ..stages.epipolar import (homogeneous, refine_fundamental,
                                sampson_residuals)
-from .datasets import list_photos, scene_of, shared_option, shared_subfolder
+from .datasets import POINT_WITH_OPTION, list_photos, require_shared, scene_of, shared_option
 from .efpairs import (MAGSAC_CONFIDENCE, MAGSAC_ITERATIONS, SOLVED_PX, WRONG_PX, EfPair, Run,
                       run_orders, symmetric_epipolar_error)
 
@@ -170,11 +170,6 @@ BY_EYE_POINT_PX = 1.0
 # --------------------------------------------------------------------------------------------
 # The pairs
 # --------------------------------------------------------------------------------------------
-
-def photos_folder(shared: Optional[PathLike] = None) -> Optional[Path]:
-    """``<shared>/data/photos`` (``shared`` default: :func:`datasets.find_shared`); None if absent."""
-    return shared_subfolder(PHOTOS_SUBDIR, shared)
-
 
 def candidate_pairs(names: Sequence[str]) -> List[Tuple[str, str]]:
     """Every two photos of one multi-view scene (``MULTIVIEW_SCENES``), as (A, B) file names
@@ -1043,10 +1038,7 @@ def reference_command(shared, json_path, out_dir, draw, draw_only, seed, silent)
       scalematch lab 3d-reference --draw
       scalematch lab 3d-reference --draw-only --out-dir /tmp/ref
     """
-    folder = photos_folder(shared)
-    if folder is None:
-        raise click.ClickException("../shared/data/photos is absent: the references need its "
-                                   "photos (set SCALEMATCH_SHARED or --shared)")
+    folder = require_shared(shared, PHOTOS_SUBDIR) / PHOTOS_SUBDIR
     log = (lambda s: None) if silent else (lambda s: click.echo(s, err=True))
     if draw_only:
         doc = read_references(json_path)
@@ -1426,13 +1418,10 @@ def threed_pairs_command(shared, reference_path, pairs, scenes, kinds, methods, 
       scalematch lab 3d-pairs --write-doc docs/THREED.md
       scalematch lab 3d-pairs --scenes sceaux --kinds photos --methods scalematch --no-ef
     """
-    from .efpairs import ef_folder
+    from .efpairs import EF_SUBDIR
     from .realpairs import write_section
 
-    folder = photos_folder(shared)
-    if folder is None:
-        raise click.ClickException("../shared/data/photos is absent: this benchmark needs its "
-                                   "photos (set SCALEMATCH_SHARED or --shared)")
+    folder = require_shared(shared, PHOTOS_SUBDIR) / PHOTOS_SUBDIR
     try:
         doc = read_references(reference_path)
     except ValueError as e:
@@ -1449,9 +1438,10 @@ def threed_pairs_command(shared, reference_path, pairs, scenes, kinds, methods, 
     chosen_scenes = _listed(scenes, sorted({p.scene for p in every}), "scene", "--scenes")
     todo = [p for p in every if (not labels or p.label in labels)
             and (not chosen_scenes or p.scene in chosen_scenes)]
-    ef_dir = ef_folder(shared) if ef else None
-    if ef and ef_dir is None:
-        raise click.ClickException("../shared/data/ef is absent: give --no-ef")
+    ef_dir = None
+    if ef:
+        no_ef = f"give --no-ef, or {POINT_WITH_OPTION}"
+        ef_dir = require_shared(shared, EF_SUBDIR, no_ef) / EF_SUBDIR
     log = (lambda s: None) if silent else (lambda s: click.echo(s, err=True))
     ref_meta = doc.get("meta", {})
     meta = {**_meta(_command_line("3d-pairs"), seed),

@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import csv
 
+import pytest
+
 from scalematch.lab.bench import _real_pairs_sections, run_benchmark, write_benchmarks_doc
 from scalematch.lab.realpairs import MARK_BEGIN, MARK_END, markers, write_section
 
 
 def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
+    pytest.importorskip("matplotlib")  # the plot needs the lab extra
     # the first four photos (sorted) are one scene; the fifth gives unrelated pairs a partner
     report = run_benchmark(shared=shared_dir, out_dir=tmp_path / "out", ratios=(4,), photos=5,
                            seed=0, methods=("scalematch", "sift"), unrelated=2, boat=False,

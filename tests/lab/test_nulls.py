@@ -147,6 +147,7 @@ def test_summary_counts_false_claims():
 
 
 def test_chart_tolerates_missing_keys(tmp_path):
+    pytest.importorskip("matplotlib")  # the chart needs the lab extra
     rows = [_row("unrelated", "given", False, log10_nfa=float(v)) for v in range(5)]
     true = [dict(_row("true", "given", False, log10_nfa=-50.0, inliers=30.0), success=True)]
     img = plot_distributions(rows, tmp_path / "c.png", true, size=(600, 400))
@@ -182,6 +183,7 @@ def test_lab_lists_the_command():
 
 @pytest.mark.shared
 def test_a_fixed_sample_end_to_end_makes_no_false_claim(shared_dir, tmp_path):
+    pytest.importorskip("matplotlib")  # the page's chart needs the lab extra
     report = run_nulls(shared=shared_dir, out_dir=tmp_path, limit=3, seed=0)
     assert len(report.rows) == 6  # 3 pairs (2 unrelated, 1 same-photo), both orders
     assert {r["kind"] for r in report.rows} == set(KINDS)

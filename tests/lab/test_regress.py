@@ -120,7 +120,7 @@ def test_run_cases_matches_in_workers_from_a_source_tree():
 def test_the_command_needs_the_shared_folder_unless_told_to_skip(tmp_path):
     runner = CliRunner()
     out = runner.invoke(regress.regress_command, ["--shared", str(tmp_path)])
-    assert out.exit_code == 1 and "shared folder" in out.output
+    assert out.exit_code == 2 and "shared folder" in out.output
     out = runner.invoke(regress.regress_command, ["--shared", str(tmp_path), "--if-shared"])
     assert out.exit_code == 0 and "skipped" in out.output
     out = runner.invoke(regress.regress_command, ["--kinds", "zoom,nope"])

@@ -192,6 +192,7 @@ def test_run_study_is_seeded_and_skips_bad_files(tmp_path):
 # ---- command line ---------------------------------------------------------------------------
 
 def test_command_prints_table_and_writes_files(tmp_path):
+    pytest.importorskip("matplotlib")  # repeatability.png needs the lab extra
     out = tmp_path / "out"
     res = CliRunner().invoke(repeatability_command, [
         str(RACCOON), "--factors", "1,2", "--crop", "240x180", "--out-dir", str(out), "--silent"])
@@ -211,7 +212,7 @@ def test_command_usage_errors(tmp_path, monkeypatch):
     assert res.exit_code == 2 and "WxH" in res.output
     monkeypatch.setenv("SCALEMATCH_SHARED", str(tmp_path))
     res = runner.invoke(repeatability_command, ["--out-dir", str(tmp_path / "o")])
-    assert res.exit_code == 1 and "no photos" in res.output
+    assert res.exit_code == 2 and "data/photos, which is not there" in res.output
 
 
 def test_python_dash_m_help():

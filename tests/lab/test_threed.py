@@ -295,7 +295,7 @@ def test_the_commands_check_their_options(tmp_path):
     result = runner.invoke(cli, ["lab", "3d-pairs", "--help"])
     assert result.exit_code == 0 and "--kinds" in result.output
     result = runner.invoke(cli, ["lab", "3d-pairs", "--shared", str(tmp_path)])
-    assert result.exit_code == 1 and "data/photos is absent" in result.output
+    assert result.exit_code == 2 and "data/photos, which is not there" in result.output
     (tmp_path / "data" / "photos").mkdir(parents=True)
     result = runner.invoke(cli, ["lab", "3d-pairs", "--shared", str(tmp_path), "--reference",
                                  str(tmp_path / "none.json")])
