@@ -43,7 +43,7 @@ from .stages.refit import (Fit, Pinned, candidates_in_images, guided_refit, pinn
 from .stages.rivals import EpipolarFit, off_plane
 from .working import WorkImages, shown_scale
 
-__all__ = ["build_result"]
+__all__ = ["build_result", "without_parallax"]
 
 
 def final_fit(attempt: Attempt, config: Config) -> Fit:
@@ -331,3 +331,40 @@ def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config)
     k = len(distinct_pairs(src[held], dst[held])[0])
     return {"parallax_points": n,
             "parallax": n >= max(params.parallax_min_points, params.parallax_share * k)}
+
+
+def without_parallax(result: MatchResult, plane: MatchResult, config: Config) -> MatchResult:
+    """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
+    of their own (``stages.decision.plane_parallax``): the plane map of the same pair,
+    ``plane``, where it passed the decision, with the matrix's figures in its evidence;
+    otherwise "no", with the matrix shown as ``rejected`` (test "plane"). Both are in the
+    images' own pixels.
+
+    Without parallax the inliers do not fix the epipole: a scene with little depth fits every
+    epipolar geometry through its plane's map, and a repeated structure matched to its shifted
+    copy fits one too. The plane map faces the tests an epipolar geometry cannot (a plausible
+    scale and footprint, no repeated structure, the pixels), and it is what the inliers do
+    determine. It is searched as the default would search it (``config`` with
+    ``decision.plane_model``, which the model check may turn into an affine map or a
+    homography: ``pipeline.match``); ``model`` then says which it is.
+    """
+    e = result.evidence
+    figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
+                parallax_log10_nfa=e.parallax_log10_nfa)
+    timings = dict(plane.timings, epipolar=result.seconds,
+                   total=result.seconds + plane.seconds)
+    if plane.matched:
+        return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
+                       timings=timings, config=result.config)
+    evidence = build_evidence(asdict(e), figs)
+    count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
+             if math.isfinite(e.parallax_log10_nfa) else "too few to count")
+    reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
+              f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
+              f"do not fix its epipole, and no plane map of the scene passes the decision "
+              f"({plane.reason})")
+    rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
+                        figures("plane", evidence, config.decision), result.order)
+    return replace(result, matched=False, reason=reason, transform=None,
+                   inliers=np.zeros((0, 4)), evidence=evidence, timings=timings,
+                   order=Direction.GIVEN, rejected=rejected)

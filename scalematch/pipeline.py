@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
@@ -25,15 +25,15 @@ import numpy as np
 from .config import Config
 from .geometry import answer_parts, usable_ratio
 from .imageio import grey_levels
-from .result import (Direction, MatchResult, NoDataSeen, Rejected, ScaleRow,
-                     StepRecord, build_evidence)
+from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
+                     StepRecord)
 from .features import (Describing, ImageViews, Roles, first_level, first_level_points,
                        image_views)
-from .answer import build_result
+from .answer import build_result, without_parallax
 from .sharing import Measured, Memo, Meter, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
-from .stages.decision import Look, SearchContext, Seen, decide, figures, look_again
+from .stages.decision import Look, SearchContext, Seen, decide, look_again
 from .stages.descriptors import Described
 from .stages.detector import Contrast, Gradients, Keypoints, detect_on_level
 from .stages.estimator import Estimate, FitSpec, estimate, model_of
@@ -76,6 +76,22 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     #    (working.py, stages/nodata.py)
     work = at_working_size(grey_levels(low, "low"), grey_levels(high, "high"), config,
                            decoded_factors)
+    # 2-6. The search and its answer, in the images' own pixels
+    result = searched_answer(work, config, progress, t0)
+    # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole: the
+    #    plane map of the same images answers instead (answer.without_parallax)
+    if result.matched and not model_of(config.model).has_ratio and not result.evidence.parallax:
+        plane = searched_answer(work, replace(config, model=config.decision.plane_model),
+                                None, time.perf_counter())
+        result = without_parallax(result, plane, config)
+    return result
+
+
+def searched_answer(work: WorkImages, config: Config,
+                    progress: Optional[Callable[[int, int], None]], t0: float) -> MatchResult:
+    """The search of images at their working size ``work`` with ``config``, and its answer in
+    the images' own pixels (``match``'s steps 2 to 6; ``t0``: when the search's time began,
+    ``time.perf_counter``)."""
     # 2. The plan (search.py, MODS): the given order, the other, then passes of tilted views
     plan = search_plan(config, work.scales, finer_sides(work))
     # 3. What every step shares: the mode's strategy (modes.py), the caches, the progress meter
@@ -89,13 +105,8 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     #    (answer.py)
     result = build_result(search, run)
     # 6. In the images' own pixels, with what each showed of no-data
-    result = replace(in_original(result, work, config),
-                     nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
-    # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole: the
-    #    plane map answers instead (stages/decision.py, plane_parallax)
-    if result.matched and not model_of(config.model).has_ratio and not result.evidence.parallax:
-        result = without_parallax(result, low, high, config, decoded_factors)
-    return result
+    return replace(in_original(result, work, config),
+                   nodata=(nodata_seen(work.low_nodata), nodata_seen(work.high_nodata)))
 
 
 def check_config(config: Config) -> None:
@@ -114,45 +125,6 @@ def finer_sides(work: WorkImages) -> Dict[Direction, int]:
 def nodata_seen(nodata: NoData) -> NoDataSeen:
     """The record of what an image showed of no-data (the JSON's ``low.nodata``)."""
     return NoDataSeen(nodata.value, nodata.share)
-
-
-def without_parallax(result: MatchResult, low: np.ndarray, high: np.ndarray, config: Config,
-                     decoded_factors: Tuple[float, float] = (1.0, 1.0)) -> MatchResult:
-    """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
-    of their own (``stages.decision.plane_parallax``): the plane map of the same pair where
-    one passes the decision, with the matrix's figures in its evidence; otherwise "no", with
-    the matrix shown as ``rejected`` (test "plane").
-
-    Without parallax the inliers do not fix the epipole: a scene with little depth fits every
-    epipolar geometry through its plane's map, and a repeated structure matched to its shifted
-    copy fits one too. The plane map faces the tests an epipolar geometry cannot (a plausible
-    scale and footprint, no repeated structure, the pixels), and it is what the inliers do
-    determine. It is searched as the default would search it (``config`` with
-    ``decision.plane_model``, which the model check may turn into an affine map or a
-    homography); ``model`` then says which it is.
-    """
-    plane = match(low, high, replace(config, model=config.decision.plane_model),
-                  decoded_factors=decoded_factors)
-    e = result.evidence
-    figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
-                parallax_log10_nfa=e.parallax_log10_nfa)
-    timings = dict(plane.timings, epipolar=result.seconds,
-                   total=result.seconds + plane.seconds)
-    if plane.matched:
-        return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
-                       timings=timings, config=result.config)
-    evidence = build_evidence(asdict(e), figs)
-    count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
-             if math.isfinite(e.parallax_log10_nfa) else "too few to count")
-    reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
-              f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
-              f"do not fix its epipole, and no plane map of the scene passes the decision "
-              f"({plane.reason})")
-    rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
-                        figures("plane", evidence, config.decision), result.order)
-    return replace(result, matched=False, reason=reason, transform=None,
-                   inliers=np.zeros((0, 4)), evidence=evidence, timings=timings,
-                   order=Direction.GIVEN, rejected=rejected)
 
 
 def run_plan(search: Search, plan: Sequence[Step], t0: float) -> SearchRun:

@@ -123,7 +123,7 @@ class Evidence:
     #: most ``max_log_nfa``, the geometry shows parallax by itself (nan: not measured)
     parallax_log10_nfa: float = math.nan
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
-    #: answers instead (``pipeline.without_parallax``; 0: no plane map passed)
+    #: answers instead (``answer.without_parallax``; 0: no plane map passed)
     plane_inliers: int = 0
     #: how firmly the answer's inliers pin its map (``stages.pinning.expected_error``): the
     #: error they leave it free to make, the mean over the finer image's 21x21 grid of each

@@ -16,7 +16,6 @@ from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
 from scalematch.lab.synthetic import make_tilted_pair, make_zoom_pair
 from scalematch.pipeline import distinct_pairs
-from scalematch.result import Evidence, MatchResult
 from scalematch.stages.detector import HarrisParams
 from scalematch.stages.views import ViewParams
 from scalematch.stages.decision import mean_transfer_gap
@@ -191,27 +190,6 @@ def test_a_flat_scene_asked_for_a_fundamental_matrix_is_answered_with_its_plane_
     assert {"epipolar", "total"} <= set(r.timings)
     from scalematch.render import verdict
     assert "no parallax: the plane map answers" in verdict(r)
-
-
-def _claimed_f(f):
-    """A matched fundamental matrix ``f`` with no parallax, as the search would report it."""
-    return MatchResult(matched=True, model="fundamental", transform=f, inliers=np.zeros((0, 4)),
-                       timings={"total": 0.1},
-                       evidence=Evidence(inliers=30, log10_nfa=-20.0, parallax_points=4,
-                                         parallax_log10_nfa=math.inf))
-
-
-def test_a_fundamental_matrix_without_parallax_or_plane_map_is_refused(raccoon):
-    """Two halves of one photo: nothing in common, so no plane map passes; an F whose inliers
-    show no parallax is refused, and the reason says both."""
-    left, right = raccoon[:, :480], raccoon[:, 544:]
-    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
-    r = pipeline.without_parallax(_claimed_f(f), left[:240, :320], right[:240, :320],
-                                  Config(model="fundamental", views=ViewParams(enabled=False)))
-    assert not r.matched and r.transform is None
-    assert r.rejected.test == "plane" and r.rejected.transform is not None
-    assert r.evidence.plane_inliers == 0
-    assert "no parallax" in r.reason and "no plane map" in r.reason
 
 
 def test_paper_mode_matches_a_ratio_3_pair(raccoon):

@@ -220,7 +220,7 @@ class DecisionParams:
     #: 4, and a facade's log10 NFA from -56 to -2.3 (docs/design/DECISION.md)
     same_point_px: float = 1.0
     #: a fundamental matrix whose inliers show no parallax (:func:`plane_parallax`) gives way
-    #: to the plane map of the same pair (``pipeline.without_parallax``), searched with this
+    #: to the plane map of the same pair (``answer.without_parallax``), searched with this
     #: model: the default's, which the model check turns into an affine map or a homography
     #: where the scene asks for one
     plane_model: str = "similarity"

@@ -1,0 +1,56 @@
+"""The answer module (answer.py): what is made of the search's attempts."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from scalematch import Config, match
+from scalematch.answer import without_parallax
+from scalematch.result import Evidence, MatchResult
+from scalematch.stages.views import ViewParams
+
+
+def _claimed_f(f):
+    """A matched fundamental matrix ``f`` with no parallax, as the search would report it."""
+    return MatchResult(matched=True, model="fundamental", transform=f, inliers=np.zeros((0, 4)),
+                       timings={"total": 0.1},
+                       evidence=Evidence(inliers=30, log10_nfa=-20.0, parallax_points=4,
+                                         parallax_log10_nfa=math.inf))
+
+
+def test_a_fundamental_matrix_without_parallax_or_plane_map_is_refused(raccoon):
+    """Two halves of one photo: nothing in common, so no plane map passes; an F whose inliers
+    show no parallax is refused, and the reason says both."""
+    left, right = raccoon[:, :480], raccoon[:, 544:]
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # a rectified pair: y' = y
+    config = Config(model="fundamental", views=ViewParams(enabled=False))
+    plane = match(left[:240, :320], right[:240, :320], replace(config, model="similarity"))
+    r = without_parallax(_claimed_f(f), plane, config)
+    assert not r.matched and r.transform is None
+    assert r.rejected.test == "plane" and r.rejected.transform is not None
+    assert r.evidence.plane_inliers == 0
+    assert "no parallax" in r.reason and "no plane map" in r.reason
+
+
+def test_a_plane_map_in_place_of_a_matrix_is_searched_without_match_calling_itself(
+        monkeypatch, raccoon):
+    """A flat zoom pair asked for a fundamental matrix: its plane map answers, searched on the
+    same working images within the one call of ``match`` (which never calls itself)."""
+    from scalematch import pipeline
+    from scalematch.lab.synthetic import make_zoom_pair
+
+    calls = []
+    real = pipeline.match
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "match", counted)
+    pair = make_zoom_pair(raccoon, 2.0, np.random.default_rng(0), high_size=(320, 240))
+    r = pipeline.match(pair.low, pair.high, Config(model="fundamental"))
+    assert calls == [1]
+    assert r.matched and r.model != "fundamental" and r.evidence.plane_inliers == r.n_inliers
