@@ -33,12 +33,12 @@ from .answer import build_result, without_parallax
 from .sharing import Measured, Memo, Meter, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
-from .stages.decision import Look, SearchContext, Seen, decide, look_again
+from .stages.decision import SearchContext, Sight, decide
 from .stages.descriptors import Described
 from .stages.detector import Contrast, Gradients, Keypoints, detect_on_level
 from .stages.estimator import Estimate, FitSpec, estimate, model_of
 from .stages.matcher import distinct_pairs, match_descriptors
-from .stages.nodata import NoData, distance_inside, with_nan
+from .stages.nodata import NoData, distance_inside
 from .stages.probe import probe_scores, select_scales
 from .stages.scalespace import Level, scale_space
 from .stages.threads import thread_map
@@ -509,18 +509,12 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
                          else work.valid(direction)[0])
-
-        def look(t, outcome, windows_below, view=p.view, low_feats=low_feats,
-                 valid=coarser_shown) -> Look:
-            return look_again(t, Seen(outcome.described, with_nan(view.image, valid_in(view))),
-                              Seen(low_feats.described, with_nan(low_feats.image, valid)),
-                              fit=fit_spec(cfg), guided=mode.guided, pixel=cfg.pixel,
-                              windows_below=windows_below)
-
+        sight = Sight(p.view.image, valid_in(p.view), low_feats.described, low_feats.image,
+                      coarser_shown, fit_spec(cfg), mode.guided, cfg.pixel)
         context = SearchContext(fit_spec(cfg), mode.orientation, searches,
                                 shown_scale(work, direction) * p.view.scale)
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
-                         context=context, look=look)
+                         context=context, sight=sight)
         attempts.append(Attempt(replace(step, direction=direction), p.view, score,
                                 outcomes, verdict, coarser_view))
         if overwhelming(attempts[-1], cfg):

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Sequence, Tuple
+from typing import Any, ClassVar, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -43,6 +43,7 @@ from .constraints import OrientationParams
 from .descriptors import Described
 from .estimator import FitSpec, estimate, model_of
 from .guided import GuidedParams, grow
+from .nodata import with_nan
 from .pixelcheck import (Agreement, NearWindows, PixelParams, agreement_of, near_windows,
                          pixel_check, unique_template, uniqueness_of)
 from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
@@ -431,6 +432,31 @@ class Seen:
     image: np.ndarray = field(repr=False)
 
 
+@dataclass(frozen=True)
+class Sight:
+    """What a second look at a hypothesis of one search sees (:meth:`look`): the images it
+    compared, at the search's working size, where each shows the scene, and the coarser
+    image's described points; handed to :func:`decide` as data, so the decision calls nothing
+    of the search that made it."""
+
+    finer: np.ndarray = field(repr=False)  #: the finer image (or view) searched
+    finer_valid: Optional[np.ndarray] = field(repr=False)  #: where it shows the scene (None: all)
+    coarser: Described = field(repr=False)  #: the coarser image's (or view's) described points
+    coarser_image: np.ndarray = field(repr=False)
+    coarser_valid: Optional[np.ndarray] = field(repr=False)
+    fit: FitSpec
+    guided: GuidedParams
+    pixel: PixelParams
+
+    def look(self, t: np.ndarray, outcome, windows_below: float = math.nan) -> Look:
+        """:func:`look_again` at hypothesis ``t`` of a scale's ``outcome`` (its described finer
+        points), the images with NaN where they show no scene."""
+        return look_again(t, Seen(outcome.described, with_nan(self.finer, self.finer_valid)),
+                          Seen(self.coarser, with_nan(self.coarser_image, self.coarser_valid)),
+                          fit=self.fit, guided=self.guided, pixel=self.pixel,
+                          windows_below=windows_below)
+
+
 def look_again(t: np.ndarray, finer: Seen, coarser: Seen, *, fit: FitSpec, guided: GuidedParams,
                pixel: PixelParams, windows_below: float = math.nan) -> Look:
     """Grow hypothesis ``t`` by guided matching (:func:`scalematch.stages.guided.grow`) and check
@@ -570,7 +596,7 @@ def disagrees(row, params: "DecisionParams") -> bool:
 
 def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
            context: SearchContext,
-           look: Optional[Callable[[np.ndarray, object, float], Look]] = None) -> Decision:
+           sight: Optional[Sight] = None) -> Decision:
     """Pick the winning scale and decide whether its transform is a reliable match.
 
     ``coarser_shape``, ``finer_shape``: the (H, W) of the images searched (or their views);
@@ -578,8 +604,9 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     threshold sets the a-contrario test's tolerance), seed
     (:func:`scalematch.stages.rivals.second_transform`), rotation groups and
     searches made, which the a-contrario count multiplies, and the scale its reasons are shown
-    at (:class:`SearchContext`). ``look(t, outcome, windows_below)``, when given, takes the
-    second look (:func:`look_again`, with :func:`look_windows_below`) at a best transform of
+    at (:class:`SearchContext`). With ``sight`` (:class:`Sight`), its ``look(t, outcome,
+    windows_below)`` takes the second look (:func:`look_again`, with :func:`look_windows_below`) at a
+    best transform of
     ``look_min_inliers`` to ``min_inliers - 1`` inliers: its figures go in the evidence, and it
     may accept a transform of ``few_min_inliers`` or more (:func:`look_confirms`).
     The accepted transform faces more tests once refit (:func:`final_checks`).
@@ -597,7 +624,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
         return _implausible(with_t, context.shown_scale)
     best = min(plausible, key=lambda o: (-o.row.inliers, _closeness(o), o.row.s))
     winner = _counted(best, outcomes, coarser_shape, context, params.same_point_px)
-    return _tested(winner, with_t, (coarser_shape, finer_shape), params, context, look)
+    return _tested(winner, with_t, (coarser_shape, finer_shape), params, context, sight)
 
 
 def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
@@ -633,7 +660,7 @@ def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext,
 
 
 def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
-            context: SearchContext, look) -> Decision:
+            context: SearchContext, sight: Optional[Sight]) -> Decision:
     """The winner ``w`` through the tests, in order (the module's docstring): enough inliers
     (or few, confirmed by the second look), beyond chance, a plausible footprint, agreeing
     scales, no repeated structure. ``shapes``: (coarser, finer) (H, W)."""
@@ -651,8 +678,8 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     # the second look decides only below min_inliers, or for a footprint mostly outside the
     # coarser image (the final map's pixel tests follow every match, final_checks): elsewhere
     # it would cost a tenth of a plain pair's time for nothing
-    second = look(t, best, look_windows_below(lnfa, params)) \
-        if look is not None and spec.has_ratio and (
+    second = sight.look(t, best, look_windows_below(lnfa, params)) \
+        if sight is not None and spec.has_ratio and (
             params.look_min_inliers <= k < params.min_inliers
             or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)

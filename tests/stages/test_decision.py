@@ -84,7 +84,14 @@ def _look(grown: int, margin: float, windows=None, asked=None):
         if windows is not None and margin < windows_below:
             return Look(t, pairs, 0.5, 0.99, margin, 5.0, windows)
         return Look(t, pairs, 0.5, 0.99, margin, 5.0)
-    return look
+    return _Sight(look)
+
+
+class _Sight:
+    """A stand-in for ``decision.Sight``: its second look is ``look``."""
+
+    def __init__(self, look):
+        self.look = look
 
 
 def _params(config):
@@ -105,7 +112,7 @@ def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good
     plain = decide(outcomes, (768, 1024), (480, 640), **_params(config))
     assert not plain.matched and "too few inliers: 5" in plain.reason
     good = decide(outcomes, (768, 1024), (480, 640), **_params(config),
-                   look=_look(grown=25, margin=0.3))
+                   sight=_look(grown=25, margin=0.3))
     assert good.matched and good.evidence.grown_inliers == 25
     assert good.evidence.pixel_margin == 0.3 and good.inliers.shape == (25, 4)
 
@@ -117,12 +124,12 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     _, outcomes = _outcomes(k=5, n=8)
     config = Config()
     for look in (_look(grown=25, margin=0.01), _look(grown=25, margin=float("nan"))):
-        verdict = decide(outcomes, (768, 1024), (480, 640), **_params(config), look=look)
+        verdict = decide(outcomes, (768, 1024), (480, 640), **_params(config), sight=look)
         assert not verdict.matched and "pass the pixel check" in verdict.reason
     # three inliers are never enough, whatever the look says (the evidence is recorded)
     _, three = _outcomes(k=3, n=8)
     verdict = decide(three, (768, 1024), (480, 640), **_params(config),
-                   look=_look(grown=40, margin=0.6))
+                   sight=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
 
 
@@ -140,19 +147,19 @@ def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_on
     _, strong = _outcomes(k=5, n=8)  # log10 NFA -12.4
     asked = []
     occluded = _look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03), asked=asked)
-    good = decide(strong, (768, 1024), (480, 640), **_params(Config()), look=occluded)
+    good = decide(strong, (768, 1024), (480, 640), **_params(Config()), sight=occluded)
     assert asked == [params.few_min_margin]
     assert good.matched, good.reason
     assert good.evidence.pixel_windows == 37 and good.evidence.pixel_windows_agreeing == 0.35
     for windows in (NearWindows(37, 0.35, 0.2), NearWindows(12, 0.6, 0.0),
                     NearWindows(37, 0.2, 0.0)):
         verdict = decide(strong, (768, 1024), (480, 640), **_params(Config()),
-                         look=_look(grown=5, margin=0.09, windows=windows))
+                         sight=_look(grown=5, margin=0.09, windows=windows))
         assert not verdict.matched and verdict.test == "too few inliers", windows
     _, weak = _outcomes(k=5, n=100)  # log10 NFA -5.0: the windows are not asked for
     asked.clear()
     verdict = decide(weak, (768, 1024), (480, 640), **_params(Config()),
-                     look=_look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03),
+                     sight=_look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03),
                                 asked=asked))
     assert params.few_max_log_nfa < verdict.evidence.log10_nfa <= params.max_log_nfa
     assert not verdict.matched and math.isnan(asked[0]) and verdict.evidence.pixel_windows == 0
@@ -168,7 +175,7 @@ def test_an_overhanging_footprint_needs_overwhelming_evidence_or_pixels_that_con
     config = Config()
     # a margin no wrong placement reaches (few_clear_margin) confirms the part inside
     clear = decide(outcomes, coarser, (480, 640), **_params(config),
-                   look=_look(grown=5, margin=0.6))
+                   sight=_look(grown=5, margin=0.6))
     assert clear.matched and clear.evidence.footprint_inside < 0.5
     # many inliers but no second look: the footprint test refuses below max_log_nfa_alone
     t, outcomes = _outcomes(k=6, n=100)
@@ -257,7 +264,7 @@ def test_a_few_inlier_hypothesis_that_does_not_grow_keeps_its_own_inliers():
 
     t, outcomes = _outcomes(k=5, n=8)
     verdict = decide(outcomes, (768, 1024), (480, 640), **_params(Config()),
-                     look=_look(grown=0, margin=0.3))
+                     sight=_look(grown=0, margin=0.3))
     assert verdict.matched and verdict.inliers.shape == (5, 4)
     assert np.allclose(verdict.transform, t)
 
@@ -441,10 +448,10 @@ def test_a_footprint_mostly_outside_is_confirmed_by_the_second_look_at_any_count
     plain = decide(outcomes, *shapes, **_params(Config()))
     assert not plain.matched and plain.test == "footprint inside", plain.reason
     assert -10 < plain.evidence.log10_nfa < -2 and plain.evidence.footprint_inside < 0.5
-    good = decide(outcomes, *shapes, **_params(Config()), look=_look(grown=6, margin=0.3))
+    good = decide(outcomes, *shapes, **_params(Config()), sight=_look(grown=6, margin=0.3))
     assert good.matched, good.reason
     assert good.evidence.pixel_margin == 0.3
-    flat = decide(outcomes, *shapes, **_params(Config()), look=_look(grown=6, margin=0.0))
+    flat = decide(outcomes, *shapes, **_params(Config()), sight=_look(grown=6, margin=0.0))
     assert not flat.matched and flat.test == "footprint inside"
 
 
