@@ -134,3 +134,73 @@ def test_evidence_is_made_only_by_its_builder():
             if made or changed:
                 offenders.append(f"{path.relative_to(ROOT)}:{call.lineno} in {owner}")
     assert not offenders, offenders
+
+
+# --------------------------------------------------------------------------------------------
+# DESIGN.md names what exists
+# --------------------------------------------------------------------------------------------
+
+def _product_names() -> set:
+    """Every name a reader of DESIGN.md may look up: each product module's top-level names and
+    their classes' attributes, Config's fields (at any depth), the presets, the options."""
+    import ast
+    import dataclasses
+
+    from click.testing import CliRunner
+
+    from scalematch.cli import cli
+    from scalematch.config import PRESETS, Config
+
+    names = set(PRESETS)
+    for path in (ROOT / "scalematch").rglob("*.py"):
+        if "lab" in path.relative_to(ROOT / "scalematch").parts:
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names.add(node.name)
+            if isinstance(node, ast.ClassDef):
+                names.update(n.name for n in node.body
+                             if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)))
+                names.update(t.id for n in node.body if isinstance(n, (ast.Assign, ast.AnnAssign))
+                             for t in (n.targets if isinstance(n, ast.Assign) else [n.target])
+                             if isinstance(t, ast.Name))
+            if isinstance(node, (ast.Assign, ast.AnnAssign)):
+                names.update(t.id for t in (node.targets if isinstance(node, ast.Assign)
+                                            else [node.target]) if isinstance(t, ast.Name))
+
+    def fields(obj) -> None:
+        for f in dataclasses.fields(obj):
+            names.add(f.name)
+            value = getattr(obj, f.name)
+            if dataclasses.is_dataclass(value):
+                fields(value)
+
+    fields(Config())
+    for command in ("match", "batch"):
+        help_text = CliRunner().invoke(cli, [command, "--help"]).output
+        names.update(w.rstrip(",") for w in help_text.split() if w.startswith("--"))
+    return names
+
+
+def test_every_module_and_name_design_cites_exists():
+    """DESIGN.md is where a maintainer starts: every file it cites is in the package, and every
+    name (a function, class, attribute, parameter, preset or option) is one the code has."""
+    import re
+
+    text = (ROOT / "docs" / "DESIGN.md").read_text()
+    names = _product_names()
+    missing = []
+    for token in re.findall(r"`([^`\n]+)`", text):
+        word = token.split()[0].rstrip("()")
+        if "*" in word or word == "import":  # a pattern of names, a line of code
+            continue
+        if word.endswith((".py", "/")):
+            if not ((ROOT / "scalematch" / word).exists() or (ROOT / word).exists()):
+                missing.append(token)
+            continue
+        head, *rest = word.split(".")
+        module = any((ROOT / "scalematch" / d / f"{head}.py").exists() for d in ("", "stages"))
+        if not (head in names or module or head == "scalematch") or \
+                not all(part in names for part in rest):
+            missing.append(token)
+    assert not missing, missing
