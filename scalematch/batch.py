@@ -163,12 +163,6 @@ def _trimmed(row: Sequence[str]) -> List[str]:
     return cells
 
 
-def read_pairs(path: Path) -> List[Tuple[str, str]]:
-    """The (low, high) rows of a pairs CSV, in file order, repeated rows included
-    (:func:`read_rows` without the other columns)."""
-    return [(low, high) for low, high, _ in read_rows(path)]
-
-
 def read_rows(path: Path) -> List[Tuple[str, str, Tuple[Tuple[str, str], ...]]]:
     """The (low, high, other columns) rows of a pairs CSV, in file order, repeated rows
     included; the other columns, (name, value) from the header, only with one.

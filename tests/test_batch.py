@@ -27,7 +27,7 @@ from scalematch import batch
 from scalematch.batch import match_pair as real_match_pair  # the worker's own
 from scalematch.batch import (NOTHING_DONE, BatchError, Counts, Done, Pair, after_worker_death,
                               bounded, config_json, cut_torn_line,
-                              drop_error_lines, errors_to_retry, plan_run, read_pairs,
+                              drop_error_lines, errors_to_retry, plan_run, read_rows,
                               resume_output, scan_output, unique_pairs)
 from scalematch.config import Config
 from scalematch.imageio import DEFAULT_MAX_PIXELS
@@ -54,6 +54,11 @@ def images(raccoon, tmp_path_factory) -> Path:
         noise = np.clip(128 + rng.normal(0, 3, TINY[::-1]), 0, 255).astype(np.uint8)
         cv2.imwrite(str(folder / name), noise)
     return folder
+
+
+def read_pairs(path: Path):
+    """The (low, high) rows of a pairs CSV (``read_rows`` without the other columns)."""
+    return [(low, high) for low, high, _ in read_rows(path)]
 
 
 def write(path: Path, text: str) -> Path:

@@ -477,11 +477,3 @@ def detect_one(image: np.ndarray, s: float = 1.0, params: HarrisParams = HarrisP
                contrast: Optional[Contrast] = None) -> Keypoints:
     """Harris points of ``image`` at the single scale ``s``."""
     return detect(image, (s,), params, contrast)[0]
-
-
-def response_at(image: np.ndarray, s: float, params: Optional[HarrisParams] = None) -> np.ndarray:
-    """The normalised response C_s at full resolution (no decimation): for checks and figures."""
-    params = params or HarrisParams()
-    level = next(scale_space(image, (s,), sigma=params.sigma, decimate=False,
-                             camera_blur_px=params.camera_blur_px))
-    return harris_response(level, params)

@@ -8,7 +8,16 @@ import pytest
 
 from scalematch.geometry import apply
 from scalematch.lab.synthetic import zoom_warp
-from scalematch.stages.detector import HarrisParams, detect, detect_one, response_at
+from scalematch.stages.detector import HarrisParams, detect, detect_one, harris_response
+from scalematch.stages.scalespace import scale_space
+
+
+def response_at(image: np.ndarray, s: float) -> np.ndarray:
+    """The normalised response C_s at full resolution (no decimation)."""
+    params = HarrisParams()
+    level = next(scale_space(image, (s,), sigma=params.sigma, decimate=False,
+                             camera_blur_px=params.camera_blur_px))
+    return harris_response(level, params)
 
 
 def _fraction_mapped(src_xy, dst_xy, tol):
@@ -103,7 +112,6 @@ def test_points_are_strongest_first_and_capped(raccoon):
 
 from scalematch.stages.detector import (Contrast, detect_on_level,  # noqa: E402
                                         effective_threshold, image_contrast)
-from scalematch.stages.scalespace import scale_space  # noqa: E402
 from scalematch.lab.synthetic import smooth_scene  # noqa: E402
 
 #: the threshold that follows the contrast, and the paper's whatever the contrast; neither with
