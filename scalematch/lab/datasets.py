@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import List, Optional, Tuple, Union
+from typing import Iterable, List, Optional, Sequence, Tuple, Union
 
 import click
 import numpy as np
@@ -102,6 +102,23 @@ def scene_of(name: Union[str, Path]) -> str:
     """The scene prefix of a photo file name: what comes before the first ``_``."""
     stem = Path(str(name)).name
     return stem.split("_", 1)[0]
+
+
+def other_scene(names: Sequence[str], start: int, avoid: Iterable[str]) -> int:
+    """The index of the first name after ``start`` (cyclically) whose scene
+    (:func:`scene_of`) is none of the scenes of ``avoid`` (names); ``start + 1`` when every
+    photo is of those scenes. An occluder cut from it shows neither image's scene: the next
+    photo of the list is often another shot of the same place (brighton_DJI_0020 and 0026),
+    whose patch the coarser image does hold.
+
+    >>> other_scene(["a_1.jpg", "a_2.jpg", "b_1.jpg", "c_1.jpg"], 0, ["a_1.jpg", "b_1.jpg"])
+    3
+    """
+    scenes = {scene_of(n) for n in avoid}
+    for k in range(1, len(names)):
+        if scene_of(names[(start + k) % len(names)]) not in scenes:
+            return (start + k) % len(names)
+    return (start + 1) % len(names)
 
 
 def load_photo(path: PathLike) -> np.ndarray:

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..geometry import as_matrix3, invert, similarity_parts
 from .baselines import RATIO_TEST, detect_and_describe, estimate, ratio_matches, to_uint8
-from .datasets import list_photos, require_shared, scene_of, shared_option
+from .datasets import list_photos, other_scene, require_shared, scene_of, shared_option
 from .evaluation import is_success, reprojection_error
 from .synthetic import (OBLIQUE_CASES, SPREADS, TILTS, make_oblique_pair,
                         make_perspective_pair, make_tilted_pair, pair_rng, pairs_from_photos,
@@ -251,7 +251,7 @@ def realistic_sets(paths: Sequence[Path], seed: int, wanted: Sequence[str],
     both images on canvases; occluded-null), ``REALISTIC_NULLS`` of each, also swapped.
 
     Each change draws from ``pair_rng(seed, "<photo> <kind>", ratio)``; an occluder is cut from
-    the next photo of ``paths`` (another scene).
+    the next photo of ``paths`` of none of the pair's scenes (``datasets.other_scene``).
     """
     from ..imageio import read_grey
     from . import realistic
@@ -262,11 +262,18 @@ def realistic_sets(paths: Sequence[Path], seed: int, wanted: Sequence[str],
     if not kinds and not nulls:
         return out
     zoom = list(pairs_from_photos(paths, REALISTIC_RATIOS, seed))
-    others = {p.name: read_grey(paths[(i + 1) % len(paths)]) for i, p in enumerate(paths)}
+    names = [p.name for p in paths]
+    read: Dict[int, np.ndarray] = {}
+
+    def occluder(*sources: str) -> np.ndarray:  # a photo of none of the pair's scenes
+        k = other_scene(names, names.index(sources[0]), sources)
+        if k not in read:
+            read[k] = read_grey(paths[k])
+        return read[k]
 
     def change(kind: str, z, rng):
         if kind == "occluded":
-            return realistic.occluded(z, others[z.source], rng)
+            return realistic.occluded(z, occluder(z.source), rng)
         return {"padded": realistic.padded, "partial": realistic.partial,
                 "relit": realistic.relit}[kind](z, rng)
 
@@ -285,7 +292,7 @@ def realistic_sets(paths: Sequence[Path], seed: int, wanted: Sequence[str],
         for u in unrelated:
             rng = pair_rng(seed, f"{u.source} / {u.high_source} {name}", u.ratio)
             q = (realistic.padded_null(u, rng) if name == "padded-null"
-                 else realistic.occluded(u, others[u.source], rng))
+                 else realistic.occluded(u, occluder(u.source, u.high_source), rng))
             pairs.append(Pair(name, f"{u.source} / {u.high_source} x{u.ratio:g}", q.low,
                               q.high, None, False, "similarity", u.ratio))
         log(f"made {len(pairs)} {name} pairs")

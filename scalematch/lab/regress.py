@@ -49,7 +49,7 @@ import click
 import numpy as np
 
 from ..geometry import as_matrix3
-from .datasets import SharedDataMissing, list_photos, require_shared, scene_of
+from .datasets import SharedDataMissing, list_photos, other_scene, require_shared, scene_of
 from .evaluation import SUCCESS_PX
 from .synthetic import (FLAT_KINDS, FLAT_RATIOS, OBLIQUE_CASES, SPREADS, TILTS, high_size_for,
                         make_flat_pair, make_oblique_pair, make_perspective_pair,
@@ -318,7 +318,8 @@ def null_cases(photos: Photos, shared: Path, want: Set[str]) -> Iterator[Case]:
                                     source_high=names[other])
             rng = pair_rng(SEED, f"{names[i]} / {names[other]} {kind}", r)
             q = (realistic.padded_null(u, rng) if kind == "null-padded"
-                 else realistic.occluded(u, photos[_other_scene(photos, other)], rng))
+                 else realistic.occluded(u, photos[other_scene(
+                     names, other, (names[i % len(names)], names[other]))], rng))
             yield from _both(kind, f"{names[i]} / {names[other]} x{r:g}", q.low, q.high, None)
 
 
