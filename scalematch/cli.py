@@ -72,7 +72,7 @@ EXITS_AT_ONCE = (EXIT_INTERRUPTED, EXIT_BROKEN_PIPE)
 #: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':
 #: medians, the two searches alternately on one 2-core machine): said in these words in
 #: --help, the slow "no"'s hint, README.md and docs/GUIDE.md (tests/test_docs.py)
-NO_VIEWS_SPEEDUP = "about 3 times sooner on 1 MP images, 1.5 times on 12-16 MP photos"
+NO_VIEWS_SPEEDUP = "about 3 times sooner on 1 MP images, 1.5 to 2 times on 12-16 MP photos"
 
 #: Width of an exit-code line in the help (its table is not rewrapped by click): click's
 #: 78 columns less the help's indent of 2
@@ -1066,9 +1066,9 @@ def _match_report(result: MatchResult, written: Dict[str, Path], json_written: O
 
 
 #: A "no" slower than this, s, with views searched, says where the time went (its views) and
-#: what answers sooner; a "no" on unrelated 12 and 16 MP photos takes a median 3.7 s (at most
-#: 4.0) as a whole process on a quiet 2-core machine, more when other jobs share it
-#: (docs/design/SPEED.md), on 1 MP images a median of about 0.8 s
+#: what answers sooner; a "no" on unrelated 12 and 16 MP photos takes a median 6.0 s (at most
+#: 6.2) as a whole process on a 2-core machine, more when other jobs share it
+#: (docs/design/SPEED.md), on 1 MP images a median of 2 to 4 s
 SLOW_NO_HINT_S = 10.0
 
 

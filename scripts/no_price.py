@@ -15,6 +15,9 @@ ways turned each pair, so that all see the same machine load. The pairs:
   orders): the time of a "no", its median and its slowest, against SIFT's;
 * ``--zoom`` zoom pairs (EVALUATION.md, ratios 2 to 16, seed 0), written as PNG files: the time
   of a match;
+* ``--sized`` unrelated pairs of photos of two different scenes, shrunk to two sizes: a 640x480
+  high image against a 1 MP low one, and 1 MP against 1 MP (the photo's aspect kept, its
+  longer side 640 or 1,280 px), written as PNG files: a "no" at the sizes users mostly match;
 * the first ``--big`` unrelated pairs of 12-16 MP photos (``fast_no.BIG_PAIRS``, the JPEG files
   themselves): a "no" on camera-size photos, seconds and peak MB.
 
@@ -81,7 +84,7 @@ def run_set(name: str, pairs: list, cmds: dict, rounds: int) -> dict:
 
 def table(title: str, got: dict, claims_are_wrong: bool) -> str:
     lines = [f"\n{title}\n", "| | median s | slowest s | peak MB (median) | exit 0 (a match) "
-             "| median / SIFT's | median of each pair's s / new's |",
+             "| median / SIFT's | median of each pair's s / the first way's |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     sift = statistics.median(s for s, _, _ in got["sift"]) if got.get("sift") else float("nan")
     for k, runs in got.items():
@@ -91,7 +94,7 @@ def table(title: str, got: dict, claims_are_wrong: bool) -> str:
         lines.append(f"| {k} | {med:.2f} | {max(secs):.2f} | "
                      f"{statistics.median(m for _, m, _ in runs):.0f} | {matched} of {len(runs)}"
                      f"{' (false)' if claims_are_wrong and matched and k != 'sift' else ''} | "
-                     f"{med / sift:.2f} | {per_pair(runs, got['new']):.2f} |")
+                     f"{med / sift:.2f} | {per_pair(runs, next(iter(got.values()))):.2f} |")
     return "\n".join(lines)
 
 
@@ -127,6 +130,35 @@ def zoom_files(n: int, folder: Path) -> list:
     return out
 
 
+def sized_files(n: int, folder: Path) -> dict:
+    """``n`` unrelated pairs at each size: {title: [(low path, high path)]}. Photo k is paired
+    with the first photo after it of another scene (the name before its first "_")."""
+    import cv2
+    from scalematch.lab.datasets import find_shared, list_photos
+
+    photos = list_photos(find_shared())
+    scene = [Path(p).name.split("_")[0] for p in photos]
+    step = max(len(photos) // max(n, 1), 1)
+    sizes = {"640x480 high against a 1 MP low image": (1280, 640),
+             "1 MP against 1 MP": (1280, 1280)}
+    out = {title: [] for title in sizes}
+    for k in range(0, step * n, step):
+        j = next(i for i in range(k + 1, k + len(photos)) if scene[i % len(photos)] != scene[k])
+        low_img = cv2.imread(str(photos[k]), cv2.IMREAD_GRAYSCALE)
+        high_img = cv2.imread(str(photos[j % len(photos)]), cv2.IMREAD_GRAYSCALE)
+        for title, (low_side, high_side) in sizes.items():
+            paths = []
+            for name, img, side in (("low", low_img, low_side), ("high", high_img, high_side)):
+                f = side / max(img.shape)
+                small = cv2.resize(img, (round(img.shape[1] * f), round(img.shape[0] * f)),
+                                   interpolation=cv2.INTER_AREA)
+                path = folder / f"sized{k}_{side}_{high_side}_{name}.png"
+                cv2.imwrite(str(path), small)
+                paths.append(str(path))
+            out[title].append(tuple(paths))
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--old", required=True, help="source tree of the version compared with")
@@ -134,16 +166,27 @@ def main() -> int:
                     help="folder of null pairs stored by `scalematch lab nulls`")
     ap.add_argument("--every", type=int, default=8, help="every N-th stored null pair")
     ap.add_argument("--zoom", type=int, default=12, help="zoom pairs (one photo each)")
+    ap.add_argument("--sized", type=int, default=8,
+                    help="unrelated pairs at 640x480 against 1 MP and at 1 MP against 1 MP")
     ap.add_argument("--big", type=int, default=4, help="unrelated 12-16 MP pairs")
+    ap.add_argument("--ways", default="new,new --no-views,old,sift",
+                    help="the ways timed, comma-separated: " + ", ".join(commands("")))
     ap.add_argument("--rounds", type=int, default=1, help="rounds over each set")
     a = ap.parse_args()
-    cmds = commands(a.old)
+    every_way = commands(a.old)
+    cmds = {k: every_way[k] for k in a.ways.split(",")}
     print(f"`python scripts/no_price.py --old {a.old} --nulls {a.nulls} --every {a.every} "
-          f"--zoom {a.zoom} --big {a.big} --rounds {a.rounds}`; load average before "
+          f"--sized {a.sized} --zoom {a.zoom} --big {a.big} --rounds {a.rounds} "
+          f"--ways \"{a.ways}\"`; load average before "
           f"{os.getloadavg()[0]:.1f}")
     if a.every and Path(a.nulls).is_dir():
         got = run_set("nulls", stored_nulls(Path(a.nulls), a.every), cmds, a.rounds)
         print(table("Null pairs (both orders): the time of a \"no\"", got, True))
+    if a.sized:
+        with tempfile.TemporaryDirectory() as tmp:
+            for title, pairs in sized_files(a.sized, Path(tmp)).items():
+                got = run_set("sized", pairs, cmds, a.rounds)
+                print(table(f"Unrelated pairs, {title}: the time of a \"no\"", got, True))
     if a.zoom:
         with tempfile.TemporaryDirectory() as tmp:
             got = run_set("zoom", zoom_files(a.zoom, Path(tmp)), cmds, a.rounds)
