@@ -46,6 +46,7 @@ from .guided import GuidedParams, grow
 from .nodata import with_nan
 from .pixelcheck import (Agreement, NearWindows, PixelParams, agreement_of, near_windows,
                          pixel_check, unique_template, uniqueness_of)
+from .nearby import Nearby, best_nearby
 from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
 from .threads import thread_map
 
@@ -456,6 +457,12 @@ class Sight:
                           fit=self.fit, guided=self.guided, pixel=self.pixel,
                           windows_below=windows_below)
 
+    def nearby(self, t: np.ndarray) -> Nearby:
+        """The placement near ``t`` that fits the pixels best
+        (:func:`scalematch.stages.nearby.best_nearby`)."""
+        return best_nearby(with_nan(self.coarser_image, self.coarser_valid),
+                           with_nan(self.finer, self.finer_valid), t, self.pixel)
+
 
 def look_again(t: np.ndarray, finer: Seen, coarser: Seen, *, fit: FitSpec, guided: GuidedParams,
                pixel: PixelParams, windows_below: float = math.nan) -> Look:
@@ -690,6 +697,9 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
                       f"that pass the pixel check)", "too few inliers")
         if len(second.inliers) >= k:  # grown (or kept): the refit map and its inliers
             t, pairs = second.transform, second.inliers
+        elsewhere = _placed_better_nearby(t, k, sight)
+        if elsewhere is not None:
+            return no(elsewhere, "nearby placement")
     if lnfa > params.max_log_nfa:
         return no(f"the best transform ({_inliers_said(k, len(pairs))} of {w.n} candidates at "
                   f"scale {shown:.3g}) could arise by chance ({_count_said(lnfa, w.m, params)})",
@@ -753,6 +763,28 @@ def _few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) ->
     return second is not None and w.k >= params.few_min_inliers and \
         look_confirms(w.log10_nfa, second, params) and \
         len(second.inliers) >= params.few_min_grown
+
+
+def _placed_better_nearby(t: np.ndarray, k: int, sight: Sight) -> Optional[str]:
+    """Why a map ``t`` of ``k`` inliers (fewer than ``min_inliers``) is ambiguous, or None: a
+    placement at least :func:`_apart` from it, within a scale step, ``rotation_deg`` and half
+    a footprint (:func:`scalematch.stages.nearby.best_nearby`), fits the pixels better. A few
+    points can agree on a copy of a repeated texture a few windows off the truth, whose pixels
+    fit well but not best (docs/design/DECISION.md, "Placed better nearby")."""
+    near = sight.nearby(t)
+    if near.moved >= _apart(sight.pixel) and near.best > near.claimed:
+        return (f"ambiguous: a placement {near.moved:.0%} of the footprint away fits the pixels "
+                f"better than the map of {k} inliers (ZNCC {near.best:.2f} against "
+                f"{near.claimed:.2f})")
+    return None
+
+
+def _apart(pixel: PixelParams) -> float:
+    """How far from a map (a fraction of the footprint's size) a placement is another one: half
+    the pixel check's perturbation (``PixelParams.shift_fraction``), whose placements count as
+    wrong ones; a map a few pixels off its best placement (a similarity on a slightly oblique
+    plane) stays within it."""
+    return 0.5 * pixel.shift_fraction
 
 
 def _outside_unproven(t: np.ndarray, shapes, lnfa: float, params: DecisionParams) -> bool:

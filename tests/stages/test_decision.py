@@ -88,10 +88,22 @@ def _look(grown: int, margin: float, windows=None, asked=None):
 
 
 class _Sight:
-    """A stand-in for ``decision.Sight``: its second look is ``look``."""
+    """A stand-in for ``decision.Sight``: its second look is ``look``; its best placement
+    nearby is ``near`` (a ``nearby.Nearby``; None: cannot tell), and ``asked`` records the
+    maps it was asked about."""
 
-    def __init__(self, look):
+    def __init__(self, look, near=None):
+        from scalematch.stages.nearby import Nearby
+        from scalematch.stages.pixelcheck import PixelParams
+
         self.look = look
+        self.pixel = PixelParams()
+        self.near = near if near is not None else Nearby(math.nan, math.nan, math.nan, None)
+        self.asked = []
+
+    def nearby(self, t):
+        self.asked.append(t)
+        return self.near
 
 
 def _params(config):
@@ -131,6 +143,38 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     verdict = decide(three, (768, 1024), (480, 640), **_params(config),
                    sight=_look(grown=40, margin=0.6))
     assert not verdict.matched and verdict.evidence.grown_inliers == 40
+
+
+def test_a_few_inlier_map_the_pixels_place_better_nearby_is_ambiguous():
+    """Few inliers cannot tell two placements apart: where a placement an eighth of the
+    footprint or more away fits the pixels better than the 5-inlier map, the answer is "no";
+    a better placement within that (the same map, a pixel off) or none better changes
+    nothing. Maps of ``min_inliers`` or more are not searched around."""
+    from scalematch.config import Config
+    from scalematch.stages.decision import decide
+    from scalematch.stages.nearby import Nearby
+
+    config = Config()
+    cases = {  # (moved, best, claimed) -> refused
+        (0.30, 0.96, 0.85): True,
+        (0.13, 0.90, 0.89): True,
+        (0.30, 0.80, 0.85): False,
+        (0.05, 0.99, 0.90): False,
+        (0.30, float("nan"), float("nan")): False,  # cannot tell
+    }
+    _, outcomes = _outcomes(k=5, n=8)
+    for (moved, best, claimed), refused in cases.items():
+        sight = _Sight(_look(grown=25, margin=0.3).look, Nearby(claimed, best, moved, np.eye(3)))
+        verdict = decide(outcomes, (768, 1024), (480, 640), **_params(config), sight=sight)
+        assert len(sight.asked) == 1 and verdict.matched is not refused, (moved, best, claimed)
+        if refused:
+            assert verdict.reason.startswith(f"ambiguous: a placement {moved:.0%} of the "
+                                             f"footprint away fits the pixels better")
+            assert verdict.test == "nearby placement"
+    _, many = _outcomes(k=12, n=20)
+    sight = _Sight(_look(grown=25, margin=0.3).look, Nearby(0.5, 0.99, 0.3, np.eye(3)))
+    verdict = decide(many, (768, 1024), (480, 640), **_params(config), sight=sight)
+    assert verdict.matched and sight.asked == []
 
 
 def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_only():
