@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
@@ -30,7 +30,7 @@ from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
 from .features import (Describing, ImageViews, Roles, first_level, first_level_points,
                        image_views)
 from .answer import build_result, without_parallax
-from .sharing import Measured, Memo, Meter, Search
+from .sharing import Detected, LowFeatures, Measured, Memo, Meter, Probed, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
 from .stages.decision import SearchContext, Sight, decide
@@ -196,24 +196,6 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
     return ScaleOutcome(row, best, best_src, best_dst, initial, high)
 
 
-@dataclass(frozen=True)
-class LowFeatures:
-    """The coarser image described once, at s = 1 (docs/ALGORITHM.md step 1: I' at s = 1)."""
-
-    image: np.ndarray = field(repr=False)  #: (H, W) float32
-    described: Described = field(repr=False)
-    keypoints: Keypoints = field(repr=False)  #: strongest first (``harris_low``)
-
-    def strongest(self, n_points: int, n_described: int) -> Tuple[Keypoints, Described, Described]:
-        """(keypoints, descriptors of the ``n_described`` strongest, of all) of the ``n_points``
-        strongest points: what detecting and describing the same image at s = 1 with a cap of
-        ``n_points`` gives (detection sorts strongest first and caps last; a point's
-        descriptors depend on that point alone)."""
-        kp = self.keypoints.part(slice(n_points))
-        d = self.described
-        return kp, d.of_strongest(min(n_described, len(kp))), d.of_strongest(len(kp))
-
-
 def describe_low(low: np.ndarray, search: Search,
                  contrast: Optional[Contrast] = None,
                  grads: Optional[Gradients] = None,
@@ -243,18 +225,6 @@ def _detect(view: View, level: Level, config: Config, contrast: Optional[Contras
                            config.views.edge_margin_px)
 
 
-@dataclass(frozen=True)
-class Probed:
-    """A view of the finer image detected at every scale and scored by the probe."""
-
-    view: View = field(repr=False)
-    detected: Tuple[Detected, ...] = field(repr=False)  #: per scale
-    usable: Tuple[int, ...]  #: scales with described points
-    run: Tuple[int, ...]  #: scales to match in full
-    score: float  #: the best probe score over the scales (inf when the probe is off)
-    probing: bool
-
-
 def _space(config: Config) -> dict:
     return dict(sigma=config.harris.sigma, min_level_sigma=config.harris.min_level_sigma,
                 decimate=config.harris.decimate, camera_blur_px=config.harris.camera_blur_px)
@@ -266,17 +236,6 @@ def _joined(head: Described, rest: Described, offset: int) -> Described:
                      index=np.concatenate([head.index, rest.index + offset]),
                      angle=np.concatenate([head.angle, rest.angle]),
                      desc=np.vstack([head.desc, rest.desc]))
-
-
-class Detected(NamedTuple):
-    """One scale of a view, detected and (its probe's points) described."""
-
-    keypoints: Keypoints
-    #: descriptors of the probe's points (of every point without the probe); None: too small
-    probe: Optional[Described]
-    level: Optional[Level]  #: the level, when kept for the full pass
-    #: every point described already (s = 1, shared with the other direction), or None
-    full: Optional[Described] = None
 
 
 class Reuse(NamedTuple):

@@ -7,6 +7,8 @@ does not need this module read:
 * :class:`Memo`: each direction's coarser image described once, each direction's finer image
   detected once (the views' vote reads both), each image's contrast measured once;
 * :class:`Measured`: an image's contrast and the gradients it was measured from;
+* :class:`LowFeatures`, :class:`Detected`, :class:`Probed`: an image described once as the
+  coarser one, and detected once at every scale as the finer one, as the memo keeps them;
 * :class:`Meter`: the progress of the plan, counted across threads;
 * :class:`Search`: what every step of one search shares, these among it.
 
@@ -17,19 +19,18 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Dict, NamedTuple, Optional
+from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from .config import Config
 from .modes import Mode
 from .result import Direction
-from .stages.detector import Contrast, Gradients, gradients, image_contrast
+from .stages.descriptors import Described
+from .stages.detector import Contrast, Gradients, Keypoints, gradients, image_contrast
+from .stages.scalespace import Level
+from .stages.views import View
 from .working import WorkImages
-
-if TYPE_CHECKING:  # the pipeline's own records, named in annotations only
-    from .pipeline import LowFeatures, Probed
-
 
 class Measured(NamedTuple):
     """What :meth:`Memo.measured` gives of an image: its contrast (None: the detector does not
@@ -37,6 +38,47 @@ class Measured(NamedTuple):
 
     contrast: Optional[Contrast]
     gradients: Optional[Gradients] = None
+
+
+@dataclass(frozen=True)
+class LowFeatures:
+    """The coarser image described once, at s = 1 (docs/ALGORITHM.md step 1: I' at s = 1)."""
+
+    image: np.ndarray = field(repr=False)  #: (H, W) float32
+    described: Described = field(repr=False)
+    keypoints: Keypoints = field(repr=False)  #: strongest first (``harris_low``)
+
+    def strongest(self, n_points: int, n_described: int) -> Tuple[Keypoints, Described, Described]:
+        """(keypoints, descriptors of the ``n_described`` strongest, of all) of the ``n_points``
+        strongest points: what detecting and describing the same image at s = 1 with a cap of
+        ``n_points`` gives (detection sorts strongest first and caps last; a point's
+        descriptors depend on that point alone)."""
+        kp = self.keypoints.part(slice(n_points))
+        d = self.described
+        return kp, d.of_strongest(min(n_described, len(kp))), d.of_strongest(len(kp))
+
+
+class Detected(NamedTuple):
+    """One scale of a view, detected and (its probe's points) described."""
+
+    keypoints: Keypoints
+    #: descriptors of the probe's points (of every point without the probe); None: too small
+    probe: Optional[Described]
+    level: Optional[Level]  #: the level, when kept for the full pass
+    #: every point described already (s = 1, shared with the other direction), or None
+    full: Optional[Described] = None
+
+
+@dataclass(frozen=True)
+class Probed:
+    """A view of the finer image detected at every scale and scored by the probe."""
+
+    view: View = field(repr=False)
+    detected: Tuple[Detected, ...] = field(repr=False)  #: per scale
+    usable: Tuple[int, ...]  #: scales with described points
+    run: Tuple[int, ...]  #: scales to match in full
+    score: float  #: the best probe score over the scales (inf when the probe is off)
+    probing: bool
 
 
 @dataclass
@@ -49,7 +91,7 @@ class Memo:
     coarser: Dict[Direction, LowFeatures] = field(default_factory=dict)
     #: each direction's finer image detected at every scale by its plain step (``Probed``),
     #: which the views' vote reads
-    plain: Dict[Direction, "Probed"] = field(default_factory=dict)
+    plain: Dict[Direction, Probed] = field(default_factory=dict)
     #: cells of the views' votes so far: the a-contrario count of a pass counts the earlier's
     cells_tried: int = 0
     _contrasts: Dict[tuple, Contrast] = field(default_factory=dict, repr=False)
