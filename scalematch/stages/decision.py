@@ -296,6 +296,7 @@ TESTS = {
     "agreeing scales": ("agreeing_scales", "min_agreeing_scales", "log10_nfa",
                         "max_log_nfa_alone"),
     "repeated structure": ("inliers", "second_inliers", "second_gap_px", "second_share"),
+    "nearby placement": ("inliers", "log10_nfa", "pixel_ncc", "pixel_margin"),
     "uniqueness": ("unique_ratio", "min_unique_ratio", "unique_claimed", "unique_elsewhere",
                    "unique_windows", "windows_agreeing", "windows_elsewhere",
                    "min_window_agreement", "log10_nfa", "max_log_nfa_geometry"),

@@ -151,7 +151,7 @@ def test_a_few_inlier_map_the_pixels_place_better_nearby_is_ambiguous():
     a better placement within that (the same map, a pixel off) or none better changes
     nothing. Maps of ``min_inliers`` or more are not searched around."""
     from scalematch.config import Config
-    from scalematch.stages.decision import decide
+    from scalematch.stages.decision import decide, figures
     from scalematch.stages.nearby import Nearby
 
     config = Config()
@@ -171,6 +171,8 @@ def test_a_few_inlier_map_the_pixels_place_better_nearby_is_ambiguous():
             assert verdict.reason.startswith(f"ambiguous: a placement {moved:.0%} of the "
                                              f"footprint away fits the pixels better")
             assert verdict.test == "nearby placement"
+            shown = figures(verdict.test, verdict.evidence, config.decision)
+            assert shown["inliers"] == 5 and shown["pixel_margin"] == 0.3  # the record's
     _, many = _outcomes(k=12, n=20)
     sight = _Sight(_look(grown=25, margin=0.3).look, Nearby(0.5, 0.99, 0.3, np.eye(3)))
     verdict = decide(many, (768, 1024), (480, 640), **_params(config), sight=sight)
