@@ -132,20 +132,20 @@ def zoom_files(n: int, folder: Path) -> list:
 
 def sized_files(n: int, folder: Path) -> dict:
     """``n`` unrelated pairs at each size: {title: [(low path, high path)]}. Photo k is paired
-    with the first photo after it of another scene (the name before its first "_")."""
+    with the first photo after it of another scene (``datasets.other_scene``)."""
     import cv2
-    from scalematch.lab.datasets import find_shared, list_photos
+    from scalematch.lab.datasets import find_shared, list_photos, other_scene
 
     photos = list_photos(find_shared())
-    scene = [Path(p).name.split("_")[0] for p in photos]
+    names = [p.name for p in photos]
     step = max(len(photos) // max(n, 1), 1)
     sizes = {"640x480 high against a 1 MP low image": (1280, 640),
              "1 MP against 1 MP": (1280, 1280)}
     out = {title: [] for title in sizes}
     for k in range(0, step * n, step):
-        j = next(i for i in range(k + 1, k + len(photos)) if scene[i % len(photos)] != scene[k])
         low_img = cv2.imread(str(photos[k]), cv2.IMREAD_GRAYSCALE)
-        high_img = cv2.imread(str(photos[j % len(photos)]), cv2.IMREAD_GRAYSCALE)
+        high_img = cv2.imread(str(photos[other_scene(names, k, [names[k]])]),
+                              cv2.IMREAD_GRAYSCALE)
         for title, (low_side, high_side) in sizes.items():
             paths = []
             for name, img, side in (("low", low_img, low_side), ("high", high_img, high_side)):

@@ -2,8 +2,8 @@
 
 A map of few inliers is pinned by few points. On a repeated texture (a facade of equal windows)
 a handful of points can agree on a copy of the scene off by the spacing of its windows, at a
-scale a few percent off, and its pixels then fit well (a ZNCC of 0.85) but not as well as the
-true placement a fifth of the footprint away (0.96). The pixel check's 8 perturbed placements
+scale a few percent off, and its pixels then fit well but not as well as the true placement a
+fifth to a third of the footprint away (docs/design/DECISION.md, "Placed better nearby"). The pixel check's 8 perturbed placements
 (:mod:`scalematch.stages.pixelcheck`) sit a quarter of the footprint away and tell a lucky
 placement from its neighbours; the uniqueness test slides the footprint beyond half of it. This
 searches between: every scale within one scale step of the map's (``PixelParams.scale_step``),
@@ -26,8 +26,9 @@ from typing import NamedTuple, Optional
 import cv2
 import numpy as np
 
-from ..geometry import as_matrix3, footprint
-from .pixelcheck import PixelParams, blurred_for_ratio, local_ratio
+from ..geometry import as_matrix3, footprint, similarity_matrix
+from .pixelcheck import (PixelParams, blurred_for_ratio, local_ratio, quad_area, shrunk,
+                         small_to_high)
 
 #: angle of one step of the grid, degrees: 2.5 moves the edge of a 64 px footprint by 1.4 px,
 #: half the 3 px inlier threshold (``RansacParams.threshold_px``)
@@ -89,13 +90,11 @@ def masked_zncc(image: np.ndarray, image_valid: np.ndarray, tpl: np.ndarray,
 
 
 def _about(centre: np.ndarray, scale: float, angle_deg: float) -> np.ndarray:
-    """3x3: turn by ``angle_deg`` and scale by ``scale`` about ``centre`` (x, y)."""
-    a = math.radians(angle_deg)
-    r = scale * np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    out = np.eye(3)
-    out[:2, :2] = r
-    out[:2, 2] = centre - r @ centre
-    return out
+    """3x3: turn by ``angle_deg`` and scale by ``scale`` about ``centre`` (x, y), as
+    :func:`scalematch.stages.pixelcheck.perturbations` turns and scales its placements."""
+    m = as_matrix3(similarity_matrix(scale, angle_deg))
+    m[:2, 2] = centre - m[:2, :2] @ centre
+    return m
 
 
 def _grid(step: float, reach: float) -> np.ndarray:
@@ -125,13 +124,13 @@ def _frame(coarser: np.ndarray, finer: np.ndarray, t3: np.ndarray, size: float,
     """The images of :func:`best_nearby` for a map ``t3`` whose footprint is ``size`` px
     (None: a singular map)."""
     q = min(1.0, params.unique_side_px / size)
-    shrink = np.array([[q, 0.0, 0.5 * q - 0.5], [0.0, q, 0.5 * q - 0.5], [0.0, 0.0, 1.0]])
     valid = np.isfinite(coarser)
     low = np.where(valid, coarser, 0).astype(np.float32)
+    shrink = np.eye(3)
     if q < 1.0:
-        wh = (max(int(round(low.shape[1] * q)), 1), max(int(round(low.shape[0] * q)), 1))
-        low = cv2.resize(low, wh, interpolation=cv2.INTER_AREA)
-        valid = cv2.resize(valid.astype(np.uint8), wh, interpolation=cv2.INTER_NEAREST) > 0
+        low, shrink = shrunk(low, 1.0 / q)
+        valid = cv2.resize(valid.astype(np.uint8), low.shape[::-1],
+                           interpolation=cv2.INTER_NEAREST) > 0
     ratio = local_ratio(shrink @ t3, finer.shape)
     if not (math.isfinite(ratio) and ratio > 0):
         return None
@@ -142,8 +141,7 @@ def _frame(coarser: np.ndarray, finer: np.ndarray, t3: np.ndarray, size: float,
     pad = int(round(params.unique_exclusion * size * q)) + \
         2 * int(math.ceil(size * q * params.scale_step)) + 4
     return _Frame(cv2.copyMakeBorder(low, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=0),
-                  np.pad(valid, pad), pad, shrink, small, small_seen,
-                  np.array([[k, 0.0, (k - 1) / 2.0], [0.0, k, (k - 1) / 2.0], [0.0, 0.0, 1.0]]))
+                  np.pad(valid, pad), pad, shrink, small, small_seen, small_to_high(k))
 
 
 def _scores(f: _Frame, placed: np.ndarray, finer_shape, reach: int) -> Optional[np.ndarray]:
@@ -157,7 +155,7 @@ def _scores(f: _Frame, placed: np.ndarray, finer_shape, reach: int) -> Optional[
     if ys < 0 or xs < 0 or ys + h + 2 * reach > f.low.shape[0] \
             or xs + w + 2 * reach > f.low.shape[1]:
         return None
-    m = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]]) @ placed @ f.to_finer
+    m = as_matrix3(similarity_matrix(1.0, 0.0, -x0, -y0)) @ placed @ f.to_finer
     tpl = cv2.warpPerspective(f.small, m, (w, h), flags=cv2.INTER_LINEAR)
     # bilinear: a pixel that mixes in the no-scene side, or the border, falls below 1
     tpl_ok = cv2.warpPerspective(f.small_seen, m, (w, h), flags=cv2.INTER_LINEAR) > 0.99
@@ -181,8 +179,7 @@ def best_nearby(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray,
     corners = footprint(t3, finer.shape) if np.all(np.isfinite(t3)) else None
     if corners is None:
         return nothing
-    d1, d2 = corners[2] - corners[0], corners[3] - corners[1]
-    size = math.sqrt(abs(0.5 * (d1[0] * d2[1] - d1[1] * d2[0])))
+    size = math.sqrt(quad_area(corners))
     f = _frame(coarser, finer, t3, size, params) if size > 0 else None
     if f is None:
         return nothing
@@ -200,8 +197,7 @@ def best_nearby(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray,
                 claimed = float(score[reach, reach])
             j = np.unravel_index(int(np.argmax(score)), score.shape)
             if score[j] > best:
-                shift = np.array([[1.0, 0.0, j[1] - reach], [0.0, 1.0, j[0] - reach],
-                                  [0.0, 0.0, 1.0]])
+                shift = as_matrix3(similarity_matrix(1.0, 0.0, j[1] - reach, j[0] - reach))
                 best, best_t = float(score[j]), np.linalg.inv(f.shrink) @ shift @ placed
     if best_t is None:
         return nothing

@@ -164,13 +164,13 @@ def blurred_for_ratio(high: np.ndarray, ratio: float,
     return img, k
 
 
-def _quad_area(q: np.ndarray) -> float:
+def quad_area(q: np.ndarray) -> float:
     """Area of a quadrilateral (4, 2) given in order (half the cross product of its diagonals)."""
     d1, d2 = q[2] - q[0], q[3] - q[1]
     return 0.5 * abs(float(d1[0] * d2[1] - d1[1] * d2[0]))
 
 
-def _small_to_high(k: int) -> np.ndarray:
+def small_to_high(k: int) -> np.ndarray:
     """3x3 map from the shrunk copy's px to high px: x = k x_s + (k - 1) / 2."""
     c = (k - 1) / 2.0
     return np.array([[k, 0.0, c], [0.0, k, c], [0.0, 0.0, 1.0]])
@@ -207,7 +207,7 @@ def perturbations(t: np.ndarray, high_shape: Tuple[int, int],
     h, w = high_shape[:2]
     centre = apply(t3, [[(w - 1) / 2.0, (h - 1) / 2.0]])[0]
     corners = footprint(t3, (h, w))
-    area = _quad_area(corners) if corners is not None else 0.0
+    area = quad_area(corners) if corners is not None else 0.0
     step = params.shift_fraction * math.sqrt(max(area, 0.0))
     to_c = np.array([[1.0, 0, -centre[0]], [0, 1.0, -centre[1]], [0, 0, 1.0]])
     back = np.array([[1.0, 0, centre[0]], [0, 1.0, centre[1]], [0, 0, 1.0]])
@@ -242,7 +242,7 @@ def _warp_into(small: np.ndarray, m3: np.ndarray, size: Tuple[int, int],
     return img, mask.astype(bool)
 
 
-def _shrunk(image: np.ndarray, factor: float) -> Tuple[np.ndarray, np.ndarray]:
+def shrunk(image: np.ndarray, factor: float) -> Tuple[np.ndarray, np.ndarray]:
     """``image`` shrunk by about ``factor`` (INTER_AREA) and the 3x3 map from its px to the
     shrunk px (centre-aligned: x_s = (x + 0.5) / f - 0.5 with f the factor actually used)."""
     h, w = image.shape
@@ -290,7 +290,7 @@ def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
     corners = footprint(t3, high_shape)
     if corners is None or not np.all(np.isfinite(t3)):
         return "the transform has no footprint"
-    area = _quad_area(corners)
+    area = quad_area(corners)
     if area < params.min_overlap_px:
         return f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})"
     ratio = local_ratio(t3, high_shape)
@@ -298,7 +298,7 @@ def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
         return "the transform is singular"
     q = min(1.0, params.max_side_px / math.sqrt(area))
     if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
-        low, shrink = _shrunk(low, 1.0 / q)
+        low, shrink = shrunk(low, 1.0 / q)
         t3 = shrink @ t3
         ratio, corners, area = (ratio / shrink[0, 0], footprint(t3, high_shape),
                                 area * shrink[0, 0] ** 2)
@@ -387,7 +387,7 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
     size = (x1 - x0 + 1, y1 - y0 + 1)
     small, k = blurred_for_ratio(high, ratio, params.camera_blur_px)
     shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
-    from_small = _small_to_high(k)
+    from_small = small_to_high(k)
     crop_shown = np.isfinite(crop)
 
     def score(m3: np.ndarray, windows: int = 0) -> Tuple[float, int]:
@@ -622,7 +622,7 @@ def unique_template(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: Pi
     low, t3, ratio, _, _ = placed
     small, k = blurred_for_ratio(high, ratio, params.camera_blur_px)
     hh, ww = low.shape
-    img, mask = _warp_into(small, t3 @ _small_to_high(k), (ww, hh), params.edge_px)
+    img, mask = _warp_into(small, t3 @ small_to_high(k), (ww, hh), params.edge_px)
     shown = np.isfinite(low)
     mask &= np.isfinite(img) & shown  # both show the scene at the claimed placement
     if vouched is not None and len(vouched):  # where the inliers vouch for the map
