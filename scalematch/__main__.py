@@ -6,7 +6,7 @@ traceback of the imports under way."""
 import os
 import sys
 
-#: ``scalematch.cli.EXIT_INTERRUPTED`` (128 + SIGINT), which cannot be imported when this is
+#: ``scalematch.exits.EXIT_INTERRUPTED`` (128 + SIGINT), which cannot be imported when this is
 EXIT_INTERRUPTED = 130
 
 

@@ -245,7 +245,7 @@ def _flat(obj: Any, prefix: str = "") -> Dict[str, Any]:
 
 #: The command-line option that sets each recorded parameter directly (``scalematch match
 #: --help``); any other parameter is said as ``--set PATH=VALUE``
-#: (the threshold options too: ``cli.THRESHOLD_OPTIONS``, which a test keeps in step)
+#: (the threshold options too: ``options.THRESHOLD_OPTIONS``, which a test keeps in step)
 OPTION_OF_PATH = {"model": "--model", "seed": "--seed", "order": "--order",
                   "time_budget_s": "--time-budget", "nodata.rule": "--nodata",
                   "harris.threshold": "--harris-threshold",

@@ -287,7 +287,7 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     "budget-1s": lambda: Config(time_budget_s=1.0),
     # the default without tilted views (``--no-views``): the plain search in both orders only.
     # A "no" comes about 3 times sooner on 1 MP images, 1.5 to 2 times on 12-16 MP photos
-    # (cli.NO_VIEWS_SPEEDUP, measured in docs/design/SPEED.md), for batches over archives of mostly unrelated pairs, at the cost
+    # (options.NO_VIEWS_SPEEDUP, measured in docs/design/SPEED.md), for batches over archives of mostly unrelated pairs, at the cost
     # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),

@@ -75,8 +75,8 @@ def run(method: str, low: np.ndarray, high: np.ndarray, model: str = "similarity
 def configured(method: str) -> Config:
     """The Config of a method: a preset, and with "+path=value" the values of ``--set`` on it
     (``tilt-4+views.full_searches=2``; ``scalematch.lab.regress.configured``)."""
-    from scalematch.cli import set_path
     from scalematch.lab.regress import configured as preset_with
+    from scalematch.options import set_path
 
     return preset_with(method, Config, set_path)
 

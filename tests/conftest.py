@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -28,3 +29,14 @@ def shared_dir() -> Path:
     if not (SHARED / "data" / "photos").is_dir():
         pytest.skip(f"the shared data is absent ({SHARED}; set SCALEMATCH_SHARED)")
     return SHARED
+
+
+@pytest.fixture
+def flat_pair(tmp_path):
+    """Two flat grey images with 3-grey-level noise: nothing to match (exit 1). (A constant image
+    is refused as bad input: test_constant_image_is_bad_input.)"""
+    low, high = tmp_path / "flat_low.png", tmp_path / "flat_high.png"
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(low), np.clip(128 + rng.normal(0, 3, (120, 160)), 0, 255).astype(np.uint8))
+    cv2.imwrite(str(high), np.clip(90 + rng.normal(0, 3, (200, 240)), 0, 255).astype(np.uint8))
+    return low, high

@@ -174,7 +174,7 @@ def test_scan_output_refuses_results_of_other_options(tmp_path):
 
 def test_options_of_says_a_configuration_as_the_options_that_give_it():
     from scalematch.batch import OPTION_OF_PATH, options_of
-    from scalematch.cli import THRESHOLD_OPTIONS, build_config
+    from scalematch.options import THRESHOLD_OPTIONS, build_config
 
     def typed(mode="default", model=None, scales=None, seed=None, *settings):
         return config_json(build_config(mode, model, scales, seed, {}, settings))
@@ -1065,7 +1065,7 @@ def test_more_jobs_than_cores_run_one_worker_a_core_and_say_so_once(monkeypatch,
         started.append(jobs)
         return real_pool(pairs, config, max_pixels, jobs, task)
 
-    monkeypatch.setattr("scalematch.cli.available_cores", lambda: 2)
+    monkeypatch.setattr("scalematch.batchrun.available_cores", lambda: 2)
     monkeypatch.setattr(batch, "run_pool", pool)
     root = Path(__file__).resolve().parents[1]
     pairs = write(tmp_path / "pairs.csv",

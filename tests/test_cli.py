@@ -1,10 +1,11 @@
 """The command line: help, bad inputs (exit 2, one-line Error), option values that mean nothing,
-Ctrl-C (exit 130), no match (exit 1), the JSON contract, the demo (exit 0). Batch: test_batch.py."""
+Ctrl-C (exit 130), no match (exit 1), the JSON contract, the demo (exit 0). Batch: test_batch.py;
+what the options give, the outputs checked, stderr's words: test_options.py, test_outputs.py,
+test_report.py."""
 
 from __future__ import annotations
 
 import csv
-import io
 import json
 import re
 import subprocess
@@ -18,7 +19,7 @@ import pytest
 from click.testing import CliRunner
 
 from scalematch import __version__
-from scalematch.cli import cli, parse_scales
+from scalematch.cli import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_LOW = ROOT / "data" / "demo_low.png"
@@ -48,17 +49,6 @@ def assert_one_line_error(result, needle: str = "") -> str:
     assert last.startswith("Error: "), result.stderr
     assert needle.lower() in last.lower(), last
     return last
-
-
-@pytest.fixture
-def flat_pair(tmp_path):
-    """Two flat grey images with 3-grey-level noise: nothing to match (exit 1). (A constant image
-    is refused as bad input: test_constant_image_is_bad_input.)"""
-    low, high = tmp_path / "flat_low.png", tmp_path / "flat_high.png"
-    rng = np.random.default_rng(0)
-    cv2.imwrite(str(low), np.clip(128 + rng.normal(0, 3, (120, 160)), 0, 255).astype(np.uint8))
-    cv2.imwrite(str(high), np.clip(90 + rng.normal(0, 3, (200, 240)), 0, 255).astype(np.uint8))
-    return low, high
 
 
 # --------------------------------------------------------------------------- help and version
@@ -108,6 +98,14 @@ def test_min_inliers_help_says_fewer_pass_with_the_pixel_check():
            "and the pixel check confirms it" in text
 
 
+def test_the_names_other_trees_import_from_the_command_line_stay_there():
+    """``scalematch lab regress --tree`` and scripts/no_price.py import ``main`` and
+    ``set_path`` from ``scalematch.cli``, in this tree as in older ones."""
+    from scalematch import cli, options
+
+    assert callable(cli.main) and cli.set_path is options.set_path
+
+
 def test_python_dash_m_runs_the_command_line():
     out = subprocess.run([sys.executable, "-m", "scalematch", "--version"], capture_output=True,
                          text=True, timeout=60)
@@ -125,38 +123,6 @@ def test_json_to_a_full_stdout_is_an_input_error_as_to_a_full_file():
     assert out.returncode == 2, out.stderr
     assert out.stderr.strip().splitlines() == [
         "Error: cannot write --json to stdout: No space left on device"]
-
-
-def test_set_takes_groups_of_tilts_for_the_view_passes():
-    from scalematch.cli import build_config
-
-    config = build_config("default", None, None, None, {}, ["views.passes=2;4;6,8"])
-    assert config.views.passes == ((2.0,), (4.0,), (6.0, 8.0))
-    with pytest.raises(ValueError, match="views.passes needs groups of numbers split by ';'"):
-        build_config("default", None, None, None, {}, ["views.passes=2;x"])
-    with pytest.raises(ValueError, match="views.passes"):
-        build_config("default", None, None, None, {}, ["views.passes=2;0.5"])  # a tilt < 1
-
-
-def test_set_scales_reads_what_the_scales_option_reads():
-    from scalematch.cli import build_config
-
-    by_set = build_config("default", None, None, None, {}, ["scales=1-8"])
-    assert by_set.scales == build_config("default", None, "1-8", None, {}, []).scales
-    assert by_set.scales == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
-
-
-@pytest.mark.parametrize("item,needle", [
-    ("harris=3", "'harris' is a group of parameters: set one of them, harris.NAME=VALUE"),
-    ("ransac=1", "'ransac' is a group"),
-    ("harris.threshold.x=2", "harris.threshold is a value, not a group"),
-])
-def test_set_on_a_group_is_a_usage_error_naming_its_parameters(item, needle):
-    """A group given a value was taken as the value and failed deep in the search (exit 4)."""
-    from scalematch.cli import build_config
-
-    with pytest.raises(ValueError, match=needle):
-        build_config("default", None, None, None, {}, [item])
 
 
 def test_nodata_takes_auto_none_or_a_grey_level_and_the_json_records_it(tmp_path):
@@ -182,21 +148,6 @@ def test_nodata_takes_auto_none_or_a_grey_level_and_the_json_records_it(tmp_path
 def test_version():
     result = run("--version")
     assert result.exit_code == 0 and result.output.strip() == f"scalematch {__version__}"
-
-
-def test_parse_scales():
-    assert parse_scales("1-4") == (1.0, 2.0, 3.0, 4.0)
-    assert parse_scales("2-4:0.5") == (2.0, 2.5, 3.0, 3.5, 4.0)
-    assert parse_scales("1,2,3.5") == (1.0, 2.0, 3.5)
-    assert parse_scales("1-3, 8") == (1.0, 2.0, 3.0, 8.0)
-    for bad in ("8-1", "a-b", "", "1-4:0", "2:3"):  # "0.5-2" parses; Config refuses 0.5
-        with pytest.raises(ValueError):
-            parse_scales(bad)
-    with pytest.raises(ValueError, match="'8-1' go down: write the range from the smaller "
-                                         "scale, 1-8"):
-        parse_scales("8-1")
-    with pytest.raises(ValueError, match="step of scales '1-4:0' must be more than 0"):
-        parse_scales("1-4:0")
 
 
 @needs_pipeline
@@ -450,43 +401,6 @@ def test_ctrl_c_in_match_exits_130(monkeypatch, flat_pair):
     assert "130  interrupted" in run("match", "--help").output
 
 
-# --------------------------------------------------------------------------- progress bar
-
-class _Terminal(io.StringIO):
-    """A stream that click takes for a terminal: its progress bar is drawn there."""
-
-    def isatty(self) -> bool:
-        return True
-
-
-@needs_pipeline
-def test_the_progress_bar_counts_the_plan_from_start_to_end():
-    """Every state the bar shows has the same total, the plan's; the count only grows, and ends
-    at the total (the search stops early on the demo pair: the rest is counted as done)."""
-    from scalematch.cli import PlanBar, _run_match
-    from scalematch.config import Config
-    from scalematch.imageio import read_grey
-
-    screen = _Terminal()
-    with PlanBar(screen) as bar:
-        _run_match(read_grey(DEMO_LOW), read_grey(DEMO_HIGH), Config(), bar)
-    shown = [(int(done), int(total)) for done, total
-             in re.findall(r"matching.*?(\d+)/(\d+)", screen.getvalue())]
-    assert len(shown) >= 2, screen.getvalue()
-    assert len({total for _, total in shown}) == 1, shown
-    done = [d for d, _ in shown]
-    assert done == sorted(done) and done[-1] == shown[-1][1]
-
-
-def test_the_progress_bar_shows_no_time_left():
-    """Its units differ several times in cost, so a rate-based time left misleads."""
-    from scalematch.cli import PlanBar
-
-    with PlanBar(_Terminal()) as bar:
-        bar(1, 100)
-        assert bar.bar is not None and bar.bar.show_eta is False
-
-
 # --------------------------------------------------------------------------- no match: exit 1
 
 @needs_pipeline
@@ -675,55 +589,7 @@ def test_an_unexpected_error_is_recorded_in_the_json_and_ctrl_c_is_not(monkeypat
     assert not js2.exists()
 
 
-# --------------------------------------------------------------------------- outputs vs inputs
-
-@needs_pipeline
-def test_json_into_a_missing_folder_creates_it_as_out_dir_does(tmp_path, flat_pair):
-    js = tmp_path / "new" / "deeper" / "result.json"
-    out = tmp_path / "new" / "pictures"
-    result = run(*flat_pair, "--json", js, "-o", out, "-q")
-    assert result.exit_code == 1, result.output  # no reliable match: both written all the same
-    assert json.loads(js.read_text())["matched"] is False
-    assert (out / "overlay.png").is_file()
-
-
-def test_json_never_overwrites_an_input(flat_pair):
-    low, high = flat_pair
-    before = low.read_bytes()
-    for target in (low, low.parent / "." / low.name):
-        last = assert_one_line_error(run(low, high, "--json", target), "is an input")
-        assert "--json" in last and "overwritten" in last
-    assert low.read_bytes() == before
-
-
-@pytest.mark.parametrize("name", ["overlay.png", "matches.csv", "scales.png"])
-def test_json_onto_a_file_of_the_out_dir_is_refused_before_anything_is_written(tmp_path,
-                                                                               flat_pair, name):
-    folder = tmp_path / "out"
-    for target in (folder / name, folder / "sub" / ".." / name):
-        last = assert_one_line_error(run(*flat_pair, "-o", folder, "--json", target),
-                                     f"is {name}, which --out-dir")
-        assert "overwrite" in last
-    assert not folder.exists()  # refused at the door: no folder made, nothing written
-
-
-def test_out_dir_dash_is_refused_where_json_dash_means_stdout(tmp_path, flat_pair, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    last = assert_one_line_error(run(*flat_pair, "-o", "-"), "--out-dir -")
-    assert "--json -" in last
-    assert not (tmp_path / "-").exists()
-
-
-@pytest.mark.parametrize("name", ["overlay.png", "matches.csv"])
-def test_out_dir_never_overwrites_an_input(tmp_path, flat_pair, name):
-    folder = tmp_path / "out"
-    folder.mkdir()
-    high = folder / name
-    high.write_bytes(flat_pair[1].read_bytes())
-    last = assert_one_line_error(run(flat_pair[0], high, "-o", folder), "is an input")
-    assert "--out-dir" in last and "choose another folder" in last
-    assert high.read_bytes() == flat_pair[1].read_bytes()
-    assert sorted(p.name for p in folder.iterdir()) == [name]  # nothing else written
+# --------------------------------------------------------------------------- a large JPEG
 
 
 @needs_pipeline
@@ -753,41 +619,3 @@ def test_a_jpeg_above_twice_the_working_size_is_decoded_reduced(tmp_path):
     assert np.linalg.norm(fit - pts[:, 2:], axis=1).max() < 2.1 * 3.0 + 1e-6
 
 
-def test_a_slow_no_with_views_says_how_to_get_a_quicker_one():
-    from dataclasses import replace
-
-    from scalematch.cli import SLOW_NO_HINT_S, _match_report, slow_no_hint
-    from scalematch.result import Direction, MatchResult, StepRecord
-
-    plain = StepRecord(Direction.GIVEN, 0, 1, 1, 3.0, False)
-    views = replace(plain, view_pass=1, views=5)
-    slow = MatchResult(matched=False, model="similarity", reason="too few inliers",
-                       timings={"total": SLOW_NO_HINT_S + 20}, search=(plain, views))
-    assert "--no-views" in slow_no_hint(slow)
-    assert _match_report(slow, {}, None, False)[0] == slow_no_hint(slow)  # before the verdict
-    assert slow_no_hint(replace(slow, timings={"total": SLOW_NO_HINT_S / 4})) == ""
-    assert slow_no_hint(replace(slow, search=(plain,))) == ""  # no views: nothing to drop
-    assert slow_no_hint(replace(slow, matched=True, reason="")) == ""
-
-
-def test_a_no_beyond_the_ratios_searched_says_which_scales_would_search_it(raccoon, tmp_path):
-    """A 41x pair (the whole photo 100 px wide against a detail 1,800 px wide) is a "no" over
-    the default ratios, 1 to 16; the hint names a --scales range that holds the ratio, and that
-    range matches it (within 2 %)."""
-    width = raccoon.shape[1]
-    low = cv2.resize(raccoon, (100, round(100 * raccoon.shape[0] / width)),
-                     interpolation=cv2.INTER_AREA)
-    high = cv2.resize(raccoon[200:650, 300:750], (1800, 1800), interpolation=cv2.INTER_CUBIC)
-    ratio = 4.0 * width / 100
-    cv2.imwrite(str(tmp_path / "low.png"), np.clip(low, 0, 255).astype(np.uint8))
-    cv2.imwrite(str(tmp_path / "high.png"), np.clip(high, 0, 255).astype(np.uint8))
-    no = run(tmp_path / "low.png", tmp_path / "high.png", "--no-views")
-    assert no.exit_code == 1, no.output
-    hint = re.search(r"--scales (\d+)-(\d+) searches", no.stderr)
-    assert hint and "the high image is 18 times the low one" in no.stderr, no.stderr
-    lo, hi = int(hint.group(1)), int(hint.group(2))
-    assert lo <= ratio <= hi
-    yes = run(tmp_path / "low.png", tmp_path / "high.png", "--scales", f"{lo}-{hi}", "--json",
-              "-", "-q")
-    assert yes.exit_code == 0, yes.output
-    assert abs(json.loads(yes.stdout)["resolution_ratio"] / ratio - 1) < 0.02

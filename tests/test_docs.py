@@ -169,7 +169,9 @@ def test_the_no_views_figure_is_said_the_same_everywhere():
 
     from click.testing import CliRunner
 
-    from scalematch.cli import NO_VIEWS_SPEEDUP, SLOW_NO_HINT_S, cli, slow_no_hint
+    from scalematch.cli import cli
+    from scalematch.options import NO_VIEWS_SPEEDUP
+    from scalematch.report import SLOW_NO_HINT_S, slow_no_hint
     from scalematch.result import Direction, MatchResult, StepRecord
 
     def flat(text: str) -> str:
@@ -222,9 +224,10 @@ REPEATED_FIGURES = (
                              r"the same runs"),
     ("12-16 MP no", r"a median ([\d.]+ s) \(at most ([\d.]+ s)\) and ([\d.]+ MB)"),
 )
-#: Where the figures are said: the pages of users and maintainers, the code's help texts
+#: Where the figures are said: the pages of users and maintainers, the code's help texts and hints
 FIGURE_PAGES = ("README.md", "docs/GUIDE.md", "docs/DESIGN.md", "docs/design/SPEED.md",
-                "scalematch/cli.py", "scalematch/config.py")
+                "scalematch/cli.py", "scalematch/options.py", "scalematch/report.py",
+                "scalematch/config.py")
 
 
 def test_a_figure_said_in_several_places_has_one_value():
@@ -251,8 +254,8 @@ def test_the_readme_verdict_is_the_tool_s_on_the_demo_pair():
     """The verdict the README shows for the demo pair is the one the tool prints, word for word,
     but for the time it took, which follows the machine."""
     from scalematch import match
-    from scalematch.cli import summary
     from scalematch.imageio import read_grey
+    from scalematch.report import summary
 
     shown = re.search(r"^(matched \(.*); matching took [\d.]+ s$", (ROOT / "README.md").read_text(),
                       re.M)

@@ -226,14 +226,6 @@ def test_a_fit_whose_ratio_contradicts_its_scale_is_shown_as_not_counted():
     assert disagreeing_rows(collapsed_fit_result("fundamental")) == []  # no ratio to compare
 
 
-def test_the_verbose_table_says_which_rows_are_not_counted():
-    from scalematch.cli import scale_table
-
-    lines = scale_table(collapsed_fit_result()).splitlines()[1:]
-    assert lines[0].endswith("ratio far from s") and lines[3].endswith("ratio far from s")
-    assert lines[1].endswith("<- best") and "far" not in lines[2]
-
-
 def test_write_outputs(tmp_path, pair):
     low, high, t = pair
     paths = write_outputs(tmp_path / "out", "low.png", "high.png", low, high, make_result(t))
@@ -311,7 +303,6 @@ def test_told_apart_names_two_files_of_the_same_name_by_their_folders():
     assert told_apart("data/boat/img1.png", "data/graf/img1.png") == ("boat/img1.png",
                                                                       "graf/img1.png")
     assert told_apart("a/low.png", "a/high.png") == ("low.png", "high.png")
-
 
 
 def test_the_verdict_calls_no_image_finer_near_a_ratio_of_1():

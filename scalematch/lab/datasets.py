@@ -30,9 +30,9 @@ BOAT_LOW_INDICES = (2, 3, 4, 5, 6)
 PathLike = Union[str, Path]
 
 
-#: The command line's exit code of bad input or usage (``scalematch.cli.EXIT_BAD_INPUT``): a lab
-#: command whose data is not where it looked was not told where the data is; not 1, which the
-#: command line keeps for "no reliable match" (and the lab's gates for a failed gate)
+#: The command line's exit code of bad input or usage (``scalematch.exits.EXIT_BAD_INPUT``): a
+#: lab command whose data is not where it looked was not told where the data is; not 1, which
+#: the command line keeps for "no reliable match" (and the lab's gates for a failed gate)
 EXIT_NO_DATA = 2
 #: How to point a lab command with a ``--shared`` option at the shared folder
 POINT_WITH_OPTION = f"point at the shared folder with --shared DIR or {SHARED_ENV}=DIR"

@@ -366,6 +366,7 @@ def _init_worker(tree: Optional[str], preset: str = "default") -> None:
         sys.path.insert(0, tree)
     _MATCH["match"] = importlib.import_module("scalematch.pipeline").match
     _MATCH["Config"] = importlib.import_module("scalematch.config").Config
+    # set_path where every tree has it, older ones too (this one re-exports it from options)
     _MATCH["config"] = _MATCH["Config"]() if preset == "default" else configured(
         preset, _MATCH["Config"], importlib.import_module("scalematch.cli").set_path)
     if tree:
@@ -660,8 +661,8 @@ def regress_command(shared, slice_, kinds, tree, baseline_path, update, rows_pat
                 raise click.BadParameter(f"unknown kind {k!r}; one of {', '.join(KINDS)}",
                                          param_hint="--kinds")
     if preset != "default":  # a preset or a setting that does not exist: said before the run
-        from ..cli import set_path
         from ..config import Config
+        from ..options import set_path
 
         try:
             configured(preset, Config, set_path)

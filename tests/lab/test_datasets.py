@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from scalematch.cli import EXIT_BAD_INPUT, EXIT_NO_MATCH, cli
+from scalematch.cli import cli
+from scalematch.exits import EXIT_BAD_INPUT, EXIT_NO_MATCH
 from scalematch.lab.datasets import SHARED_ENV, find_shared, shared_place
 
 ROOT = Path(__file__).resolve().parents[2]

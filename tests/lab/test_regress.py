@@ -150,8 +150,8 @@ def test_every_kind_is_made_in_both_orders_with_unique_ids(shared_dir):
 def test_a_preset_with_settings_is_the_configuration_of_every_run():
     """``--preset tilt-4+views.max_short_side_px=500`` runs the tilt-4 preset with that value; an unknown
     preset or parameter is refused before the run (exit 2)."""
-    from scalematch.cli import set_path
     from scalematch.config import Config
+    from scalematch.options import set_path
 
     config = regress.configured("tilt-4+views.max_short_side_px=500", Config, set_path)
     base = Config.preset("tilt-4")
