@@ -25,9 +25,9 @@ def plural(n: int, word: str) -> str:
 
 
 def summary(result: MatchResult) -> str:
-    """The one-line verdict on stderr: :func:`render.verdict` (the captions' too) and the time the
+    """The one-line verdict on stderr: :func:`verdict.verdict` (the captions' too) and the time the
     match took (``MatchResult.seconds``: not the reading of the images, nor Python's start)."""
-    from .render import verdict
+    from .verdict import verdict
 
     return f"{verdict(result)}; matching took {result.seconds:.2f} s"  # 0.04 s, not 0.0 s
 
@@ -36,7 +36,7 @@ def scale_table(result: MatchResult) -> str:
     """The per-scale table (the paper's Table 1) as text."""
     head = f"{'s':>7} {'points':>7} {'initial':>7} {'kept':>6} {'inliers':>7} {'outl%':>6} " \
            f"{'ratio':>7} {'rot':>7}"
-    from .render import disagreeing_rows
+    from .scalechart import disagreeing_rows
 
     lines = [head]
     off = set(disagreeing_rows(result))

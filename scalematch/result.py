@@ -88,7 +88,7 @@ class Evidence:
     unique_claimed: float = math.nan  #: ZNCC of the finer image at the claimed placement
     unique_elsewhere: float = math.nan  #: the best ZNCC anywhere half a footprint away
     unique_ratio: float = math.nan  #: misfit elsewhere over misfit at the claim
-    #: the same by windows (``stages.pixelcheck.window_agreement``), measured only when the
+    #: the same by windows (``stages.uniqueness.window_agreement``), measured only when the
     #: ratio above refuses: windows compared, the share that agrees at the claim, the highest
     #: share anywhere else
     unique_windows: int = 0

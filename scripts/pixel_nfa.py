@@ -15,7 +15,7 @@ size with NaN where an image shows no scene (as ``stages.decision.final_checks``
 * the geometry: its log10 NFA (the evidence's, or the rejected candidate's);
 * the pixels, over the whole overlap of the footprint with the coarser image (no inlier
   vouching): the finer image warped by the map at the uniqueness test's size
-  (``pixelcheck.unique_template`` without ``vouched``), cut into ``PixelParams.window_px``
+  (``uniqueness.unique_template`` without ``vouched``), cut into ``PixelParams.window_px``
   windows; ``j`` of ``m`` agree (ZNCC >= ``window_ncc``) at the map; ``q_elsewhere`` is the
   best share at any placement half a footprint away (``agreement_of``), ``q_nearby`` the best
   at the 8 nearby placements (``near_windows``: shifted, turned, rescaled; its own tiling of
@@ -73,9 +73,9 @@ from scalematch.lab.realistic import KINDS as REALISTIC_KINDS  # noqa: E402
 from scalematch.result import Direction  # noqa: E402
 from scalematch.stages.decision import log10_binom  # noqa: E402
 from scalematch.stages.estimator import model_of  # noqa: E402
+from scalematch.stages.pixelcheck import PixelParams, near_windows, perturbations  # noqa: E402
 # _far: the placements that agreement_of counts as elsewhere (half a footprint away)
-from scalematch.stages.pixelcheck import (PixelParams, _far, agreement_of,  # noqa: E402
-                                          near_windows, perturbations, unique_template)
+from scalematch.stages.uniqueness import _far, agreement_of, unique_template  # noqa: E402
 from scalematch.working import at_working_size  # noqa: E402
 
 SETS = ("regress", "realistic", "nulls", "real-nulls")

@@ -1,5 +1,5 @@
-"""Shared fixtures: the photo the repo ships, and the shared data folder when it is present
-($SCALEMATCH_SHARED, else ../shared beside the repository)."""
+"""Shared fixtures: the photo the repo ships, the pictures' pair cut from it, and the shared data
+folder when it is present ($SCALEMATCH_SHARED, else ../shared beside the repository)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
+from scalematch.geometry import compose
 from scalematch.imageio import read_grey
 from scalematch.lab.datasets import find_shared
+from scalematch.lab.synthetic import zoom_warp
 
 ROOT = Path(__file__).resolve().parents[1]
 #: where the commands look too (``find_shared``): $SCALEMATCH_SHARED, else ../shared
@@ -40,3 +42,19 @@ def flat_pair(tmp_path):
     cv2.imwrite(str(low), np.clip(128 + rng.normal(0, 3, (120, 160)), 0, 255).astype(np.uint8))
     cv2.imwrite(str(high), np.clip(90 + rng.normal(0, 3, (200, 240)), 0, 255).astype(np.uint8))
     return low, high
+
+
+#: The pictures' pair (``pair``: test_render.py, test_overlay.py, test_scalechart.py): the photo
+#: turned by ANGLE and shrunk by RATIO, and a crop of it at full resolution
+RATIO, ANGLE = 3.0, 25.0
+CROP = (300, 200, 480, 360)  # x0, y0, w, h of the high-resolution crop of the photo
+
+
+@pytest.fixture(scope="module")
+def pair(raccoon):
+    """(low, high, T): high a full-resolution crop, low the whole photo turned and shrunk by 3."""
+    x0, y0, w, h = CROP
+    high = raccoon[y0:y0 + h, x0:x0 + w].copy()
+    low, a = zoom_warp(raccoon, RATIO, ANGLE)
+    t = compose(a, np.array([[1.0, 0, x0], [0, 1.0, y0]]))  # high px -> photo px -> low px
+    return low, high, t

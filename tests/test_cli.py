@@ -421,7 +421,7 @@ def test_flat_images_no_reliable_match_and_json_still_written(tmp_path, flat_pai
     assert data["config"]["model"] == "similarity"
     for name in ("overlay.png", "scales.png", "matches.csv"):
         assert (out / name).is_file(), name
-    # the low image enlarged 4 times (under 600 px: render.MIN_OVERLAY_SIDE_PX)
+    # the low image enlarged 4 times (under 600 px: overlay.MIN_OVERLAY_SIDE_PX)
     overlay_shape = cv2.imread(str(out / "overlay.png")).shape
     assert overlay_shape[1:] == (640, 3) and overlay_shape[0] >= 480
 

@@ -39,7 +39,8 @@ try:
     main(["--help"])
 except SystemExit:
     pass
-names = ("scalematch.pipeline", "scalematch.render", "scalematch.lab")
+names = ("scalematch.pipeline", "scalematch.render", "scalematch.overlay", "scalematch.scalechart",
+         "scalematch.captions", "scalematch.verdict", "scalematch.lab")
 print(after_import, sorted(m for m in sys.modules if m.startswith(names)))
 """
 

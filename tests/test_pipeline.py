@@ -188,7 +188,7 @@ def test_a_flat_scene_asked_for_a_fundamental_matrix_is_answered_with_its_plane_
     assert r.evidence.plane_inliers == r.n_inliers
     assert r.config.model == "fundamental"
     assert {"epipolar", "total"} <= set(r.timings)
-    from scalematch.render import verdict
+    from scalematch.verdict import verdict
     assert "no parallax: the plane map answers" in verdict(r)
 
 
@@ -535,7 +535,7 @@ def test_a_homography_its_inliers_do_not_pin_is_answered_as_the_simpler_model_th
     pin it within 1 px, and the simpler model they pin answers, within 3 px, the verdict
     naming the homography refused."""
     from scalematch.lab.synthetic import pairs_from_photos
-    from scalematch.render import verdict
+    from scalematch.verdict import verdict
 
     pair = next(pairs_from_photos([shared_dir / "data" / "photos" / name], [ratio], seed=seed,
                                   pick="least"))

@@ -13,7 +13,7 @@ import numpy as np
 from scalematch.report import (SLOW_NO_HINT_S, PlanBar, match_report, scale_table,
                                slow_no_hint)
 from test_cli import DEMO_HIGH, DEMO_LOW, needs_pipeline, run
-from test_render import collapsed_fit_result
+from test_scalechart import collapsed_fit_result
 
 
 class _Terminal(io.StringIO):

@@ -47,7 +47,7 @@ import click
 import cv2
 import numpy as np
 
-from ..render import line_ends
+from ..overlay import line_ends
 from ..stages.epipolar import (homogeneous, refine_fundamental,
                                sampson_residuals)
 from .datasets import POINT_WITH_OPTION, list_photos, require_shared, scene_of, shared_option

@@ -44,8 +44,8 @@ from .descriptors import Described
 from .estimator import FitSpec, estimate, model_of
 from .guided import GuidedParams, grow
 from .nodata import with_nan
-from .pixelcheck import (Agreement, NearWindows, PixelParams, agreement_of, near_windows,
-                         pixel_check, unique_template, uniqueness_of)
+from .pixelcheck import NearWindows, PixelParams, near_windows, pixel_check
+from .uniqueness import Agreement, agreement_of, unique_template, uniqueness_of
 from .nearby import Nearby, best_nearby
 from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
 from .threads import thread_map
@@ -117,7 +117,7 @@ class DecisionParams:
     few_clear_margin: float = 0.25
     #: a transform about to be accepted must place the finer image better than anywhere else in
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
-    #: times the claimed one's (``stages.pixelcheck.uniqueness``). A repeated structure (the
+    #: times the claimed one's (``stages.uniqueness.uniqueness``). A repeated structure (the
     #: windows of a facade) is matched by many points wherever a copy of it stands. Measured
     #: (docs/NULLS.md): the 12 claims of the hardest nulls (two halves of one photo; 6 to 13
     #: inliers, log10 NFA down to -38) 0.48 to 1.1; 152 true zoom pairs 3.75 to 898 (median
@@ -134,7 +134,7 @@ class DecisionParams:
     #: measured with ``--no-views`` had 2.88 (an occluded pair at ratio 8, 5 inliers; the
     #: realistic and tilted sets, both orders); true zoom pairs 3.75 and more
     unconfirmed_min_unique_ratio: float = 2.5
-    #: ... or, compared window by window (``stages.pixelcheck.window_agreement``), at least
+    #: ... or, compared window by window (``stages.uniqueness.window_agreement``), at least
     #: ``min_windows`` windows of which this share agree at the claim ...
     min_window_agreement: float = 0.6
     #: ... and this many times the share that agrees anywhere else. An occluder loses only
@@ -957,7 +957,7 @@ def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
 
 
 def windows_agree(a: Agreement, params: DecisionParams) -> bool:
-    """Whether the windows of a claim (:func:`scalematch.stages.pixelcheck.window_agreement`)
+    """Whether the windows of a claim (:func:`scalematch.stages.uniqueness.window_agreement`)
     show it unique: enough of them, most agreeing at the claim, far fewer anywhere else.
 
     >>> p = DecisionParams()
@@ -986,7 +986,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
 
     Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
     the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
-    times better than any other place (:func:`scalematch.stages.pixelcheck.uniqueness`),
+    times better than any other place (:func:`scalematch.stages.uniqueness.uniqueness`),
     compared where the inliers vouched for the map (``claim.vouched``); or, where that one
     ZNCC refuses (an occluder sinks it), window by window (:func:`windows_agree`).
     Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours

@@ -10,7 +10,7 @@ searches between: every scale within one scale step of the map's (``PixelParams.
 every angle within ``PixelParams.rotation_deg``, every shift within
 ``PixelParams.unique_exclusion`` of the footprint, and gives the best placement and its ZNCC.
 
-How: the finer image, blurred for its ratio (:func:`scalematch.stages.pixelcheck.blurred_for_ratio`),
+How: the finer image, blurred for its ratio (:func:`scalematch.stages.placing.blurred_for_ratio`),
 is warped for each scale and angle about the footprint's centre onto a template at most
 ``PixelParams.unique_side_px`` on its side; every shift is one correlation over the coarser
 image (:func:`masked_zncc`), compared only where both images show the scene (NaN elsewhere).
@@ -27,8 +27,8 @@ import cv2
 import numpy as np
 
 from ..geometry import as_matrix3, footprint, similarity_matrix
-from .pixelcheck import (PixelParams, blurred_for_ratio, local_ratio, quad_area, shrunk,
-                         small_to_high)
+from .pixelcheck import PixelParams
+from .placing import blurred_for_ratio, local_ratio, quad_area, shrunk, small_to_high
 
 #: angle of one step of the grid, degrees: 2.5 moves the edge of a 64 px footprint by 1.4 px,
 #: half the 3 px inlier threshold (``RansacParams.threshold_px``)

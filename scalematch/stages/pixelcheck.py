@@ -19,12 +19,12 @@ structure lines up.
 Cheap by construction: the high image is first shrunk by an integer factor ``k ~ r / 2`` with
 ``cv2.INTER_AREA`` (a box filter) and blurred by the rest of the camera blur on the small copy;
 all placements are warped only onto the bounding box of the footprints in the low image, at the
-low image's resolution.
+low image's resolution (:mod:`scalematch.stages.placing`). ``near_windows`` makes the same
+comparison window by window.
 
 Where the pixels are compared: only where both images show the scene (NaN marks the rest: a
-no-data canvas, :mod:`scalematch.stages.nodata`), and for the uniqueness test only near the
-inliers (``vouch_radius``): an occluder, a foreground object or a 3-D scene's other planes hold
-no inlier, and one ZNCC over the whole footprint would count them against a true map.
+no-data canvas, :mod:`scalematch.stages.nodata`). The uniqueness test, which compares the claim
+with every placement elsewhere, is :mod:`scalematch.stages.uniqueness`.
 
 Pixel convention: OpenCV's, (x, y), pixel centres at integers. Used by the decision's second
 look and by the pixel tests of every match's final map (:mod:`scalematch.stages.decision`).
@@ -33,14 +33,14 @@ look and by the pixel tests of every match's final map (:mod:`scalematch.stages.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import ClassVar, Mapping, NamedTuple, Optional, Tuple, Union
+from dataclasses import dataclass, field
+from typing import ClassVar, Mapping, NamedTuple, Optional, Tuple
 
-import cv2
 import numpy as np
 
 from ..checks import ANGLE, AT_LEAST_ONE, Bounds, CORRELATION, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds
-from ..geometry import apply, as_matrix3, footprint, ratio_at, similarity_matrix
+from ..geometry import apply, as_matrix3, footprint, similarity_matrix
+from .placing import blurred_for_ratio, place, quad_area, small_to_high, warp_into
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ class PixelParams:
     #: (16 px of a 64 px footprint) is twice the descriptor window's radius (8 of its 16 px
     #: at the point's scale), so most of what is compared was not what the descriptors matched
     vouch_radius: float = 0.25
-    #: side of the windows of the agreement test (:func:`window_agreement`), px of the
+    #: side of the windows of the agreement test (``uniqueness.window_agreement``), px of the
     #: uniqueness test's template (``unique_side_px``): 8 tiles a 64 px template with 64
     #: windows, each half the descriptor window (16 px at the point's scale)
     window_px: int = 8
@@ -96,7 +96,7 @@ class PixelParams:
     #: structure elsewhere is at least that far away, or it would overlap the claim)
     unique_exclusion: float = 0.5
     #: camera blur the coarser image is taken to carry, in its own px: the finer image is
-    #: blurred by this times sqrt(ratio^2 - 1) before it is compared (:func:`blurred_for_ratio`;
+    #: blurred by this times sqrt(ratio^2 - 1) before it is compared (``placing.blurred_for_ratio``;
     #: the camera model of EVALUATION.md, as ``HarrisParams.camera_blur_px``)
     camera_blur_px: float = 0.5
 
@@ -138,42 +138,6 @@ class PixelCheck:
     def decided(self) -> bool:
         """True when the check could measure the hypothesis and its neighbours."""
         return math.isfinite(self.margin)
-
-
-def blurred_for_ratio(high: np.ndarray, ratio: float,
-                      camera_blur_px: float = 0.5) -> Tuple[np.ndarray, int]:
-    """The high image (h, w) with the camera blur of ``ratio``, on a copy shrunk by ``k``.
-
-    Returns (small, k): ``small[y_s, x_s]`` is the high image blurred by
-    ``camera_blur_px * sqrt(ratio^2 - 1)`` high px sampled at ``x = k x_s + (k - 1) / 2``
-    (``cv2.INTER_AREA``'s centre-aligned box, variance ``(k^2 - 1) / 12`` high px^2, counted in
-    the blur). ``k = max(1, floor(ratio / 2))`` keeps two small pixels per low pixel.
-    """
-    img = np.asarray(high, np.float32)
-    r = max(float(ratio), 1.0)
-    k = max(1, int(r // 2))
-    h, w = img.shape
-    k = min(k, max(1, min(h, w) // 8))
-    if k > 1:
-        img = cv2.resize(img[: (h // k) * k, : (w // k) * k], (w // k, h // k),
-                         interpolation=cv2.INTER_AREA)
-    total = camera_blur_px * math.sqrt(max(r * r - 1.0, 0.0))
-    rest = math.sqrt(max(total * total - (k * k - 1) / 12.0, 0.0)) / k
-    if rest > 0.05:
-        img = cv2.GaussianBlur(img, (0, 0), rest, borderType=cv2.BORDER_REFLECT_101)
-    return img, k
-
-
-def quad_area(q: np.ndarray) -> float:
-    """Area of a quadrilateral (4, 2) given in order (half the cross product of its diagonals)."""
-    d1, d2 = q[2] - q[0], q[3] - q[1]
-    return 0.5 * abs(float(d1[0] * d2[1] - d1[1] * d2[0]))
-
-
-def small_to_high(k: int) -> np.ndarray:
-    """3x3 map from the shrunk copy's px to high px: x = k x_s + (k - 1) / 2."""
-    c = (k - 1) / 2.0
-    return np.array([[k, 0.0, c], [0.0, k, c], [0.0, 0.0, 1.0]])
 
 
 def zncc(a: np.ndarray, b: np.ndarray, min_std: float = PixelParams.min_std) -> float:
@@ -220,91 +184,6 @@ def perturbations(t: np.ndarray, high_shape: Tuple[int, int],
     return tuple(out)
 
 
-def _warp_into(small: np.ndarray, m3: np.ndarray, size: Tuple[int, int],
-               edge_px: int) -> Tuple[np.ndarray, np.ndarray]:
-    """Warp ``small`` by the 3x3 map ``m3`` (small px -> box px) onto a box of ``size`` (w, h);
-    returns (image, valid mask)."""
-    ones = np.ones(small.shape, np.uint8)
-    if abs(m3[2, 0]) < 1e-15 and abs(m3[2, 1]) < 1e-15:
-        m = (m3 / m3[2, 2])[:2]
-        img = cv2.warpAffine(small, m, size, flags=cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        mask = cv2.warpAffine(ones, m, size, flags=cv2.INTER_NEAREST,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    else:
-        img = cv2.warpPerspective(small, m3, size, flags=cv2.INTER_LINEAR,
-                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        mask = cv2.warpPerspective(ones, m3, size, flags=cv2.INTER_NEAREST,
-                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    if edge_px > 0:
-        mask = cv2.erode(mask, np.ones((2 * edge_px + 1,) * 2, np.uint8),
-                         borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    return img, mask.astype(bool)
-
-
-def shrunk(image: np.ndarray, factor: float) -> Tuple[np.ndarray, np.ndarray]:
-    """``image`` shrunk by about ``factor`` (INTER_AREA) and the 3x3 map from its px to the
-    shrunk px (centre-aligned: x_s = (x + 0.5) / f - 0.5 with f the factor actually used)."""
-    h, w = image.shape
-    ow, oh = max(int(round(w / factor)), 1), max(int(round(h / factor)), 1)
-    fx, fy = w / ow, h / oh
-    out = cv2.resize(image, (ow, oh), interpolation=cv2.INTER_AREA)
-    m = np.array([[1.0 / fx, 0.0, 0.5 / fx - 0.5], [0.0, 1.0 / fy, 0.5 / fy - 0.5],
-                  [0.0, 0.0, 1.0]])
-    return out, m
-
-
-class Placed(NamedTuple):
-    """A hypothesis ready to be warped: at most ``max_side_px`` of footprint (``low`` shrunk
-    and the map with it, centre-aligned, when it was larger)."""
-
-    low: np.ndarray  #: the low image, maybe shrunk
-    t3: np.ndarray  #: 3x3 high px -> (shrunk) low px
-    ratio: float  #: the map's ratio, high px per (shrunk) low px
-    corners: np.ndarray  #: (4, 2) the footprint in (shrunk) low px
-    area: float  #: its area, (shrunk) low px^2
-
-
-def local_ratio(t3: np.ndarray, high_shape: Tuple[int, int]) -> float:
-    """High px per low px of the 3x3 map ``t3`` at the high image's centre
-    (:func:`scalematch.geometry.ratio_at` there). For an affine map (w = 1 everywhere) it is the ratio of
-    :func:`scalematch.geometry.similarity_parts`; for a homography it is the ratio where the
-    footprint is, not at the high image's origin (in perspective, a factor 4 and more apart
-    across the footprint: the high image is blurred for its middle).
-
-    >>> h = np.array([[0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 1.0]])
-    >>> local_ratio(h, (101, 201)), local_ratio(h * 3.0, (101, 201))
-    (2.0, 2.0)
-    >>> round(local_ratio(np.array([[0.5, 0, 0], [0, 0.5, 0], [0.01, 0, 1.0]]), (101, 201)), 3)
-    5.657
-    """
-    h, w = high_shape[:2]
-    return ratio_at(np.asarray(t3, np.float64), ((w - 1) / 2.0, (h - 1) / 2.0))
-
-
-def _placed(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
-            params: PixelParams) -> Union[Placed, str]:
-    """The hypothesis ``t`` placed on ``low`` (:class:`Placed`), or why it cannot be: no
-    footprint, a footprint under ``min_overlap_px``, a singular map."""
-    t3 = as_matrix3(np.asarray(t, np.float64))
-    corners = footprint(t3, high_shape)
-    if corners is None or not np.all(np.isfinite(t3)):
-        return "the transform has no footprint"
-    area = quad_area(corners)
-    if area < params.min_overlap_px:
-        return f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})"
-    ratio = local_ratio(t3, high_shape)
-    if not (math.isfinite(ratio) and ratio > 0):
-        return "the transform is singular"
-    q = min(1.0, params.max_side_px / math.sqrt(area))
-    if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
-        low, shrink = shrunk(low, 1.0 / q)
-        t3 = shrink @ t3
-        ratio, corners, area = (ratio / shrink[0, 0], footprint(t3, high_shape),
-                                area * shrink[0, 0] ** 2)
-    return Placed(low, t3, ratio, corners, area)
-
-
 def _nan_check(reason: str, overlap: int = 0, fraction: float = 0.0) -> PixelCheck:
     nan = float("nan")
     return PixelCheck(nan, nan, nan, nan, (), overlap, fraction, reason)
@@ -332,6 +211,7 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
         z-score against the perturbed placements; nan with a ``reason`` when the overlap is
         smaller than ``min_overlap_px``, flat, or the map has no footprint.
 
+    >>> import cv2
     >>> rng = np.random.default_rng(0)
     >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
     >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
@@ -344,7 +224,7 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     high = np.asarray(high, np.float32)
     if low.ndim != 2 or high.ndim != 2:
         raise ValueError(f"expected 2-D grey images, got shapes {low.shape} and {high.shape}")
-    placed = _placed(low, high.shape, t, params)
+    placed = place(low, high.shape, t, params)
     if isinstance(placed, str):
         return _nan_check(placed)
     low, t3, ratio, corners, area = placed
@@ -391,7 +271,7 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
     crop_shown = np.isfinite(crop)
 
     def score(m3: np.ndarray, windows: int = 0) -> Tuple[float, int]:
-        img, mask = _warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
+        img, mask = warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
         mask &= crop_shown & np.isfinite(img)
         if windows:  # (share of the windows that agree, windows compared)
             return _windows_agreeing(img, crop, mask, windows, params.window_ncc)
@@ -404,7 +284,7 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
 
 
 #: A window whose grey levels vary less than this (std, grey levels) in either image is flat:
-#: its correlation means nothing, and it is not counted (as ``agreement_map``'s default)
+#: its correlation means nothing, and it is not counted (as ``uniqueness.agreement_map``'s default)
 WINDOW_MIN_STD = 1.0
 
 
@@ -460,6 +340,7 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     the finer image) against the map over all of its area, at the claim as at its neighbours;
     a share of windows loses only the windows it covers. nan shares (0 windows): cannot tell.
 
+    >>> import cv2
     >>> rng = np.random.default_rng(0)
     >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
     >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
@@ -471,7 +352,7 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     nan = float("nan")
     low = np.asarray(low, np.float32)
     high = np.asarray(high, np.float32)
-    placed = _placed(low, high.shape, t, params)
+    placed = place(low, high.shape, t, params)
     if isinstance(placed, str):
         return NearWindows(0, nan, nan)
     low, t3, ratio, corners, area = placed
@@ -487,235 +368,3 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     nearby = [score(m, side)[0] for m in others]
     good = [v for v in nearby if math.isfinite(v)]
     return NearWindows(n, claimed, max(good) if good else nan)
-
-
-# --------------------------------------------------------------------------- uniqueness
-
-#: Smallest misfit 1 - ZNCC used as a divisor (a perfect fit would divide by zero): a numerical
-#: guard, far below any misfit measured (no answer depends on it)
-MISFIT_FLOOR = 1e-6
-
-
-@dataclass(frozen=True)
-class Uniqueness:
-    """How much better the claimed placement fits than the best placement elsewhere."""
-
-    claimed: float  #: ZNCC of the placed high image at the claimed position
-    elsewhere: float  #: the best ZNCC of the same warped image at any position half a footprint away
-    #: misfit elsewhere over misfit at the claim, ``(1 - elsewhere) / (1 - claimed)``: how many
-    #: times better the claimed placement fits (nan: cannot tell, e.g. no room elsewhere). A
-    #: ratio, not a difference: on a smooth scene every placement correlates 0.99, yet the
-    #: true one has ten times less misfit
-    ratio: float
-
-
-def masked_zncc_map(image: np.ndarray, tpl: np.ndarray, mask: np.ndarray,
-                    min_std: float = PixelParams.min_std) -> np.ndarray:
-    """ZNCC of ``tpl`` over its ``mask`` (bool, same shape) at every placement inside ``image``
-    (float32, (H - h + 1, W - w + 1); -1 where the image is flat under the mask).
-
-    What ``cv2.matchTemplate(image, tpl, TM_CCOEFF_NORMED, mask=mask)`` computes, from three
-    unmasked correlations (each one DFT-based in OpenCV): the template zero-meaned over the mask,
-    and the mask against the image and its square (the window's sum and sum of squares), 2-4
-    times faster than OpenCV's masked path, equal to it within 1e-4.
-
-    >>> rng = np.random.default_rng(0)
-    >>> img = rng.uniform(0, 255, (40, 50)).astype(np.float32)
-    >>> m = np.ones((10, 12), bool); m[:3, :4] = False
-    >>> r = masked_zncc_map(img, img[5:15, 7:19], m)
-    >>> [int(v) for v in np.unravel_index(np.argmax(r), r.shape)], round(float(r.max()), 4)
-    ([5, 7], 1.0)
-    """
-    img = np.asarray(image, np.float32)
-    m = mask.astype(np.float32)
-    n = float(m.sum())
-    tz = (np.asarray(tpl, np.float32) - float((tpl * m).sum()) / n) * m
-    num = cv2.matchTemplate(img, tz, cv2.TM_CCORR)
-    s1 = cv2.matchTemplate(img, m, cv2.TM_CCORR)
-    s2 = cv2.matchTemplate(img * img, m, cv2.TM_CCORR)
-    var = s2 - s1 * s1 / n  # n times the window's variance under the mask
-    flat = var <= n * min_std * min_std
-    out = num / np.sqrt(np.where(flat, 1.0, var) * float((tz * tz).sum()))
-    out[flat] = -1.0
-    return np.clip(out, -1.0, 1.0)
-
-
-def vouched_mask(shape: Tuple[int, int], xy: np.ndarray, radius: float) -> np.ndarray:
-    """(H, W) bool: the discs of ``radius`` px around the points ``xy`` (N, 2), (x, y) px.
-
-    >>> m = vouched_mask((20, 30), np.array([[5.0, 5.0], [25.0, 15.0]]), 3)
-    >>> bool(m[5, 5]), bool(m[15, 25]), bool(m[10, 15]), int(m.sum())
-    (True, True, False, 58)
-    """
-    out = np.zeros(shape, np.uint8)
-    r = max(int(round(radius)), 1)
-    for x, y in np.rint(np.asarray(xy, np.float64)).astype(int):
-        cv2.circle(out, (int(x), int(y)), r, 1, thickness=-1)
-    return out.astype(bool)
-
-
-def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,
-               params: PixelParams = PixelParams(),
-               vouched: Optional[np.ndarray] = None) -> Uniqueness:
-    """Slide the high image, warped by ``t`` (rotation, scale, tilt kept), over the whole low
-    image and compare the claimed placement with the best one elsewhere (``cv2.matchTemplate``,
-    ZNCC over the footprint's mask).
-
-    A repeated structure (the windows of a facade, the panels of a bus) matches wherever a copy
-    of it stands: the claimed placement is then no better than another one, and the claim is
-    ambiguous even when many points agree with it. A true match fits its own place better than
-    any copy (the pixels are the same ones, not alike ones).
-
-    ``vouched`` (finer px, (N, 2)): the inliers; only the pixels within ``vouch_radius`` of the
-    footprint's size of them are compared (None: all). Pixels that are NaN in either image (no
-    scene there, :func:`scalematch.stages.nodata.with_nan`) are left out.
-
-    >>> rng = np.random.default_rng(0)
-    >>> low = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 1.5)
-    >>> high = cv2.resize(low[20:80, 30:110], (320, 240), interpolation=cv2.INTER_CUBIC)
-    >>> u = uniqueness(low, high, np.array([[0.25, 0, 30 - 0.375], [0, 0.25, 20 - 0.375]]))
-    >>> u.claimed > 0.9, u.ratio > 3
-    (True, True)
-    >>> tiled = np.tile(low[20:80, 30:110], (2, 2))            # the structure twice over
-    >>> u = uniqueness(tiled, high, np.array([[0.25, 0, -0.375], [0, 0.25, -0.375]]))
-    >>> 0.8 < u.ratio < 1.25
-    True
-    """
-    return uniqueness_of(unique_template(low, high, t, params, vouched), params)
-
-
-def uniqueness_of(placed: Optional["Template"], params: PixelParams) -> Uniqueness:
-    """:func:`uniqueness` of a template made already (None: cannot tell, all nan)."""
-    nan = float("nan")
-    if placed is None:
-        return Uniqueness(nan, nan, nan)
-    r = masked_zncc_map(placed.low, placed.tpl, placed.mask, params.min_std)
-    claimed = _at_claim(r, placed)
-    far = _far(r.shape, placed, params.unique_exclusion)
-    if not far.any():
-        return Uniqueness(claimed, nan, nan)
-    elsewhere = float(r[far].max())
-    return Uniqueness(claimed, elsewhere, (1.0 - elsewhere) / max(1.0 - claimed, MISFIT_FLOOR))
-
-
-class Template(NamedTuple):
-    """The finer image warped by a claim, cut to where it is compared, for the tests that slide
-    it over the coarser image (:func:`uniqueness`, :func:`window_agreement`)."""
-
-    low: np.ndarray  #: (H, W) float32 coarser image at the tests' size, 0 where it has no scene
-    tpl: np.ndarray  #: (h, w) float32 warped finer image, 0 outside ``mask``
-    mask: np.ndarray  #: (h, w) bool: the pixels compared
-    y0: int  #: the claimed placement: the template's top-left corner in ``low``
-    x0: int
-
-
-def unique_template(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: PixelParams,
-                    vouched: Optional[np.ndarray] = None) -> Optional[Template]:
-    """The :class:`Template` of claim ``t`` (finer px -> coarser px) at the uniqueness test's
-    size (``unique_side_px``), compared where both images show the scene and, with ``vouched``
-    (the inliers, finer px), within ``vouch_radius`` of them; None when it cannot tell: too
-    small an overlap, flat, or no room elsewhere."""
-    placed = _placed(np.asarray(low, np.float32), high.shape, t,
-                     replace(params, max_side_px=params.unique_side_px))
-    if isinstance(placed, str):
-        return None
-    low, t3, ratio, _, _ = placed
-    small, k = blurred_for_ratio(high, ratio, params.camera_blur_px)
-    hh, ww = low.shape
-    img, mask = _warp_into(small, t3 @ small_to_high(k), (ww, hh), params.edge_px)
-    shown = np.isfinite(low)
-    mask &= np.isfinite(img) & shown  # both show the scene at the claimed placement
-    if vouched is not None and len(vouched):  # where the inliers vouch for the map
-        radius = params.vouch_radius * math.sqrt(max(float(mask.sum()), 1.0))
-        mask &= vouched_mask(mask.shape, apply(t3, vouched), radius)
-    low = np.where(shown, low, np.float32(0.0))
-    rows, cols = np.nonzero(mask)
-    if rows.size < params.min_overlap_px:
-        return None
-    y0, y1, x0, x1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
-    tmask = mask[y0:y1, x0:x1]
-    tpl = np.ascontiguousarray(np.where(tmask, img[y0:y1, x0:x1], np.float32(0.0)))
-    if tpl.shape[0] >= hh or tpl.shape[1] >= ww or float(tpl[tmask].std()) <= params.min_std:
-        return None  # no room to place it anywhere else, or flat
-    return Template(low, tpl, tmask, int(y0), int(x0))
-
-
-def _at_claim(score: np.ndarray, placed: Template) -> float:
-    """The best of ``score`` (a map over placements) within 1 px of the claimed placement."""
-    y0, x0 = placed.y0, placed.x0
-    return float(score[max(y0 - 1, 0):y0 + 2, max(x0 - 1, 0):x0 + 2].max())
-
-
-def _far(shape: Tuple[int, int], placed: Template, exclusion: float) -> np.ndarray:
-    """(shape) bool: the placements ``exclusion`` of the template's size away from the
-    claimed one (``PixelParams.unique_exclusion``)."""
-    yy, xx = np.ogrid[0:shape[0], 0:shape[1]]
-    radius = exclusion * min(placed.tpl.shape)
-    return (yy - placed.y0) ** 2 + (xx - placed.x0) ** 2 > radius * radius
-
-
-class Agreement(NamedTuple):
-    """How many windows of the placed finer image agree with the coarser one (ZNCC of at least
-    ``PixelParams.window_ncc``), at the claimed placement and at the best placement elsewhere."""
-
-    windows: int  #: windows compared (wholly inside the compared pixels, not flat)
-    claimed: float  #: share of them that agree at the claimed placement
-    elsewhere: float  #: the highest share anywhere half a footprint away
-
-
-def agreement_map(low: np.ndarray, tpl: np.ndarray, mask: np.ndarray, side: int,
-                  least: float, min_std: float = 1.0) -> Tuple[np.ndarray, int]:
-    """(share, n): for every placement of ``tpl`` in ``low`` (as ``cv2.matchTemplate`` counts
-    them), the share of its ``n`` windows of ``side`` px (a grid over ``tpl``, those wholly in
-    ``mask`` with a grey-level std above ``min_std``) whose own ZNCC there is at least ``least``.
-
-    >>> rng = np.random.default_rng(0)
-    >>> img = cv2.GaussianBlur(rng.uniform(0, 255, (60, 80)).astype(np.float32), (0, 0), 1.0)
-    >>> tpl = img[10:42, 20:52].copy(); tpl[:16, :16] = 0        # an occluded quarter
-    >>> m = np.ones(tpl.shape, bool)
-    >>> share, n = agreement_map(img, tpl, m, 8, 0.8)
-    >>> n, float(share[10, 20]), float(np.delete(share.ravel(), 10 * share.shape[1] + 20).max()) < 0.5
-    (12, 1.0, True)
-    """
-    hh, ww = low.shape
-    h, w = tpl.shape
-    ph, pw = hh - h + 1, ww - w + 1
-    count = np.zeros((ph, pw), np.float32)
-    n = 0
-    for oy in range(0, h - side + 1, side):
-        for ox in range(0, w - side + 1, side):
-            patch = np.ascontiguousarray(tpl[oy:oy + side, ox:ox + side])
-            if not mask[oy:oy + side, ox:ox + side].all() or float(patch.std()) <= min_std:
-                continue
-            r = cv2.matchTemplate(low, patch, cv2.TM_CCOEFF_NORMED)
-            count += r[oy:oy + ph, ox:ox + pw] >= least
-            n += 1
-    return count / max(n, 1), n
-
-
-def window_agreement(low: np.ndarray, high: np.ndarray, t: np.ndarray,
-                     params: PixelParams = PixelParams(),
-                     vouched: Optional[np.ndarray] = None) -> Agreement:
-    """The uniqueness test by windows: the placed finer image (:func:`unique_template`) cut
-    into windows of ``window_px``, each compared on its own (ZNCC at least ``window_ncc``), at
-    the claimed placement and at every placement elsewhere.
-
-    One ZNCC over the footprint counts an occluder, a shadow or a relit patch against the map
-    over its whole area; a share of windows loses only the windows it covers. A copy of a
-    repeated structure is alike, not the same: fewer of its windows agree at the claim, and as
-    many agree at the other copies. nan shares (0 windows): cannot tell.
-    """
-    return agreement_of(unique_template(low, high, t, params, vouched), params)
-
-
-def agreement_of(placed: Optional[Template], params: PixelParams) -> Agreement:
-    """:func:`window_agreement` of a template made already (None: cannot tell)."""
-    nan = float("nan")
-    if placed is None:
-        return Agreement(0, nan, nan)
-    share, n = agreement_map(placed.low, placed.tpl, placed.mask, params.window_px,
-                             params.window_ncc)
-    if n == 0:
-        return Agreement(0, nan, nan)
-    far = _far(share.shape, placed, params.unique_exclusion)
-    return Agreement(n, _at_claim(share, placed), float(share[far].max()) if far.any() else nan)

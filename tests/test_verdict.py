@@ -1,0 +1,64 @@
+"""verdict: the words of a match, in the verdict line and the evidence line."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scalematch.result import MatchResult
+from scalematch.verdict import verdict
+
+
+def test_the_verdict_calls_no_image_finer_near_a_ratio_of_1():
+    """Two crops of one photo match at ratio 1.000, either way round by chance: "the first
+    image is the finer one" would be false there; what the transform maps is said instead."""
+    def swapped(ratio):
+        return MatchResult(matched=True, model="similarity", resolution_ratio=ratio,
+                           rotation_deg=0.0, order="swapped", best_scale=1.0,
+                           transform=np.array([[1 / ratio, 0, 0], [0, 1 / ratio, 0.0]]),
+                           inliers=np.zeros((0, 4)))
+    assert verdict(swapped(1.0)).endswith(
+        "order swapped (the transform maps the first image into the second)")
+    assert verdict(swapped(3.0)).endswith("order swapped (the first image is the finer one)")
+
+
+def test_the_verdict_says_which_image_the_tilted_view_was_of():
+    """A match found on a view of the coarser image says so; one on a view of the finer image
+    says only the tilt."""
+    from scalematch.result import Evidence
+
+    def found(view_of):
+        return MatchResult(matched=True, model="affine", resolution_ratio=1.0, rotation_deg=0.0,
+                           best_scale=2.0, transform=np.array([[1.0, 0, 0], [0, 1.0, 0]]),
+                           inliers=np.zeros((0, 4)),
+                           evidence=Evidence(view_tilt=4.0, view_longitude_deg=36.0,
+                                             view_of=view_of))
+    assert verdict(found("coarser")).endswith(
+        "seen tilted by 4 at 36 deg (the coarser image)")
+    assert verdict(found("finer")).endswith("seen tilted by 4 at 36 deg")
+
+
+def test_the_evidence_line_says_when_windows_decided():
+    """A match the final margin refused and its windows accepted says so, with their shares;
+    one whose margin passed says nothing of windows."""
+    from dataclasses import replace
+
+    from scalematch.verdict import evidence_line
+    from scalematch.result import build_evidence
+
+    plain = dict(log10_nfa=-59.6, final_ncc=0.15, final_margin=-0.09, unique_ratio=0.69,
+                 judged_by="pixels")
+    by_windows = MatchResult(matched=True, model="similarity", evidence=build_evidence(
+        plain, dict(near_windows=38, near_windows_agreeing=0.5, near_windows_nearby=0.026,
+                    unique_windows=20, windows_agreeing=0.8, windows_elsewhere=0.2)))
+    line = evidence_line(by_windows)
+    assert "-0.09 against nearby placements" in line
+    assert "50% of 38 windows agree there, 3% nearby" in line
+    assert "80% of 20 windows agree at its place, 20% elsewhere" in line
+    margin_only = replace(by_windows, evidence=build_evidence(dict(plain, final_margin=0.3)))
+    assert "windows" not in evidence_line(margin_only)
+    # a refused few-inlier map: the second look's margin, and its windows where measured
+    look = dict(log10_nfa=-10.0, pixel_ncc=0.2, pixel_margin=0.05, pixel_windows=37,
+                pixel_windows_agreeing=0.2, pixel_windows_nearby=0.03)
+    refused = MatchResult(matched=False, model="similarity", evidence=build_evidence(look))
+    assert "+0.05 against nearby placements; 20% of 37 windows agree there, 3% nearby" in \
+        evidence_line(refused)
