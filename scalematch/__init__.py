@@ -25,7 +25,7 @@ False
 >>> match(np.full((60, 80), 128.0), scene)  # a constant image: not even a try
 Traceback (most recent call last):
     ...
-scalematch.imageio.ImageError: the low image is constant (every pixel 128): there is nothing to match in it
+scalematch.imagefile.ImageError: the low image is constant (every pixel 128): there is nothing to match in it
 """
 
 __version__ = "0.1.0"
@@ -40,7 +40,7 @@ _EXPORTS = {
     "Keypoints": ".stages.detector",
     "PAPER_SCALES": ".stages.detector",
     "detect": ".stages.detector",
-    "ImageError": ".imageio",
+    "ImageError": ".imagefile",
     "ImageWarning": ".imageio",
     "read_grey": ".imageio",
     "MatchResult": ".result",

@@ -20,20 +20,21 @@ from .report import is_terminal, plural, show_progress
 from .result import dumps
 
 if TYPE_CHECKING:  # batch imports the pipeline: the command line imports it where used
-    from .batch import Counts, Plan
+    from .batch import Counts
+    from .batchresume import Plan
 
 
 def batch_lines(pairs: List[Any], config: Config, max_pixels: int, jobs: int,
                 client: Any) -> Iterator[Dict[str, Any]]:
     """The result lines of ``pairs`` from the runner the options ask for."""
-    from . import batch
+    from . import batchdask, batchpool
 
     if client is not None:
-        return batch.run_dask(pairs, config, max_pixels, client)
+        return batchdask.run_dask(pairs, config, max_pixels, client)
     if jobs == 1 or len(pairs) <= 1:  # decoded here: stderr is ours, the decoders' words caught
         click.get_current_context().with_resource(decoder_stderr_caught())
-        return batch.run_serial(pairs, config, max_pixels)
-    return batch.run_pool(pairs, config, max_pixels, jobs)
+        return batchpool.run_serial(pairs, config, max_pixels)
+    return batchpool.run_pool(pairs, config, max_pixels, jobs)
 
 
 def available_cores() -> int:
@@ -72,34 +73,34 @@ def local_workers(jobs: int, quiet: bool) -> int:
 
 def batch_plan(pairs_csv: Path, output: Optional[Path], retry_errors: bool,
                scheduler: Optional[str], config: Config) -> Tuple[Plan, Any]:
-    """The run's ``batch.Plan`` and its Dask client (None: local processes). What refuses the
-    run is exit 2: the scheduler's address, the CSV, the output file (an input, not writable,
-    not a batch output of these options). The output file is changed (``batch.resume_output``)
-    only once nothing else can refuse the run."""
-    from . import batch
+    """The run's ``batchresume.Plan`` and its Dask client (None: local processes). What refuses
+    the run is exit 2: the scheduler's address, the CSV, the output file (an input, not
+    writable, not a batch output of these options). The output file is changed
+    (``batchresume.resume_output``) only once nothing else can refuse the run."""
+    from . import batch, batchcsv, batchdask, batchresume
 
-    recorded = batch.config_json(config)
-    done, retried, client = batch.NOTHING_DONE, frozenset(), None
+    recorded = batchresume.config_json(config)
+    done, retried, client = batchresume.NOTHING_DONE, frozenset(), None
     try:
         if scheduler is not None:  # its form first: a malformed address fails at once
-            batch.check_scheduler_address(scheduler)
-        rows = batch.read_rows(pairs_csv)
-        pairs = batch.unique_pairs(rows, pairs_csv.resolve().parent)
+            batchdask.check_scheduler_address(scheduler)
+        rows = batchcsv.read_rows(pairs_csv)
+        pairs = batchcsv.unique_pairs(rows, pairs_csv.resolve().parent)
         if output is not None:
             check_not_an_input(output, [pairs_csv] + [f for p in pairs
                                                       for f in (p.low_file, p.high_file)],
                                "--output")
             check_out_file(output, "--output")
-            done = batch.scan_output(output, recorded)
-        client = batch.connect(scheduler) if scheduler is not None else None
+            done = batchresume.scan_output(output, recorded)
+        client = batchdask.connect(scheduler) if scheduler is not None else None
         if output is not None:
-            retry = batch.errors_to_retry(done, pairs) if retry_errors else frozenset()
-            done, retried = batch.resume_output(output, done, retry, recorded)
+            retry = batchresume.errors_to_retry(done, pairs) if retry_errors else frozenset()
+            done, retried = batchresume.resume_output(output, done, retry, recorded)
     except batch.BatchError as exc:
         if client is not None:
             client.close()
         raise InputError(str(exc))
-    return batch.plan_run(len(rows), pairs, done, retried), client
+    return batchresume.plan_run(len(rows), pairs, done, retried), client
 
 
 def batch_notes(plan: Plan, pairs_csv: Path, output: Optional[Path]) -> List[str]:

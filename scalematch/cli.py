@@ -44,7 +44,9 @@ from .exits import (BATCH_EXIT_TEXT, EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_CODE
                     EXIT_INTERNAL_ERROR, EXIT_INTERRUPTED, EXIT_MATCHED, EXIT_NO_MATCH,
                     EXIT_PAIR_ERRORS, EXITS_AT_ONCE, MATCH_EXIT_TEXT, InputError, exit_at_once,
                     exit_code_table)
-from .imageio import Decoded, ImageError, decoder_stderr_caught, grey_of_file
+from .greylevels import grey_of_file
+from .imagefile import ImageError
+from .imageio import Decoded, decoder_stderr_caught
 from .options import NO_VIEWS_SPEEDUP, config_from, matching_options
 # re-exported: lab/regress.py (--tree) imports scalematch.cli.set_path, where older trees have it
 from .options import set_path as set_path

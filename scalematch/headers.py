@@ -1,12 +1,12 @@
 """What an image file's header says, read before a pixel is decoded: its size and orientation,
 and whether the decoder can be trusted with it.
 
-Image files are untrusted input. :mod:`scalematch.imageio` reads a file's header here first,
-checks the size against its limits, and only then lets OpenCV decode the pixels. Pillow reads
-most headers (``Image.open`` is lazy: no pixel is decoded); PNG files are read here directly,
-every chunk of them, because OpenCV's PNG reader allocates each chunk at the length its
-length field states before it finds the file too short: a 2 KB file whose chunk length
-reads 0xFFFFFFF0 took 4.2 GB and 3 to 13 s in ``cv2.imread``. The formats Pillow cannot
+Image files are untrusted input. :mod:`scalematch.imagefile` reads a file's header here first
+and checks the size against its limits; only then does :mod:`scalematch.imageio` let OpenCV
+decode the pixels. Pillow reads most headers (``Image.open`` is lazy: no pixel is decoded); PNG
+files are read here directly, every chunk of them, because OpenCV's PNG reader allocates each
+chunk at the length its length field states before it finds the file too short: a 2 KB file
+whose chunk length reads 0xFFFFFFF0 took 4.2 GB and 3 to 13 s in ``cv2.imread``. The formats Pillow cannot
 read that OpenCV decodes (PAM, PFM, Radiance HDR, and TIFF and JPEG layouts Pillow refuses:
 float samples, 12-bit) have their size read here too, so that every file decoded has had its
 size checked first.

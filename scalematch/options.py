@@ -15,7 +15,7 @@ import click
 
 from .config import MAX_SCALES, MAX_SEED, MIN_WORKING_SIDE_PX, MODELS, MODES, ORDERS, Config
 from .exits import InputError
-from .imageio import DEFAULT_MAX_PIXELS
+from .imagefile import DEFAULT_MAX_PIXELS
 
 
 #: What --no-views saves on a "no", as measured (docs/design/SPEED.md, 'The time of a "no"':

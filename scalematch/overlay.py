@@ -24,7 +24,7 @@ import numpy as np
 
 from .captions import band
 from .geometry import as_matrix3, footprint, resize_map, similarity_parts
-from .imageio import to_bgr8
+from .greylevels import to_bgr8
 from .result import MatchResult
 from .stages.estimator import model_of
 from .stages.nodata import NoDataParams, valid_mask

@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import Config
 from .geometry import answer_parts, usable_ratio
-from .imageio import grey_levels
+from .greylevels import grey_levels
 from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
                      StepRecord)
 from .features import (Describing, ImageViews, Roles, first_level, first_level_points,

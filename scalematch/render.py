@@ -22,7 +22,7 @@ import numpy as np
 
 from .captions import band
 from .geometry import apply, resize_map
-from .imageio import to_bgr8
+from .greylevels import to_bgr8
 from .overlay import INLIER_DOT, enlarged, overlay, overlay_footer, overlay_zoom
 from .result import MatchResult
 from .scalechart import scale_plot

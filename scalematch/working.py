@@ -30,7 +30,8 @@ import numpy as np
 
 from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarser, invert,
                        resize_map)
-from .imageio import DEFAULT_MAX_PIXELS, Decoded, read_reduced
+from .imagefile import DEFAULT_MAX_PIXELS
+from .imageio import Decoded, read_reduced
 from .result import Direction, MatchResult
 from .stages.estimator import model_of
 from .stages.nodata import NoData, find_nodata, with_nan

@@ -16,7 +16,7 @@ The ways, as ``scalematch.imageio`` would use each:
 * full decode: ``cv2.imdecode`` (``IMREAD_ANYDEPTH | IMREAD_ANYCOLOR |
   IMREAD_IGNORE_ORIENTATION``: BGR) against ``PIL.Image.open(...).load()`` and
   ``np.asarray`` (RGB);
-* full decode and grey: the above then ``imageio.to_grey`` (float32 BT.601) for OpenCV, and
+* full decode and grey: the above then ``greylevels.to_grey`` (float32 BT.601) for OpenCV, and
   for Pillow ``convert("L")`` (8-bit BT.601, rounded) then float32; and, to tell the decoder
   from the conversion, OpenCV's decode then ``cv2.cvtColor`` on the 8-bit image (rounded,
   as Pillow's) then float32 (``cv2_grey8``);
@@ -52,7 +52,8 @@ from PIL import Image
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scalematch.imageio import REDUCED_FLAGS, to_grey  # noqa: E402
+from scalematch.greylevels import to_grey  # noqa: E402
+from scalematch.imageio import REDUCED_FLAGS  # noqa: E402
 from scalematch.lab.datasets import find_shared  # noqa: E402
 
 #: The photo of docs/design/SPEED.md's reduced decode, 4608x3456 (../shared or $SCALEMATCH_SHARED).

@@ -38,7 +38,8 @@ from scalematch.lab.fuzz import PER_KIND, write_corpus  # noqa: E402
 #: The child: peak memory before reading, then the reading, as JSON on stdout.
 READ = """
 import json, resource, sys, time
-from scalematch.imageio import ImageError, read_reduced
+from scalematch.imagefile import ImageError
+from scalematch.imageio import read_reduced
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
 try:

@@ -63,7 +63,7 @@ sys.path.insert(0, str(ROOT))
 
 from scalematch import Config, match  # noqa: E402
 from scalematch.geometry import as_matrix3, resize_map  # noqa: E402
-from scalematch.imageio import grey_levels  # noqa: E402
+from scalematch.greylevels import grey_levels  # noqa: E402
 from scalematch.lab import nulls as NL  # noqa: E402
 from scalematch.lab import realpairs as RP  # noqa: E402
 from scalematch.lab import regress as RG  # noqa: E402

@@ -1,5 +1,6 @@
-"""Shared fixtures: the photo the repo ships, the pictures' pair cut from it, and the shared data
-folder when it is present ($SCALEMATCH_SHARED, else ../shared beside the repository)."""
+"""Shared fixtures: the photo the repo ships (grey, and a colour crop of it), the pictures' pair
+cut from it, and the shared data folder when it is present ($SCALEMATCH_SHARED, else ../shared
+beside the repository)."""
 
 from __future__ import annotations
 
@@ -23,6 +24,13 @@ SHARED = find_shared() or ROOT.parent / "shared"
 def raccoon() -> np.ndarray:
     """data/raccoon.jpg (public domain, 1024x768) as float32 grey levels."""
     return read_grey(ROOT / "data" / "raccoon.jpg")
+
+
+@pytest.fixture(scope="module")
+def bgr() -> np.ndarray:
+    """A 120x160 colour crop of the raccoon photo (non-square, so rotations show)."""
+    img = cv2.imread(str(ROOT / "data" / "raccoon.jpg"), cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(img[300:420, 400:560])
 
 
 @pytest.fixture(scope="session")

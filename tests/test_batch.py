@@ -1,10 +1,9 @@
-"""Batch: the pairs CSV (columns, header, repeated rows), the output file (refused when it holds
-anything but results, or results of other options; a torn line cut; error lines removed to retry
-their pairs), bounded in-flight work, exit codes (3 when a pair errored), worker processes that
-die with the main process (kill -9), resume after it, a worker killed mid-run (the pool started
-again, its pairs retried, a pair that kills its worker given up), a worker replaced after an
-internal error (out of memory), no semaphore left to the resource tracker after kill -9, Ctrl-C,
-and the Dask backend on a LocalCluster on loopback."""
+"""Batch: the lines counted by verdict, bounded in-flight work, and the command: exit codes (3
+when a pair errored), resume and --retry-errors, worker processes that die with the main process
+(kill -9), resume after it, a worker killed mid-run (the pool started again, its pairs retried),
+no semaphore left to the resource tracker after kill -9, Ctrl-C, and the Dask backend on a
+LocalCluster on loopback. The pairs CSV: test_batchcsv.py; the output file and a run's plan:
+test_batchresume.py; the worker processes: test_batchpool.py."""
 
 from __future__ import annotations
 
@@ -23,15 +22,11 @@ import cv2
 import numpy as np
 import pytest
 
-from scalematch import batch
+from scalematch import batch, batchpool
 from scalematch.batch import match_pair as real_match_pair  # the worker's own
-from scalematch.batch import (NOTHING_DONE, BatchError, Counts, Done, Pair, after_worker_death,
-                              bounded, config_json, cut_torn_line,
-                              drop_error_lines, errors_to_retry, plan_run, read_rows,
-                              resume_output, scan_output, unique_pairs)
+from scalematch.batch import Counts, Pair, bounded
 from scalematch.config import Config
-from scalematch.imageio import DEFAULT_MAX_PIXELS
-from scalematch.result import dumps
+from scalematch.imagefile import DEFAULT_MAX_PIXELS
 from scalematch.lab.synthetic import make_zoom_pair
 from test_cli import JSON_KEYS, assert_one_line_error, run
 
@@ -56,11 +51,6 @@ def images(raccoon, tmp_path_factory) -> Path:
     return folder
 
 
-def read_pairs(path: Path):
-    """The (low, high) rows of a pairs CSV (``read_rows`` without the other columns)."""
-    return [(low, high) for low, high, _ in read_rows(path)]
-
-
 def write(path: Path, text: str) -> Path:
     path.write_text(text)
     return path
@@ -78,195 +68,7 @@ def keys_of(lines):
     return sorted((x["low"]["path"], x["high"]["path"]) for x in lines)
 
 
-# --------------------------------------------------------------------------- the pairs CSV
-
-@pytest.mark.parametrize("text", [
-    "a.png,b.png\nc.png,d.png\n",  # no header: two columns, low then high
-    "low,high\na.png,b.png\nc.png,d.png\n",
-    "\ufeffLOW_PATH , High_Path\na.png,b.png\n\nc.png,d.png\n",  # spreadsheet: BOM, blank row
-    "name,high,low,notes\nx,b.png,a.png,n\ny,d.png,c.png,\n",  # named columns, any position
-    "low_res,high_res,low\n1,b.png,a.png\n2,d.png,c.png\n",  # the exact name wins
-    "a.png,b.png,,\nc.png,d.png\n",  # empty cells at the end of a row are no column
-])
-def test_read_pairs_columns(tmp_path, text):
-    assert read_pairs(write(tmp_path / "p.csv", text)) == [("a.png", "b.png"), ("c.png", "d.png")]
-
-
-@pytest.mark.parametrize("text,needle", [
-    ("name,a.png,b.png\n", "3 columns"),  # no header: a third column is not silently dropped
-    ("a.png,b.png\nx.png,y.png,z.png\n", "line 2 has 3 columns"),
-    ("only-one-column\n", "has 1 column; without"),
-    ("name,low,other\nx,a.png,b.png\n", "no column named 'high'"),
-    ("low_a,low_b,high\na.png,b.png,c.png\n", "several columns named 'low'"),
-    ("low,high\na.png,\n", "line 2 does not have two paths"),
-    ("a,b\nx.png,y.png\n", r"line 1 \(a,b\) reads as a header, but names no columns low"),
-])
-def test_read_pairs_refuses_what_it_cannot_read(tmp_path, text, needle):
-    with pytest.raises(BatchError, match=needle):
-        read_pairs(write(tmp_path / "p.csv", text))
-
-
-def test_unique_pairs_keeps_first_of_repeated_rows_and_resolves_paths(tmp_path):
-    rows = [("a.png", "b.png"), ("/abs/c.png", "d.png"), ("a.png", "b.png"), ("b.png", "a.png")]
-    pairs = unique_pairs(rows, tmp_path)
-    assert [p.key for p in pairs] == [("a.png", "b.png"), ("/abs/c.png", "d.png"),
-                                      ("b.png", "a.png")]
-    assert pairs[0].low_file == str(tmp_path / "a.png")
-    assert pairs[1].low_file == "/abs/c.png" and pairs[1].high_file == str(tmp_path / "d.png")
-
-
-# --------------------------------------------------------------------------- the output file
-
-def _line(low: str, high: str, config=None, error: bool = False) -> str:
-    obj = {"low": {"path": low}, "high": {"path": high}, "matched": not error,
-           "config": config_json(Config()) if config is None else config}
-    if error:
-        obj["error"] = "no such file"
-    return json.dumps(obj) + "\n"
-
-
-def test_scan_output_counts_results_and_their_errors(tmp_path):
-    assert scan_output(tmp_path / "new.jsonl", config_json(Config())) == NOTHING_DONE
-    out = write(tmp_path / "r.jsonl", _line("a", "b") + "\n" + _line("c", "d", error=True))
-    done = scan_output(out, config_json(Config()))
-    assert done.pairs == {("a", "b"), ("c", "d")} and done.errors == {("c", "d")}
-    assert done.complete_bytes == out.stat().st_size
-
-
-def test_a_swapped_line_is_the_pair_as_given(tmp_path):
-    # the CSV row fine.png,coarse.png gave the finer image first: its line names the images as
-    # found (low: the coarser), with order "swapped"
-    swapped = json.loads(_line("coarse.png", "fine.png"))
-    swapped["order"] = "swapped"
-    out = write(tmp_path / "r.jsonl", json.dumps(swapped) + "\n")
-    assert scan_output(out, config_json(Config())).pairs == {("fine.png", "coarse.png")}
-
-
-def test_a_torn_last_line_is_not_counted_and_is_cut(tmp_path):
-    good = _line("a", "b")
-    out = write(tmp_path / "r.jsonl", good + _line("c", "d")[:30])
-    done = scan_output(out, config_json(Config()))
-    assert done.pairs == {("a", "b")} and done.complete_bytes == len(good)
-    cut_torn_line(out, done)
-    assert out.read_text() == good
-
-
-@pytest.mark.parametrize("text", [
-    "my notes\n",
-    "my notes without a newline at the end",
-    "low,high\na.png,b.png\n",  # the pairs CSV itself
-    '{"a": 1}\n',  # JSON, but not a result line
-    '{"low": {"path": "a"}, "high": {"path": "b"}, "matched": true}\n'
-    "a note after a result\n",
-])
-def test_scan_output_refuses_a_file_with_other_lines(tmp_path, text):
-    out = write(tmp_path / "notes.txt", text)
-    with pytest.raises(BatchError, match="not a scalematch result"):
-        scan_output(out, config_json(Config()))
-
-
-def test_scan_output_refuses_results_of_other_options(tmp_path):
-    other = config_json(Config(model="homography"))
-    out = write(tmp_path / "r.jsonl", _line("a", "b", config=other))
-    with pytest.raises(BatchError, match="made with --model homography; this run: no matching"):
-        scan_output(out, config_json(Config()))
-
-
-def test_options_of_says_a_configuration_as_the_options_that_give_it():
-    from scalematch.batch import OPTION_OF_PATH, options_of
-    from scalematch.options import THRESHOLD_OPTIONS, build_config
-
-    def typed(mode="default", model=None, scales=None, seed=None, *settings):
-        return config_json(build_config(mode, model, scales, seed, {}, settings))
-
-    assert options_of(typed("paper", None, None, None, "views.enabled=True")) == ["--mode paper"]
-    assert options_of(typed("default", "affine", "1-8", 3, "views.enabled=False",
-                            "ransac.threshold_px=2", "guided.radius_px=5")) == [
-        "--set guided.radius_px=5.0", "--model affine", "--ransac-threshold 2.0",
-        "--scales 1,2,3,4,5,6,7,8", "--seed 3", "--no-views"]
-    for _, paths, _, _ in THRESHOLD_OPTIONS:  # every threshold option is said as typed
-        assert all(p in OPTION_OF_PATH for p in paths), paths
-
-
-def test_drop_error_lines_removes_only_those_asked_and_keeps_every_other_byte(tmp_path):
-    good, blank = _line("a", "b"), "\n"
-    kept_error = _line("e", "f", error=True)  # not asked: kept
-    both_error, both_good = _line("g", "h", error=True), _line("g", "h")  # a pair with two lines
-    real = write(tmp_path / "real.jsonl", good + blank + _line("c", "d", error=True) + kept_error
-                 + both_error + both_good + _line("x", "y")[:30])  # ... and a torn last line
-    os.chmod(real, 0o640)
-    out = tmp_path / "r.jsonl"
-    out.symlink_to(real)
-    done = drop_error_lines(out, {("c", "d"), ("g", "h")}, config_json(Config()))
-    assert real.read_text() == good + blank + kept_error + both_good
-    assert done == scan_output(out, config_json(Config()))
-    assert done.pairs == {("a", "b"), ("e", "f"), ("g", "h")} and done.errors == {("e", "f")}
-    assert out.is_symlink() and stat.S_IMODE(real.stat().st_mode) == 0o640
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.jsonl", "real.jsonl"]  # no temp file
-
-
-def test_drop_error_lines_refuses_a_file_with_other_lines_and_leaves_it(tmp_path):
-    text = _line("c", "d", error=True) + "my notes\n"
-    out = write(tmp_path / "r.jsonl", text)
-    with pytest.raises(BatchError, match="line 2 is not a scalematch result"):
-        drop_error_lines(out, {("c", "d")}, config_json(Config()))
-    assert out.read_text() == text and [p.name for p in tmp_path.iterdir()] == ["r.jsonl"]
-
-
-# --------------------------------------------------------------------------- what a run does
-
-def _pairs(*names):
-    return [Pair(n, n + "'", n, n + "'") for n in names]
-
-
-def test_plan_run_of_a_new_output_matches_every_pair():
-    pairs = _pairs("a", "b", "c")
-    plan = plan_run(5, pairs)
-    assert plan.pairs == tuple(pairs) and plan.todo == tuple(pairs)
-    assert (plan.repeated_rows, plan.skipped, plan.errors_before, plan.retried) == (2, 0, 0, set())
-
-
-def test_plan_run_skips_the_pairs_done_and_counts_their_errors():
-    pairs = _pairs("a", "b", "c", "d")
-    # the output holds a, b (an error) and a pair no longer in the CSV, x (an error)
-    done = Done(frozenset({("a", "a'"), ("b", "b'"), ("x", "x'")}),
-                frozenset({("b", "b'"), ("x", "x'")}), 100)
-    plan = plan_run(4, pairs, done)
-    assert [p.low for p in plan.todo] == ["c", "d"]
-    assert (plan.repeated_rows, plan.skipped, plan.errors_before) == (0, 2, 1)
-
-
-def test_errors_to_retry_are_the_error_lines_of_the_csv_pairs_only():
-    done = Done(frozenset({("a", "a'"), ("b", "b'"), ("x", "x'")}),
-                frozenset({("b", "b'"), ("x", "x'")}), 100)
-    assert errors_to_retry(done, _pairs("a", "b", "c")) == {("b", "b'")}
-    assert errors_to_retry(NOTHING_DONE, _pairs("a")) == frozenset()
-
-
-def test_resume_output_removes_the_retried_error_lines_and_redoes_only_pairs_without_a_good_line(
-        tmp_path):
-    good, bad, bad_twice, good_too = (_line("a", "b"), _line("c", "d", error=True),
-                                      _line("g", "h", error=True), _line("g", "h"))
-    out = write(tmp_path / "r.jsonl", good + bad + bad_twice + good_too)
-    config = config_json(Config())
-    done = scan_output(out, config)
-    retry = errors_to_retry(done, [Pair("c", "d", "c", "d"), Pair("g", "h", "g", "h")])
-    assert retry == {("c", "d"), ("g", "h")}
-    done, retried = resume_output(out, done, retry, config)
-    assert out.read_text() == good + good_too
-    assert retried == {("c", "d")}  # ("g", "h") has a good line: kept, not redone
-    plan = plan_run(2, [Pair("c", "d", "c", "d"), Pair("g", "h", "g", "h")], done, retried)
-    assert [p.key for p in plan.todo] == [("c", "d")] and plan.errors_before == 0
-
-
-def test_resume_output_without_retries_cuts_a_torn_line_only(tmp_path):
-    text = _line("a", "b") + _line("c", "d", error=True)
-    out = write(tmp_path / "r.jsonl", text + _line("e", "f")[:30])
-    config = config_json(Config())
-    done, retried = resume_output(out, scan_output(out, config), frozenset(), config)
-    assert out.read_text() == text and retried == frozenset()
-    assert done.errors == {("c", "d")}
-
+# --------------------------------------------------------------------------- the lines of a run
 
 def test_counts_add_each_line_by_its_verdict():
     counts = Counts()
@@ -307,127 +109,6 @@ def test_bounded_keeps_at_most_limit_in_flight_and_yields_each_pair_once():
     assert next(early)["low"]["path"] == "0"
     early.close()  # as on Ctrl-C: the unfinished futures are handed to stop
     assert len(stopped) == 2 and all(not f.done() for f in stopped)  # 3 in flight, 1 yielded
-
-
-# --------------------------------------------------------------------------- worker deaths
-
-def test_after_worker_death_tries_again_then_writes_a_resumable_error_line(tmp_path):
-    pair = Pair("a.png", "b.png", "/data/a.png", "/data/b.png")
-    assert after_worker_death(pair, 1, Config()) is None  # maybe another pair's doing: again
-    line = after_worker_death(pair, 2, Config())
-    assert line["matched"] is False and (line["low"]["path"], line["high"]["path"]) == pair.key
-    assert "worker process died while matching it, 2 times" in line["error"]
-    assert "out of memory" in line["error"]
-    assert after_worker_death(pair, 2, Config(), max_deaths=3) is None
-    # the line is a batch error line: a resumed batch counts it, --retry-errors retries it
-    out = write(tmp_path / "r.jsonl", dumps(line) + "\n")
-    assert scan_output(out, config_json(Config())).errors == {pair.key}
-
-
-#: Set in a worker process once a pair ran it out of memory: every later pair there fails too,
-#: as when the memory a MemoryError left taken is not given back (seen under RLIMIT_AS).
-_OUT_OF_MEMORY = False
-
-
-def _log(pair: Pair, what: str) -> None:
-    """A line "low-name what" appended to log.txt beside the pair's low image (one write of a
-    few bytes with O_APPEND: whole lines however many workers write)."""
-    low = Path(pair.low_file)
-    with open(low.parent / "log.txt", "a") as fh:
-        fh.write(f"{low.name} {what}\n")
-
-
-def match_or_fail(pair: Pair, config: Config, max_pixels: int):
-    """``match_pair`` as a worker runs it, but the pair whose low image is named oom*.png raises
-    MemoryError in ``match`` and leaves its process out of memory (every later match there
-    raises too), and the pair whose low image is named exit1*.png ends its process with exit
-    code 1, as OpenBLAS does from native code when it cannot allocate its buffers. Picklable by
-    reference: ``run_pool`` hands it to worker processes, which import this module."""
-    global _OUT_OF_MEMORY
-
-    def match(low, high, cfg, **kwargs):
-        global _OUT_OF_MEMORY
-        if _OUT_OF_MEMORY or Path(pair.low).name.startswith("oom"):
-            _OUT_OF_MEMORY = True
-            raise MemoryError("Unable to allocate 1.00 GiB")
-        return real_match(low, high, cfg, **kwargs)
-
-    _log(pair, "start")
-    if Path(pair.low).name.startswith("exit1"):
-        _log(pair, "exits")
-        os._exit(1)
-    real_match = batch.match
-    batch.match = match
-    try:
-        return real_match_pair(pair, config, max_pixels)
-    finally:
-        batch.match = real_match
-        _log(pair, "end")
-
-
-def _linked_pairs(images: Path, folder: Path, names) -> Path:
-    """A pairs CSV in ``folder`` of the tiny pair under the low names ``names`` (hard links)."""
-    folder.mkdir(exist_ok=True)
-    for name in names:
-        os.link(images / "low.png", folder / name)
-    return write(folder / "pairs.csv", "".join(f"{name},{images / 'high.png'}\n"
-                                               for name in names))
-
-
-def test_a_worker_out_of_memory_is_replaced_before_it_takes_another_pair(images, tmp_path):
-    """One pair's MemoryError in a worker process is that pair's internal error line; the worker
-    ends and a fresh process takes the next pair, so the pairs after it are matched. One worker,
-    so that with the pool of before (the same process takes the next pair) every later pair
-    would fail."""
-    names = ["oom.png"] + [f"l{k}.png" for k in range(3)]
-    pairs = unique_pairs(read_pairs(_linked_pairs(images, tmp_path / "oom", names)),
-                         tmp_path / "oom")
-    lines = list(batch.run_pool(pairs, Config(), DEFAULT_MAX_PIXELS, 1, task=match_or_fail))
-    assert [x["low"]["path"] for x in lines] == names  # one line each, in turn
-    assert lines[0]["error_kind"] == "internal"
-    assert lines[0]["error"] == ("internal error, out of memory (MemoryError: Unable to allocate "
-                                 "1.00 GiB)")
-    assert all(x["matched"] and "error" not in x for x in lines[1:])
-
-
-def test_without_workers_the_pairs_after_an_out_of_memory_go_to_a_fresh_process(images, tmp_path,
-                                                                               monkeypatch):
-    """--jobs 1 matches in the main process; after one pair's MemoryError there the pairs left
-    go to a worker process (this one may not have its memory back): they are matched."""
-    names = ["oom.png"] + [f"l{k}.png" for k in range(3)]
-    pairs = _linked_pairs(images, tmp_path / "serial", names)
-    monkeypatch.setattr(batch, "match_pair", match_or_fail)
-    monkeypatch.setattr(sys.modules[__name__], "_OUT_OF_MEMORY", False)  # this process's
-    result = run("batch", pairs)
-    assert result.exit_code == 4, (result.exit_code, result.stderr)
-    lines = lines_of_text(result.stdout)
-    assert [x["low"]["path"] for x in lines] == names
-    assert lines[0]["error_kind"] == "internal"
-    assert all(x["matched"] and "error" not in x for x in lines[1:])
-
-
-def test_a_worker_that_exits_1_is_an_internal_error_never_no_match(images, tmp_path, monkeypatch):
-    """A worker ending with exit code 1 (OpenBLAS out of memory, from native code) is a death:
-    its pair is tried again alone, nothing beside it, then gets an internal error line naming
-    the exit code; the other pairs are matched; the batch exits 4, not 1 nor 3."""
-    names = ["l0.png", "exit1.png"] + [f"l{k}.png" for k in range(1, 5)]
-    folder = tmp_path / "exit1"
-    pairs = _linked_pairs(images, folder, names)
-    monkeypatch.setattr(batch, "match_pair", match_or_fail)
-    result = run("batch", pairs, "-j", "2")
-    assert result.exit_code == 4, (result.exit_code, result.stderr)
-    lines = {x["low"]["path"]: x for x in lines_of_text(result.stdout)}
-    assert sorted(lines) == sorted(names)
-    assert lines["exit1.png"]["error_kind"] == "internal" and not lines["exit1.png"]["matched"]
-    assert ("its worker process died while matching it, 2 times, the last one exit code 1"
-            in lines["exit1.png"]["error"])
-    assert all(lines[n]["matched"] for n in names if n != "exit1.png")
-    # the second try ran alone: every other pair started had ended, none started beside it
-    log = (folder / "log.txt").read_text().splitlines()
-    second = [i for i, x in enumerate(log) if x == "exit1.png start"][1]
-    assert log[second + 1] == "exit1.png exits"
-    before = [x for x in log[:second] if not x.startswith("exit1.png")]
-    assert sum(x.endswith(" start") for x in before) == sum(x.endswith(" end") for x in before)
 
 
 # --------------------------------------------------------------------------- the command
@@ -735,14 +416,6 @@ def _complete_lines(path: Path) -> int:
         return path.read_bytes().count(b"\n")
     except FileNotFoundError:
         return 0
-
-
-def test_a_worker_whose_parent_is_gone_exits_at_once():
-    # die_with_parent(pid) in a process whose parent is not pid: the parent died before the
-    # worker got to ask, so the worker must end there and then
-    code = "from scalematch.batch import die_with_parent; die_with_parent(-1); print('alive')"
-    run_ = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert run_.returncode == 1 and "alive" not in run_.stdout
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
@@ -1059,14 +732,14 @@ def test_batch_lines_on_a_terminal_do_not_run_into_a_progress_bar(tmp_path):
 
 def test_more_jobs_than_cores_run_one_worker_a_core_and_say_so_once(monkeypatch, tmp_path):
     started = []
-    real_pool = batch.run_pool
+    real_pool = batchpool.run_pool
 
     def pool(pairs, config, max_pixels, jobs, task=None):
         started.append(jobs)
         return real_pool(pairs, config, max_pixels, jobs, task)
 
     monkeypatch.setattr("scalematch.batchrun.available_cores", lambda: 2)
-    monkeypatch.setattr(batch, "run_pool", pool)
+    monkeypatch.setattr(batchpool, "run_pool", pool)
     root = Path(__file__).resolve().parents[1]
     pairs = write(tmp_path / "pairs.csv",
                   f"{root}/data/demo_low.png,{root}/data/demo_high.png\n"

@@ -94,7 +94,7 @@ def test_the_defaults_and_presets_pass_their_own_checks():
 def test_guided_growth_and_the_pixel_tests_are_set_and_recorded_as_the_rest():
     """They decide match or no match: fields of Config (defaults as the stages'), set with
     --set guided.X / pixel.X, recorded in the result's config."""
-    from scalematch.batch import config_json
+    from scalematch.batchresume import config_json
     from scalematch.options import build_config
 
     assert Config().guided == GuidedParams() and Config().pixel == PixelParams()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import io
-import os
 import struct
 import warnings
 import zlib
@@ -15,17 +14,13 @@ import pytest
 
 from PIL import Image
 
-from scalematch.imageio import (DEFAULT_MAX_PIXELS, ImageError, ImageWarning, decoder_stderr_caught,
-                                header, read_grey, read_image, read_reduced, to_bgr8, to_grey)
+from scalematch.greylevels import to_grey
+from scalematch.headers import header
+from scalematch.imagefile import DEFAULT_MAX_PIXELS, ImageError
+from scalematch.imageio import (ImageWarning, decoder_stderr_caught, read_grey, read_image,
+                                read_reduced)
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def bgr() -> np.ndarray:
-    """A 120x160 colour crop of the raccoon photo (non-square, so rotations show)."""
-    img = cv2.imread(str(ROOT / "data" / "raccoon.jpg"), cv2.IMREAD_COLOR)
-    return np.ascontiguousarray(img[300:420, 400:560])
 
 
 def exif_app1(orientation: int, little_endian: bool = False) -> bytes:
@@ -395,23 +390,6 @@ def test_a_damaged_jpeg_that_decodes_is_used_with_one_warning(tmp_path, bgr, cap
     assert capfd.readouterr().err == "Corrupt JPEG data: premature end of data segment\n" * 2
 
 
-def test_native_stderr_catches_fd_2_and_gives_it_back(capfd):
-    """What is written to descriptor 2 inside is caught, line by line; after, descriptor 2 is
-    the real stderr again, also when the block raises."""
-    from scalematch.imageio import native_stderr
-
-    with native_stderr() as said:
-        os.write(2, b"libpng warning: iCCP: too short\n\nsecond line\n")
-        assert said == []  # filled once the block ends
-    assert said == ["libpng warning: iCCP: too short", "second line"]
-    with pytest.raises(RuntimeError):
-        with native_stderr() as said:
-            os.write(2, b"inside\n")
-            raise RuntimeError("the block failed")
-    os.write(2, b"after\n")
-    assert capfd.readouterr().err == "after\n"
-
-
 def test_threads_decoding_damaged_files_each_get_their_own_words(tmp_path, bgr, capfd):
     """Descriptor 2 belongs to the process: decodes in threads take it in turn, so each file
     gets what its own decoder said, and nothing leaks."""
@@ -543,14 +521,6 @@ def test_the_command_line_says_a_decoders_words_once_in_its_own_voice(tmp_path, 
         assert {done["low"]["warning"], done["high"]["warning"]} == {warning, None}
 
 
-def test_to_bgr8_layouts(bgr):
-    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
-    for img in (bgr, grey, grey.astype(np.float32), bgr.astype(np.uint16) * 257,
-                np.dstack([bgr, np.zeros(bgr.shape[:2], np.uint8)])):
-        out = to_bgr8(img)
-        assert out.dtype == np.uint8 and out.shape == bgr.shape
-
-
 def test_one_minimum_side_for_reading_and_matching(tmp_path, bgr):
     """Reading a file and matching arrays refuse the same sizes (stages.detector.MIN_SIDE_PX)."""
     from scalematch.pipeline import match
@@ -646,84 +616,6 @@ def test_the_png_header_is_read_as_pillow_reads_it(tmp_path, bgr):
     assert _png_header(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40) is None  # no IHDR
 
 
-# --------------------------------------------------------------------------- hostile paths
-
-#: Address space a command gets in the tests below: enough for Python, numpy and OpenCV (360 MB
-#: of address space at start, measured) and for a batch process that has matched a small pair
-#: (680 MB after one: the matcher's threads reserve malloc arenas; 700 MB failed in CI when
-#: Pillow was then imported), below any whole read of the 1 GB file (with the 360 MB it would
-#: need 1.4 GB), so reading it would fail with exit 4, not the exit 2 and message asserted.
-#: A refused input takes about 60 MB of memory (RSS, measured).
-LIMIT_AS_BYTES = 1000 << 20
-#: Each command must be done by then (a read of /dev/urandom or a pipe would never end).
-HOSTILE_TIMEOUT_S = 20
-
-
-def hostile_cases(folder: Path):
-    """(name, path, words of the expected message) for inputs that are not image files to read
-    whole: a device of endless zeros, one of endless random bytes, a named pipe no one writes
-    to, a 1 GB sparse file of zeros, and 1 GB of zeros after a PNG or a JPEG signature."""
-    import os
-
-    yield "dev-zero", Path("/dev/zero"), "is a device"
-    yield "dev-urandom", Path("/dev/urandom"), "is a device"
-    fifo = folder / "pipe.png"
-    if not fifo.exists():
-        os.mkfifo(fifo)
-    yield "fifo", fifo, "is a named pipe"
-    for name, head in (("sparse.bin", b""), ("sparse-png.png", b"\x89PNG\r\n\x1a\n"),
-                       ("sparse-jpg.jpg", b"\xff\xd8\xff\xe0")):
-        big = folder / name
-        with open(big, "wb") as fh:
-            fh.write(head)
-            fh.truncate(1 << 30)
-        yield name, big, "not an image" if not head else "cannot decode"
-    yield "sparse-small-limit", big, "larger than an image within the limit"
-
-
-def run_limited(args, timeout: float = HOSTILE_TIMEOUT_S):
-    """The command line in a subprocess with its address space limited (``resource.setrlimit``
-    in the child, not on the machine)."""
-    import resource
-    import subprocess
-    import sys
-
-    def limit() -> None:
-        resource.setrlimit(resource.RLIMIT_AS, (LIMIT_AS_BYTES, LIMIT_AS_BYTES))
-
-    return subprocess.run([sys.executable, "-m", "scalematch.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout, preexec_fn=limit)
-
-
-@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="needs /dev/zero and named pipes")
-def test_hostile_paths_are_refused_before_they_are_read(tmp_path, bgr):
-    """As match inputs: exit 2, one line naming what the path is, in a subprocess whose memory
-    could not hold a whole read; as batch rows: an error line each, the good pair still matched."""
-    good = write(tmp_path / "good.png", cv2.imencode(".png", bgr)[1].tobytes())
-    rows = []
-    for name, path, needle in hostile_cases(tmp_path):
-        extra = ["--max-pixels", "1000000"] if name == "sparse-small-limit" else []
-        run = run_limited([path, good, "-q", *extra])
-        lines = run.stderr.strip().splitlines()
-        assert run.returncode == 2, (name, run.returncode, run.stderr)
-        assert len(lines) == 1 and lines[0].startswith(f"Error: {path}: "), (name, run.stderr)
-        assert needle in lines[0], (name, lines[0])
-        if name != "sparse-small-limit":
-            rows.append(f"{path},{good}\n")
-    rows.insert(2, f"{good},{good}\n")
-    pairs = write(tmp_path / "pairs.csv", "".join(rows).encode())
-    run = run_limited(["batch", pairs, "-q"])
-    assert run.returncode == 3, (run.returncode, run.stderr)  # some pair errored; none internal
-    import json
-
-    lines = [json.loads(s) for s in run.stdout.splitlines()]
-    assert len(lines) == len(rows)
-    errors = [x for x in lines if "error" in x]
-    assert len(errors) == len(rows) - 1
-    assert all(x["error_kind"] == "input" for x in errors)
-    assert {x["low"]["path"] for x in errors} == {r.split(",")[0] for r in rows} - {str(good)}
-
-
 def test_a_decode_out_of_memory_is_a_memory_error_not_a_corrupt_file(tmp_path, monkeypatch):
     """With no memory left to decode (OpenCV then returns no image, or raises "Insufficient
     memory"), read_image raises MemoryError (an internal error: exit 4, batch error_kind
@@ -812,16 +704,6 @@ def test_an_mpo_file_is_decoded_reduced_as_a_jpeg(tmp_path, bgr):
     full = to_grey(read_image(path))
     ref = cv2.resize(full, (80, 60), interpolation=cv2.INTER_AREA)
     assert np.sqrt(np.mean((to_grey(d.image) - ref) ** 2)) < REDUCED_RMS  # measured 0.35
-
-
-def test_a_float_image_a_little_past_1_is_drawn_as_the_matcher_reads_it():
-    """The pictures scale floats as the matcher does (``UNIT_FLOAT_MAX``): a [0, 1] image
-    brightened to 1.03 is drawn bright, not black."""
-    from scalematch.imageio import to_bgr8
-
-    img = np.linspace(0.0, 1.03, 64, dtype=np.float32).reshape(8, 8)
-    drawn = to_bgr8(img)
-    assert drawn[..., 0].max() == 255 and abs(float(drawn[0, 1, 0]) - 255 * img[0, 1]) <= 1
 
 
 # --------------------------------------------------------------------------- the seeded corpus

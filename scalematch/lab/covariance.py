@@ -136,7 +136,8 @@ def _covariance_command():
         Example:
           scalematch lab covariance photos/*.jpg -o my_covariance.json
         """
-        from ..imageio import ImageError, read_grey
+        from ..imagefile import ImageError
+        from ..imageio import read_grey
 
         if not photos:
             raise click.UsageError("give at least one photo")

@@ -45,7 +45,7 @@ from ..checks import AT_LEAST_ONE, Bounds, NON_NEGATIVE, POSITIVE, SHARE, check_
 RULES = ("auto", "none")
 
 #: The highest grey level a declared no-data value may be: the images are matched as 8-bit
-#: grey (:mod:`scalematch.imageio` scales 16-bit images down), so levels run from 0 to 255
+#: grey (:mod:`scalematch.greylevels` scales 16-bit images down), so levels run from 0 to 255
 MAX_GREY_LEVEL = 255.0
 
 
