@@ -9,7 +9,7 @@ made of them, in this order (:func:`build_result`):
    (:func:`best_fitting`); with none, the "no" of the strongest refused attempt
    (:func:`refused`), or of an empty plan (:func:`unreachable`);
 2. the pixel tests of that final map (:func:`judged_by_pixels`:
-   :func:`scalematch.stages.decision.final_checks`), which may still refuse it;
+   :func:`scalematch.stages.finalchecks.final_checks`), which may still refuse it;
 3. the map grown by guided matching (:func:`grown_answer`) and claimed as the model its
    inliers pin down (:func:`pinned_answer`: :mod:`scalematch.stages.pinning`);
 4. the match itself, turned to map the finer image to the coarser one (:func:`answered`),
@@ -32,10 +32,10 @@ from .geometry import answer_parts, finer_to_coarser
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
 from .search import Attempt, SearchRun, fit_spec, probe_best, searched, strongest
 from .sharing import Search
-from .stages.decision import (Claim, FinalFigures, figures, final_checks, plane_parallax,
-                              unique_threshold)
+from .stages.acontrario import FinalFigures, figures
 from .stages.epipolar import refine_fundamental
 from .stages.estimator import model_of, residuals
+from .stages.finalchecks import Claim, final_checks, plane_parallax, unique_threshold
 from .stages.matcher import distinct_pairs
 from .stages.pixelcheck import pixel_check
 from .stages.refit import (Fit, Pinned, candidates_in_images, guided_refit, pinned_model,
@@ -143,7 +143,7 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     """The one :class:`Evidence` of a search's answer, assembled here from its parts: the
     decision's figures for the search ``shown`` (:func:`stages.decision.decide`), the pixel
     tests of the final transform when it faced them (``final``,
-    :func:`stages.decision.final_checks`), the search's own figures (searches, the view shown,
+    :func:`stages.finalchecks.final_checks`), the search's own figures (searches, the view shown,
     the probe, the steps), and the working size's: its factors, and the implied ratio and the
     footprint's area in the images' own pixels (as the per-scale table, ``working.in_original``),
     and the answer's own figures (``seen``): its parallax (:func:`answer_parallax`) and how
@@ -188,7 +188,7 @@ def build_result(search: Search, run: SearchRun) -> MatchResult:
 
     A match shows the strongest matched attempt, refit in the finer image's pixels; no match
     shows the first search made (the finer image itself, in the given order), with its reason.
-    The refit transform faces the pixel tests (:func:`stages.decision.final_checks`): a
+    The refit transform faces the pixel tests (:func:`stages.finalchecks.final_checks`): a
     repeated structure is refused there. The accepted map, grown, is claimed as its model only
     where its inliers pin it down (:func:`pinned_answer`); a simpler model they pin answers
     otherwise.
@@ -261,7 +261,7 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
 def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
                      near) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
     """(the pixel tests' figures, None) for a winner's refit ``fit`` that passes them
-    (:func:`stages.decision.final_checks`), or (figures, the "no" that refuses it)."""
+    (:func:`stages.finalchecks.final_checks`), or (figures, the "no" that refuses it)."""
     config, verdict = search.config, winner.verdict
     t, inliers, model = fit
     coarse, fine = search.work.shown(winner.step.direction)
@@ -335,7 +335,7 @@ def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config)
 
 def without_parallax(result: MatchResult, plane: MatchResult, config: Config) -> MatchResult:
     """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
-    of their own (``stages.decision.plane_parallax``): the plane map of the same pair,
+    of their own (``stages.finalchecks.plane_parallax``): the plane map of the same pair,
     ``plane``, where it passed the decision, with the matrix's figures in its evidence;
     otherwise "no", with the matrix shown as ``rejected`` (test "plane"). Both are in the
     images' own pixels.

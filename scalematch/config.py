@@ -11,7 +11,7 @@ from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Tuple
 
 from .checks import FACTOR, NON_NEGATIVE, Bounds, check_bounds, in_range, one_of
 from .stages.constraints import OrientationParams, SemiLocalParams
-from .stages.decision import DecisionParams
+from .stages.acontrario import DecisionParams
 from .stages.descriptors import GradientParams, JetParams
 from .stages.detector import HarrisParams, PAPER_SCALES
 from .stages.estimator import MODELS as _MODEL_RECORDS, RansacParams

@@ -33,7 +33,7 @@ from .answer import build_result, without_parallax
 from .sharing import Detected, LowFeatures, Measured, Memo, Meter, Probed, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
-from .stages.decision import SearchContext, Sight, decide
+from .stages.decision import SearchContext, decide
 from .stages.descriptors import Described
 from .stages.detector import Contrast, Gradients, Keypoints, detect_on_level
 from .stages.estimator import Estimate, FitSpec, estimate, model_of
@@ -41,6 +41,7 @@ from .stages.matcher import distinct_pairs, match_descriptors
 from .stages.nodata import NoData, distance_inside
 from .stages.probe import probe_scores, select_scales
 from .stages.scalespace import Level, scale_space
+from .stages.secondlook import Sight
 from .stages.threads import thread_map
 from .stages.views import View, identity_view, tilt_view, valid_in, view_scales
 from .stages.vote import (Candidates as VoteCandidates, Cells, Ranked, best_pairs, index_scale,

@@ -71,7 +71,7 @@ class Evidence:
     footprint_area_px: float = math.nan  #: area of the high image's footprint, low px^2
     footprint_inside: float = math.nan  #: fraction of the footprint inside the low image
     agreeing_scales: int = 0  #: other scales whose transform agrees with the winner's
-    #: the second look (``stages.decision.look_again``), for a best transform of 3+ inliers:
+    #: the second look (``stages.secondlook.look_again``), for a best transform of 3+ inliers:
     grown_inliers: int = 0  #: distinct inliers after guided growth
     grown_chance: float = math.nan  #: guided matches to expect by chance
     pixel_ncc: float = math.nan  #: ZNCC of the pixels under the grown map
@@ -119,7 +119,7 @@ class Evidence:
     parallax_points: int = 0
     parallax: bool = False
     #: ``--model fundamental``: the log10 NFA of the epipolar geometry's inliers off the
-    #: dominant plane among the candidates off it (``stages.decision.plane_parallax``); at
+    #: dominant plane among the candidates off it (``stages.finalchecks.plane_parallax``); at
     #: most ``max_log_nfa``, the geometry shows parallax by itself (nan: not measured)
     parallax_log10_nfa: float = math.nan
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
@@ -214,9 +214,9 @@ class Rejected:
     model: str  #: similarity | affine | homography
     inliers: np.ndarray = field(repr=False)  #: (N, 4) x_finer, y_finer, x_coarser, y_coarser
     log10_nfa: float  #: how far beyond chance its inliers are (a contrario)
-    #: which test refused it (``stages.decision.TESTS``: "chance", "uniqueness", ...)
+    #: which test refused it (``stages.acontrario.TESTS``: "chance", "uniqueness", ...)
     test: str
-    #: that test's figures and limits (``stages.decision.figures``)
+    #: that test's figures and limits (``stages.acontrario.figures``)
     figures: Dict[str, Any] = field(default_factory=dict)
     order: Direction = Direction.GIVEN  #: GIVEN: the first image given is the coarser one
 

@@ -23,7 +23,7 @@ from typing import Dict, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .result import Direction, ScaleRow, StepRecord
-from .stages.decision import Decision
+from .stages.acontrario import Decision
 from .stages.descriptors import Described
 from .config import Config
 from .stages.estimator import Estimate, FitSpec, model_of

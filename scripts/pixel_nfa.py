@@ -10,7 +10,7 @@ product does (``scalematch.match``, the default ``Config``; the homography model
 pairs and the fundamental matrix on the 3-D pairs, as the lab runs them) and takes the map it
 answered (``result.transform``) or, for a "no", the refused candidate (``result.rejected``;
 none when nothing reached the tests or the best attempt was a view's). On that map, at working
-size with NaN where an image shows no scene (as ``stages.decision.final_checks`` sees it):
+size with NaN where an image shows no scene (as ``stages.finalchecks.final_checks`` sees it):
 
 * the geometry: its log10 NFA (the evidence's, or the rejected candidate's);
 * the pixels, over the whole overlap of the footprint with the coarser image (no inlier
@@ -71,7 +71,7 @@ from scalematch.lab.datasets import find_shared, list_photos, scene_of  # noqa: 
 from scalematch.lab.evaluation import SUCCESS_PX  # noqa: E402
 from scalematch.lab.realistic import KINDS as REALISTIC_KINDS  # noqa: E402
 from scalematch.result import Direction  # noqa: E402
-from scalematch.stages.decision import log10_binom  # noqa: E402
+from scalematch.stages.acontrario import log10_binom  # noqa: E402
 from scalematch.stages.estimator import model_of  # noqa: E402
 from scalematch.stages.pixelcheck import PixelParams, near_windows, perturbations  # noqa: E402
 # _far: the placements that agreement_of counts as elsewhere (half a footprint away)
@@ -93,7 +93,7 @@ TINY_M = 16
 # --------------------------------------------------------------------------------------------
 
 def log10_tail(m: int, j: int, q: float) -> float:
-    """log10 P[Bin(m, q) >= j] (``decision.log10_binom`` terms, summed in log space).
+    """log10 P[Bin(m, q) >= j] (``acontrario.log10_binom`` terms, summed in log space).
 
     >>> round(log10_tail(10, 10, 0.5), 4), log10_tail(10, 0, 0.3), log10_tail(5, 3, 1.0)
     (-3.0103, 0.0, 0.0)

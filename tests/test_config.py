@@ -7,7 +7,7 @@ from dataclasses import fields
 import pytest
 
 from scalematch.config import MODES, PRESETS, Config, ProbeParams
-from scalematch.stages.decision import DecisionParams
+from scalematch.stages.acontrario import DecisionParams
 from scalematch.stages.detector import PAPER_SCALES, HarrisParams
 from scalematch.stages.estimator import RansacParams
 from scalematch.stages.guided import GuidedParams

@@ -70,7 +70,8 @@ def test_a_degenerate_fits_ratio_is_none_in_the_table_and_the_json():
     row holds NaN (null in the JSON), and the decision ignores the row as before (a NaN ratio
     is as far from its scale as any)."""
     from scalematch.geometry import usable_ratio
-    from scalematch.stages.decision import DecisionParams, disagrees
+    from scalematch.stages.acontrario import DecisionParams
+    from scalematch.stages.decision import disagrees
 
     row = ScaleRow(8.0, usable_ratio(7.49e19), 346, 102, 24, 5, 95.1, 150.5)
     assert math.isnan(row.ratio) and disagrees(row, DecisionParams())

@@ -10,7 +10,7 @@ import pytest
 from scalematch.config import Config
 from scalematch.result import Direction, Evidence
 from scalematch.search import (Attempt, Step, search_plan, skips, stop_reason, strongest)
-from scalematch.stages.decision import Decision
+from scalematch.stages.acontrario import Decision
 from scalematch.stages.views import ViewParams, identity_view
 
 GIVEN, SWAPPED = Direction.GIVEN, Direction.SWAPPED

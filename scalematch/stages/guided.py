@@ -19,7 +19,7 @@ the density of low points near the predictions and the fraction of descriptor- a
 orientation-compatible pairs (an estimate, for comparison with ``Growth.n_inliers``).
 
 Pixel convention: OpenCV's, (x, y), pixel centres at integers. Used by the decision's second
-look (:func:`scalematch.stages.decision.look_again`).
+look (:func:`scalematch.stages.secondlook.look_again`).
 """
 
 from __future__ import annotations

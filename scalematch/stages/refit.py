@@ -38,7 +38,8 @@ import numpy as np
 
 from ..checks import Bounds, COUNT, FACTOR, check_bounds, one_of
 from ..geometry import compose, invert
-from .decision import Decision, folded
+from .acontrario import Decision
+from .decision import folded
 from .descriptors import Described
 from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, model_of, refine,
                         residuals)

@@ -222,7 +222,7 @@ def _no_cells() -> Cells:
 
 def log10_nfa(cells: Cells, tried: int) -> np.ndarray:
     """Each cell's log10 number of false alarms among ``tried`` cells (every side's, every
-    direction's): ``log10(tried) + log10 C(n, k) + k log10 p`` (``decision.log10_binom``'s
+    direction's): ``log10(tried) + log10 C(n, k) + k log10 p`` (``acontrario.log10_binom``'s
     binomial, over arrays through one table of log-factorials).
 
     >>> c = Cells(*(np.array([0]),) * 3, np.array([3]), np.array([10]), np.array([0.01]), 100)

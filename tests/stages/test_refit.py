@@ -98,7 +98,7 @@ def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
     from finer px to coarser px to 1e-3 px (the estimator works in float32), though the view's
     own similarity could not hold it."""
     from scalematch.geometry import compose
-    from scalematch.stages.decision import Decision
+    from scalematch.stages.acontrario import Decision
     from scalematch.stages.refit import refit_in_high
     from scalematch.stages.views import tilt_view
 

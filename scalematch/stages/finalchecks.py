@@ -1,0 +1,220 @@
+"""The tests of a match's final transform, after the refit (docs/design/DECISION.md).
+
+:func:`final_checks` judges a :class:`Claim` by its pixels: unique in the coarser image (one
+ZNCC, or window by window: :func:`windows_agree`, :func:`unique_threshold`) and better than its
+nearby placements (the margin, or window by window: :func:`near_windows_agree`).
+:func:`plane_parallax` says whether an epipolar geometry's inliers show parallax off their
+dominant plane, counted one to one (:func:`one_to_one`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Dict, Optional, Tuple
+
+import numpy as np
+
+from ..result import Evidence
+from .acontrario import DecisionParams, FinalFigures, log10_nfa
+from .estimator import FitSpec, estimate, model_of
+from .pixelcheck import NearWindows, PixelParams, near_windows, pixel_check
+from .threads import thread_map
+from .uniqueness import Agreement, agreement_of, unique_template, uniqueness_of
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A match's final transform as the pixel tests judge it (:func:`final_checks`)."""
+
+    transform: np.ndarray = field(repr=False)  #: refit, finer px -> coarser px
+    log10_nfa: float  #: the decision's a-contrario figure for it
+    #: the finer px (N, 2) of the inliers that vouch for it; None: the whole footprint
+    vouched: Optional[np.ndarray] = field(default=None, repr=False)
+    #: a plain match of few inliers that no pass of views confirmed: its pixels must show it
+    #: unique by ``DecisionParams.unconfirmed_min_unique_ratio``
+    unconfirmed: bool = False
+
+
+def one_to_one(pairs: np.ndarray, same_point_px: float) -> np.ndarray:
+    """Row indices of ``pairs`` ((N, 4): x, y finer; x, y coarser) that share no point with an
+    earlier row kept: a row is dropped when its finer point, or its coarser point, lies within
+    ``same_point_px`` of a kept row's (0: the same position only). In first order.
+
+    An epipolar geometry maps a point to a line, so many points matched to one point all fit
+    any geometry whose epipole lies on it: counted once, they are one inlier.
+
+    >>> one_to_one(np.array([[0, 0, 5, 5], [9, 9, 5.4, 5], [20, 0, 30, 0], [20.5, 0, 40, 0],
+    ...                      [50, 50, 60, 60]], float), 1.0).tolist()
+    [0, 2, 4]
+    """
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    cell = max(float(same_point_px), 1e-3)
+    seen: Tuple[Dict[Tuple[int, int], list], Dict[Tuple[int, int], list]] = ({}, {})
+    keep = []
+    for i, row in enumerate(pairs):
+        points = (row[:2], row[2:])
+        if any(_near(table, xy, cell) for table, xy in zip(seen, points)):
+            continue
+        keep.append(i)
+        for table, xy in zip(seen, points):
+            table.setdefault(_cell(xy, cell), []).append(xy)
+    return np.asarray(keep, int)
+
+
+def _cell(xy: np.ndarray, cell: float) -> Tuple[int, int]:
+    return int(math.floor(xy[0] / cell)), int(math.floor(xy[1] / cell))
+
+
+def _near(table: Dict[Tuple[int, int], list], xy: np.ndarray, cell: float) -> bool:
+    """Whether a point of ``table`` (points by grid cell of side ``cell``) is within ``cell``."""
+    cx, cy = _cell(xy, cell)
+    return any(np.hypot(*(q - xy)) <= cell for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+               for q in table.get((cx + dx, cy + dy), ()))
+
+
+def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
+                   params: DecisionParams) -> Dict[str, Any]:
+    """Whether an epipolar geometry's inliers ``pairs`` ((N, 4) x, y finer; x, y coarser, the
+    search's working px) show parallax by themselves: the figures ``parallax_points``,
+    ``parallax_log10_nfa`` and ``parallax`` of the evidence.
+
+    The inliers a homography explains (RANSAC at the inlier threshold of ``fit``) are the
+    scene's dominant plane; the rest are off it. A scene with no depth, or a repeated structure
+    matched to its shifted copy, leaves few off the plane, and those few fit an epipolar
+    geometry as chance points would; a 3-D scene leaves many that fit it. So the inliers off the
+    plane, counted one to one (:func:`one_to_one`), face the a-contrario test of the winner
+    (``counted``: its candidates ``n``, one-to-one inliers ``k``, chance ``p`` and log10 NFA,
+    from which the number of tests is recovered) among the candidates off the plane:
+
+        log10 NFA_off = log10 tests + log10 C(n - k_plane, k_off) + log10 C(k_off, m)
+                        + (k_off - m) log10 p
+
+    and parallax is seen when it is at most ``params.max_log_nfa``, the bound of any claim.
+    This is the test of DEGENSAC (Chum, Werner & Matas, "Two-view geometry estimation
+    unaffected by a dominant plane", CVPR 2005) made a-contrario.
+    """
+    m = model_of(fit.model).min_sample
+    n, k, p = int(counted.candidates), int(counted.inliers), float(counted.chance_p)
+    log10_tests = counted.log10_nfa - log10_nfa(n, k, m, p, 1.0)
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    pairs = pairs[one_to_one(pairs, params.same_point_px)]
+    plane = estimate("homography", pairs[:, :2], pairs[:, 2:], fit.ransac, seed=fit.seed)
+    on_plane = int(plane.n_inliers)
+    k_off = len(pairs) - on_plane
+    lnfa = log10_nfa(max(n - on_plane, k_off), k_off, m, p, 1.0)
+    if math.isfinite(lnfa) and math.isfinite(log10_tests):
+        lnfa += max(log10_tests, 0.0)
+    return {"parallax_points": k_off, "parallax_log10_nfa": lnfa,
+            "parallax": bool(lnfa <= params.max_log_nfa)}
+
+
+def windows_agree(a: Agreement, params: DecisionParams) -> bool:
+    """Whether the windows of a claim (:func:`scalematch.stages.uniqueness.window_agreement`)
+    show it unique: enough of them, most agreeing at the claim, far fewer anywhere else.
+
+    >>> p = DecisionParams()
+    >>> windows_agree(Agreement(40, 0.8, 0.2), p), windows_agree(Agreement(40, 0.5, 0.1), p)
+    (True, False)
+    >>> windows_agree(Agreement(40, 0.8, 0.5), p), windows_agree(Agreement(9, 1.0, 0.0), p)
+    (False, False)
+    """
+    return (a.windows >= params.min_windows and a.claimed >= params.min_window_agreement
+            and a.claimed >= params.min_window_ratio * a.elsewhere)
+
+
+def unique_threshold(params: DecisionParams, unconfirmed: bool) -> float:
+    """The uniqueness ratio a claim needs (:func:`final_checks`): ``min_unique_ratio``, or for
+    a weak plain match no view confirmed, ``unconfirmed_min_unique_ratio`` if higher."""
+    return max(params.min_unique_ratio, params.unconfirmed_min_unique_ratio) if unconfirmed \
+        else params.min_unique_ratio
+
+
+def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
+                 near=None, pixel: PixelParams = PixelParams()):
+    """(figures, reason, test): the pixel tests of a match's final transform ``claim.transform``
+    (``t`` below: finer px -> coarser px, refit, at log10 NFA ``claim.log10_nfa``) as
+    :class:`scalematch.stages.acontrario.FinalFigures`, why it is refused and by which test
+    (:data:`scalematch.stages.acontrario.TESTS`; "" when it is not).
+
+    Uniqueness: a repeated structure is matched by many points wherever a copy of it stands;
+    the pixels tell: the finer image, warped by ``t``, must fit its place ``min_unique_ratio``
+    times better than any other place (:func:`scalematch.stages.uniqueness.uniqueness`),
+    compared where the inliers vouched for the map (``claim.vouched``); or, where that one
+    ZNCC refuses (an occluder sinks it), window by window (:func:`windows_agree`).
+    Nearby placements: ``t`` must fit better than its shifted, turned and rescaled neighbours
+    (:func:`scalematch.stages.pixelcheck.pixel_check`) by more than ``min_final_margin``.
+    Both are measured on the final transform: a similarity found before the refit may hold on
+    part of the image only (a tilted view, a mild tilt), which the pixels would count against it.
+    The images carry NaN where they show no scene (:func:`scalematch.stages.nodata.with_nan`).
+
+    Geometry first: a transform beyond chance by ``max_log_nfa_geometry`` (and with no second
+    transform of comparable support, which :func:`scalematch.stages.decision.decide` refuses) is
+    unique by its geometry; its pixel figures are recorded, not decisive: an occluder, parallax or
+    relighting lowers them where the points prove the map (``judged_by`` says which test decided).
+    ``near``: the pixel check of ``t`` when it was measured already (``answer.best_fitting``).
+    ``pixel``: the pixel tests' parameters (``Config.pixel``).
+    """
+    t, log10_nfa, vouched = claim.transform, claim.log10_nfa, claim.vouched
+    placed = None  # the template of the uniqueness ratio, and of the windows where it refuses
+
+    def unique():
+        nonlocal placed
+        placed = unique_template(coarser, finer, t, pixel, vouched)
+        return uniqueness_of(placed, pixel)
+
+    if near is None:  # side by side: neither needs the other
+        u, near = thread_map(lambda job: job(), [unique,
+                                                 lambda: pixel_check(coarser, finer, t, pixel)])
+    else:
+        u = unique()
+    geometric = log10_nfa <= params.max_log_nfa_geometry
+    final = FinalFigures(unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
+                         unique_ratio=u.ratio, final_ncc=near.ncc, final_margin=near.margin,
+                         judged_by="geometry" if geometric else "pixels")
+    if geometric:
+        return final, "", ""
+    if u.ratio < unique_threshold(params, claim.unconfirmed):  # nan: no room elsewhere, passes
+        a = agreement_of(placed, pixel)
+        final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
+                        windows_elsewhere=a.elsewhere)
+        if not windows_agree(a, params):
+            windows = (f"; {a.claimed:.0%} of its windows agree at the transform found, "
+                       f"{a.elsewhere:.0%} elsewhere" if a.windows else "")
+            return final, (f"ambiguous: the high image's pixels fit elsewhere in the low "
+                           f"image nearly as well (ZNCC {u.elsewhere:.2f} there, "
+                           f"{u.claimed:.2f} at the transform found{windows}; log10 NFA "
+                           f"{log10_nfa:.1f})"), "uniqueness"
+    if near.margin <= params.min_final_margin:  # nan: no check possible, passes
+        return _nearby_windows(coarser, finer, t, final, params, pixel)
+    return final, "", ""
+
+
+def _nearby_windows(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, final: FinalFigures,
+                    params: DecisionParams, pixel: PixelParams):
+    """(figures, reason, test) of a final map whose margin refuses it: the nearby placements
+    compared window by window (:func:`near_windows_agree`) decide."""
+    w = near_windows(coarser, finer, t, pixel)
+    final = replace(final, near_windows=w.windows, near_windows_agreeing=w.claimed,
+                    near_windows_nearby=w.nearby)
+    if near_windows_agree(w, params):
+        return final, "", ""
+    windows = (f"; {w.claimed:.0%} of its windows agree there, {w.nearby:.0%} at the best "
+               f"nearby placement" if w.windows else "")
+    return final, (f"the pixels do not confirm it: the transform found fits the low image no "
+                   f"better than nearby wrong placements (ZNCC margin "
+                   f"{final.final_margin:+.2f}{windows})"), "pixels"
+
+
+def near_windows_agree(w: NearWindows, params: DecisionParams) -> bool:
+    """Whether a claim's windows (:func:`scalematch.stages.pixelcheck.near_windows`) fit it
+    better than its nearby wrong placements: enough of them, ``min_near_windows`` agreeing at
+    the claim, ``min_window_ratio`` times the share at the best nearby placement.
+
+    >>> p = DecisionParams()
+    >>> [near_windows_agree(NearWindows(n, at, near), p)
+    ...  for n, at, near in ((40, 0.45, 0.02), (40, 0.1, 0.0), (40, 0.45, 0.3), (9, 0.9, 0.0))]
+    [True, False, False, False]
+    """
+    return (w.windows >= params.min_windows and w.claimed >= params.min_near_windows
+            and w.claimed >= params.min_window_ratio * w.nearby)
