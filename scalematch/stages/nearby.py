@@ -13,7 +13,8 @@ every angle within ``PixelParams.rotation_deg``, every shift within
 How: the finer image, blurred for its ratio (:func:`scalematch.stages.placing.blurred_for_ratio`),
 is warped for each scale and angle about the footprint's centre onto a template at most
 ``PixelParams.unique_side_px`` on its side; every shift is one correlation over the coarser
-image (:func:`masked_zncc`), compared only where both images show the scene (NaN elsewhere).
+image (:func:`scalematch.stages.uniqueness.masked_zncc`), compared only where both images show
+the scene (NaN elsewhere).
 Each step of the grid moves the footprint's edge by at most half the inlier threshold (1.5 of
 3 px at 64 px): 2.5 degrees and a scale factor of about 1.044.
 """
@@ -29,16 +30,13 @@ import numpy as np
 from ..geometry import as_matrix3, footprint, similarity_matrix
 from .pixelcheck import PixelParams
 from .placing import blurred_for_ratio, local_ratio, quad_area, shrunk, small_to_high
+from .uniqueness import masked_zncc
 
 #: angle of one step of the grid, degrees: 2.5 moves the edge of a 64 px footprint by 1.4 px,
 #: half the 3 px inlier threshold (``RansacParams.threshold_px``)
 ANGLE_STEP_DEG = 2.5
 #: scale factor of one step of the grid: 1.044 moves the edge of a 64 px footprint by 1.4 px
 SCALE_STEP = 1.044
-#: shifts where the footprint overlaps less than this share of its valid pixels with the
-#: coarser image's scene are not compared: a partial overlap leaves 30 to 70 % inside
-#: (EVALUATION.md, "partial"), and below a quarter the template is a strip
-MIN_SHARED = 0.25
 
 
 class Nearby(NamedTuple):
@@ -50,43 +48,6 @@ class Nearby(NamedTuple):
     #: corners, as a fraction of the footprint's size (sqrt of its area)
     moved: float
     transform: Optional[np.ndarray]  #: the best placement, finer px -> coarser px (3x3)
-
-
-def masked_zncc(image: np.ndarray, image_valid: np.ndarray, tpl: np.ndarray,
-                tpl_valid: np.ndarray, min_shared: float = MIN_SHARED,
-                min_std: float = PixelParams.min_std) -> np.ndarray:
-    """ZNCC of ``tpl`` at every placement inside ``image`` ((H - h + 1, W - w + 1) float32),
-    over the pixels valid in both (``image_valid``, ``tpl_valid``: bool masks of their shapes);
-    -1 where they share less than ``min_shared`` of the template's valid pixels or either is
-    flat there. Six unmasked correlations (each DFT-based in OpenCV): the shared count, the
-    sums and sums of squares of either side over the shared pixels, and the cross term
-    (Padfield, "Masked object registration in the Fourier domain", IEEE TIP 2012).
-
-    >>> rng = np.random.default_rng(0)
-    >>> img = rng.uniform(0, 255, (40, 50)).astype(np.float32)
-    >>> ok = np.ones(img.shape, bool); ok[:, :10] = False    # no scene on the left
-    >>> m = np.ones((10, 12), bool)
-    >>> r = masked_zncc(np.where(ok, img, 0), ok, img[5:15, 7:19], m)
-    >>> [int(v) for v in np.unravel_index(np.argmax(r), r.shape)], round(float(r.max()), 4)
-    ([5, 7], 1.0)
-    """
-    def corr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return cv2.matchTemplate(a, b, cv2.TM_CCORR)
-
-    mi, mt = image_valid.astype(np.float32), tpl_valid.astype(np.float32)
-    im = np.where(image_valid, image, 0).astype(np.float32)
-    tp = np.where(tpl_valid, tpl, 0).astype(np.float32)
-    n = corr(mi, mt)
-    s_t, s_tt = corr(mi, tp), corr(mi, tp * tp)
-    s_i, s_ii = corr(im, mt), corr(im * im, mt)
-    s_ti = corr(im, tp)
-    nn = np.maximum(n, 1.0)
-    var_t = s_tt - s_t * s_t / nn  # n times each side's variance over the shared pixels
-    var_i = s_ii - s_i * s_i / nn
-    ok = (n >= min_shared * float(mt.sum())) & (var_t > nn * min_std ** 2) & \
-        (var_i > nn * min_std ** 2)
-    out = (s_ti - s_t * s_i / nn) / np.sqrt(np.where(ok, var_t * var_i, 1.0))
-    return np.where(ok, np.clip(out, -1.0, 1.0), -1.0).astype(np.float32)
 
 
 def _about(centre: np.ndarray, scale: float, angle_deg: float) -> np.ndarray:

@@ -35,6 +35,11 @@ from ..geometry import apply
 from .pixelcheck import PixelParams
 from .placing import blurred_for_ratio, place, small_to_high, warp_into
 
+#: shifts where the footprint overlaps less than this share of its valid pixels with the
+#: coarser image's scene are not compared: a partial overlap leaves 30 to 70 % inside
+#: (EVALUATION.md, "partial"), and below a quarter the template is a strip
+MIN_SHARED = 0.25
+
 
 #: Smallest misfit 1 - ZNCC used as a divisor (a perfect fit would divide by zero): a numerical
 #: guard, far below any misfit measured (no answer depends on it)
@@ -83,6 +88,43 @@ def masked_zncc_map(image: np.ndarray, tpl: np.ndarray, mask: np.ndarray,
     out = num / np.sqrt(np.where(flat, 1.0, var) * float((tz * tz).sum()))
     out[flat] = -1.0
     return np.clip(out, -1.0, 1.0)
+
+
+def masked_zncc(image: np.ndarray, image_valid: np.ndarray, tpl: np.ndarray,
+                tpl_valid: np.ndarray, min_shared: float = MIN_SHARED,
+                min_std: float = PixelParams.min_std) -> np.ndarray:
+    """ZNCC of ``tpl`` at every placement inside ``image`` ((H - h + 1, W - w + 1) float32),
+    over the pixels valid in both (:func:`masked_zncc_map` when only the template has a mask) (``image_valid``, ``tpl_valid``: bool masks of their shapes);
+    -1 where they share less than ``min_shared`` of the template's valid pixels or either is
+    flat there. Six unmasked correlations (each DFT-based in OpenCV): the shared count, the
+    sums and sums of squares of either side over the shared pixels, and the cross term
+    (Padfield, "Masked object registration in the Fourier domain", IEEE TIP 2012).
+
+    >>> rng = np.random.default_rng(0)
+    >>> img = rng.uniform(0, 255, (40, 50)).astype(np.float32)
+    >>> ok = np.ones(img.shape, bool); ok[:, :10] = False    # no scene on the left
+    >>> m = np.ones((10, 12), bool)
+    >>> r = masked_zncc(np.where(ok, img, 0), ok, img[5:15, 7:19], m)
+    >>> [int(v) for v in np.unravel_index(np.argmax(r), r.shape)], round(float(r.max()), 4)
+    ([5, 7], 1.0)
+    """
+    def corr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return cv2.matchTemplate(a, b, cv2.TM_CCORR)
+
+    mi, mt = image_valid.astype(np.float32), tpl_valid.astype(np.float32)
+    im = np.where(image_valid, image, 0).astype(np.float32)
+    tp = np.where(tpl_valid, tpl, 0).astype(np.float32)
+    n = corr(mi, mt)
+    s_t, s_tt = corr(mi, tp), corr(mi, tp * tp)
+    s_i, s_ii = corr(im, mt), corr(im * im, mt)
+    s_ti = corr(im, tp)
+    nn = np.maximum(n, 1.0)
+    var_t = s_tt - s_t * s_t / nn  # n times each side's variance over the shared pixels
+    var_i = s_ii - s_i * s_i / nn
+    ok = (n >= min_shared * float(mt.sum())) & (var_t > nn * min_std ** 2) & \
+        (var_i > nn * min_std ** 2)
+    out = (s_ti - s_t * s_i / nn) / np.sqrt(np.where(ok, var_t * var_i, 1.0))
+    return np.where(ok, np.clip(out, -1.0, 1.0), -1.0).astype(np.float32)
 
 
 def vouched_mask(shape: Tuple[int, int], xy: np.ndarray, radius: float) -> np.ndarray:
