@@ -5,7 +5,8 @@ attempt it made, each decided (:func:`scalematch.stages.decision.decide`). Here 
 made of them, in this order (:func:`build_result`):
 
 1. the best fit: the matched attempt whose map, refit in the finer image's own pixels
-   (:func:`final_fit`: :mod:`scalematch.stages.refit`), lines the pixels up best
+   (:func:`final_fit`: :mod:`scalematch.stages.refit`) as the model the pixels choose
+   (:func:`model_by_pixels`), lines the pixels up best
    (:func:`best_fitting`); with none, the "no" of the strongest refused attempt
    (:func:`refused`), or of an empty plan (:func:`unreachable`);
 2. the pixel tests of that final map (:func:`judged_by_pixels`:
@@ -35,27 +36,70 @@ from .sharing import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.epipolar import refine_fundamental
 from .stages.estimator import model_of, residuals
-from .stages.finalchecks import Claim, final_checks, plane_parallax, unique_threshold
+from .stages.finalchecks import (Claim, final_checks, plane_parallax, unique_threshold,
+                                 windows_agree)
 from .stages.matcher import distinct_pairs
-from .stages.pixelcheck import pixel_check
-from .stages.refit import (Fit, Pinned, candidates_in_images, guided_refit, pinned_model,
-                           pooled_refit, refit_in_high, richer_model, union_homography)
+from .stages.pixelcheck import overlap_ncc, pixel_check
+from .stages.refit import (Fit, Pinned, by_counts, by_pixels, candidates_in_images,
+                           chosen_model, guided_refit, pinned_model, pooled_refit, refit_in_high,
+                           richer_fits)
 from .stages.rivals import EpipolarFit, off_plane
+from .stages.uniqueness import window_agreement
 from .working import WorkImages, shown_scale
 
 __all__ = ["build_result", "without_parallax"]
 
 
-def final_fit(attempt: Attempt, config: Config) -> Fit:
-    """A matched attempt's transform refit in the images' own pixels."""
+def final_fit(attempt: Attempt, search: Search) -> Fit:
+    """A matched attempt's transform refit in the images' own pixels, refined on every scale
+    matched in full, and the model the pixels choose (:func:`model_by_pixels`)."""
+    config = search.config
     best = attempt.winning_outcome()
     view, coarser = attempt.view, attempt.coarser_view
     spec = fit_spec(config)
     fit = refit_in_high(view, attempt.verdict, best, spec, coarser)
-    # a fit through a coarser view is affine already
-    fit = richer_model(fit, view, best, config.model_check, spec.ransac, spec.seed)
     fit = pooled_refit(fit, view, attempt.outcomes, spec.ransac, coarser)
-    return union_homography(fit, view, attempt.outcomes, config.model_check, spec, coarser)
+    return model_by_pixels(fit, attempt, search)
+
+
+def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
+    """``fit``, or a richer model of the same match (:func:`stages.refit.richer_fits`) chosen
+    by the pixels (:func:`stages.refit.chosen_model`): for a similarity searched for (the
+    default), with the model check on.
+
+    A richer map may answer where it lines the pixels up clearly better than ``fit``
+    (:func:`stages.refit.by_pixels`) and the pixels vouch for it window by window over the
+    whole overlap (its freedom was fitted to the pixels that chose it: the windows must agree
+    where they were not compared), or where it explains clearly more candidates and the pixels
+    do not refuse it (:func:`stages.refit.by_counts`: a scene with depth, where no map lines
+    all the pixels up, answers the plane most matches lie on). Among those, the pixels choose:
+    a wrong affine map of a plane in perspective can fit more candidates than its homography.
+    """
+    config = search.config
+    check = config.model_check
+    if not check.enabled or fit_spec(config).model != "similarity":
+        return fit
+    richer = richer_fits(fit, attempt.view, attempt.winning_outcome(), attempt.outcomes, check,
+                         fit_spec(config), attempt.coarser_view)
+    if not richer:
+        return fit
+    coarse, fine = search.work.shown(attempt.step.direction)
+    options = [fit] + [r.fit for r in richer]
+    nccs = [overlap_ncc(coarse, fine, o.transform, config.pixel) for o in options]
+    gain = check.min_ncc_gain
+
+    def vouched(t) -> bool:
+        whole = window_agreement(coarse, fine, t, config.pixel)
+        if not math.isfinite(whole.elsewhere):  # no room elsewhere: the share at it decides
+            whole = whole._replace(elsewhere=0.0)
+        return windows_agree(whole, config.decision)
+
+    allowed = [True] + [
+        by_counts(r.counted and check.clearly_more(len(r.fit.inliers), r.simpler_inliers),
+                  n, nccs[0], gain)
+        or (by_pixels(n, nccs[0], gain) and vouched(r.fit.transform))
+        for r, n in zip(richer, nccs[1:])]
+    return options[chosen_model(nccs, [o.model for o in options], allowed, gain)]
 
 
 def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
@@ -72,7 +116,7 @@ def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
     if not attempt.view.is_identity or attempt.coarser_view is not None:
         return fit  # a view's points and orientations are in the view's frame
     spec = fit_spec(config)
-    asked = config.model_check if spec.model == "similarity" else None  # as richer_model
+    asked = config.model_check if spec.model == "similarity" else None  # as model_by_pixels
     return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
                         search.memo.coarser[attempt.step.direction].described,
                         search.mode.guided, spec, asked)
@@ -104,8 +148,8 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1 or not model_of(config.model).has_ratio:
         winner = strongest(attempts)
-        return winner, (final_fit(winner, config) if winner is not None else None), None
-    fits = [final_fit(a, config) for a in matched]
+        return winner, (final_fit(winner, search) if winner is not None else None), None
+    fits = [final_fit(a, search) for a in matched]
     checks = [pixel_check(*work.shown(a.step.direction), fit.transform, config.pixel)
               for a, fit in zip(matched, fits)]
 

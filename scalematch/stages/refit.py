@@ -1,24 +1,24 @@
 """After the decision: the winning search's transform refit in the finer image's own pixels.
 
-Six refinements, in this order, each keeping the answer unless the evidence says otherwise:
+Five refinements, in this order, each keeping the answer unless the evidence says otherwise:
 
 1. :func:`refit_in_high`: a match found on a simulated tilted view (of the finer image, or of
    the coarser one) is refit in the images' own pixels (the view's similarity composed with the
    view's compression is an affine map).
-2. :func:`richer_model`: a similarity that explains clearly fewer candidates than an affine map
-   or a homography gives way to it (``ModelCheckParams``).
-3. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
-4. :func:`union_homography`: a homography fitted afresh to those pooled candidates replaces an
-   answer that explains clearly fewer of them (perspective: each scale matches the part of the
-   footprint at its own local ratio, so only the union sees the whole of it;
-   docs/design/VIEWS.md, "Perspective pairs").
-5. :func:`guided_refit`, once the answer is accepted (``answer.grown_answer``): the paper's
+2. :func:`pooled_refit`: the transform refined on the candidates of every scale matched in full.
+3. :func:`richer_fits` and :func:`chosen_model` (``answer.model_by_pixels``): an affine
+   map and a homography fitted to the winning scale's candidates and to the pooled ones; the
+   one that lines the pixels up clearly better than the map found, and that the pixels vouch
+   for window by window over the whole overlap, answers (``ModelCheckParams``). In
+   perspective each scale matches the part of the footprint at its own local ratio, so only
+   the pooled candidates see the whole of it (docs/design/VIEWS.md, "Perspective pairs").
+4. :func:`guided_refit`, once the answer is accepted (``answer.grown_answer``): the paper's
    step (iv), "establish many other matches once this matrix is known": every described point
    of every scale matched in full is predicted by the answer and matched among the coarser
    points near its prediction (guided matching, :mod:`scalematch.stages.guided`); the answer
    is refit on those matches while they grow. Matches spread over the whole footprint pin
    down the parts the winning scale's inliers leave loose (a homography's far corners).
-6. :func:`pinned_model`, last: a map whose inliers leave it free to err by more than the
+5. :func:`pinned_model`, last: a map whose inliers leave it free to err by more than the
    claim's tolerance (:func:`scalematch.stages.pinning.expected_error`) gives way to the next
    simpler model fitted to the same inliers that they pin down.
 
@@ -32,11 +32,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, Dict, Mapping, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, ClassVar, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..checks import Bounds, COUNT, FACTOR, check_bounds, one_of
+from ..checks import Bounds, CORRELATION, COUNT, FACTOR, check_bounds, one_of
 from ..geometry import compose, invert
 from .acontrario import Decision
 from .decision import folded
@@ -51,27 +51,39 @@ from .views import View, to_high
 
 @dataclass(frozen=True)
 class ModelCheckParams:
-    """A similarity answer is checked against richer models on the same candidates.
+    """A similarity answer is checked against richer models of the same match.
 
     A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
     measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
-    tens of px off away from its inliers. When an affine map or a homography fitted to the
-    winning scale's candidates explains clearly more of them, that model is reported instead
-    (``MatchResult.model`` says which); on plain zoom pairs the similarity is exact and stays.
+    tens of px off away from its inliers. An affine map and a homography are fitted to the
+    match's candidates (:func:`richer_fits`) and the pixels choose (:func:`chosen_model`):
+    inlier counts cannot, since a model with more freedom always fits a few more by chance and
+    a wrong affine map of a plane in perspective can fit more candidates than its homography.
+    ``MatchResult.model`` says which model answers; on plain zoom pairs the similarity lines
+    the pixels up as well as any, and stays.
     """
 
     enabled: bool = True  #: False: the similarity is always the answer when asked for
-    models: Tuple[str, ...] = ("affine", "homography")  #: tried in this order (simplest first)
-    #: a richer model is taken when its inliers reach ``min_gain`` x the similarity's and at
-    #: least ``min_extra`` more (a model with more freedom always fits a few more by chance)
+    models: Tuple[str, ...] = ("affine", "homography")  #: the richer models fitted
+    #: guided growth (:func:`guided_refit`) takes a richer model when its guided matches reach
+    #: ``min_gain`` x the similarity's and at least ``min_extra`` more (a model with more
+    #: freedom always fits a few more by chance)
     min_gain: float = 1.25
     min_extra: int = 10
-    #: pool the candidates of every scale matched in full and fit a homography to them afresh
-    #: (:func:`union_homography`, same ``min_gain`` and ``min_extra``): on perspective zoom pairs
-    #: whose local ratio spans 4x across the footprint the winning scale sees one band of it,
-    #: and its similarity was 4.6-6.8 px off at the far ends (docs/design/VIEWS.md,
-    #: "Perspective pairs")
+    #: fit the richer models to the pooled candidates of every scale matched in full as well as
+    #: the winning scale's: on perspective zoom pairs whose local ratio spans 4x across the
+    #: footprint the winning scale sees one band of it, and its similarity was 4.6-6.8 px off
+    #: at the far ends (docs/design/VIEWS.md, "Perspective pairs")
     union: bool = True
+    #: a richer model answers where it lines the pixels up better than the map found, by at
+    #: least this much ZNCC over the overlap (:func:`by_pixels`), or explains clearly more
+    #: candidates and lines them up no worse by more than this (:func:`by_counts`); among the
+    #: maps allowed, the simplest model within this much of the best (:func:`chosen_model`).
+    #: Where a richer model is needed the gap is wide (a plane in perspective: similarity 0.40,
+    #: homography 0.92; Oxford graf 1 -> 6 zoomed by 4: affine 0.42, homography 0.75), and on
+    #: the gate's 176 zoom pairs no richer map gains this much: the similarity stays
+    #: (docs/design/DECISION.md, "The model chosen by the pixels")
+    min_ncc_gain: float = 0.05
 
     def clearly_more(self, n: int, k: int) -> bool:
         """Whether ``n`` inliers of a richer model clearly beat ``k`` of the simpler one
@@ -86,6 +98,7 @@ class ModelCheckParams:
     BOUNDS: ClassVar[Mapping[str, Bounds]] = {
         "min_gain": FACTOR,
         "min_extra": COUNT,
+        "min_ncc_gain": CORRELATION,
     }
 
     def __post_init__(self) -> None:
@@ -146,28 +159,6 @@ def refit_in_high(view: View, verdict: Decision, best, spec: FitSpec,
     return Fit(est.transform, np.hstack([src[inl], dst[inl]]), model)
 
 
-def richer_model(fit: Fit, view: View, best, check: ModelCheckParams, ransac: RansacParams,
-                 seed: int) -> Fit:
-    """A richer model when the similarity explains too little of the winning scale.
-
-    The candidates of the winning scale are refit with each of ``check.models``;
-    the first whose inliers pass ``min_gain`` and ``min_extra`` over the similarity's, and
-    whose transform does not fold the image over, is taken (see ``ModelCheckParams``).
-    """
-    t, inliers, model = fit
-    if not check.enabled or model != "similarity" or not view.is_identity:
-        return fit
-    k = len(inliers)
-    for richer in check.models:
-        est = estimate(richer, best.src, best.dst, ransac, seed=seed)
-        if est.transform is None or folded(est.transform, view.source_shape):
-            continue
-        if check.clearly_more(est.n_inliers, k):
-            inl = est.inliers
-            return Fit(est.transform, np.hstack([best.src[inl], best.dst[inl]]), richer)
-    return fit
-
-
 def _pooled(view: View, outcomes: Sequence,
             coarser: Optional[View] = None) -> Optional[Tuple[np.ndarray, np.ndarray]]:
     """The distinct candidates (finer px, coarser px) of every scale matched in full, or None
@@ -203,40 +194,97 @@ def pooled_refit(fit: Fit, view: View, outcomes: Sequence, ransac: RansacParams,
     return Fit(est.transform, inliers[keep], model)
 
 
-def union_homography(fit: Fit, view: View, outcomes: Sequence, check: ModelCheckParams,
-                     spec: FitSpec, coarser: Optional[View] = None) -> Fit:
-    """A homography fitted to the candidates of every scale matched in full, when it explains
-    clearly more of them than ``fit`` does (``min_gain`` times and ``min_extra`` more; the
-    same pooled pairs count for both, so a plain zoom pair, where the similarity explains them
-    all, keeps it).
+class Richer(NamedTuple):
+    """A richer model of a match (:func:`richer_fits`), and how many of the candidates it was
+    fitted to the map found explains (the count it is compared with)."""
 
-    In perspective the local ratio changes across the footprint, so each scale matches the
-    band of it whose local ratio is near that scale, and a similarity or an affine map fitted
-    there holds on that band only: the pooled candidates of neighbouring scales cover the
-    others, and a homography fitted to all of them holds on the whole. Only for a similarity
-    asked for (``spec.model``: the model searched for) with the model check on
-    (``ModelCheckParams.union``) and a homography among its models, as :func:`richer_model`;
-    ``spec``: also the robust fit's parameters and the one seed.
+    fit: Fit
+    simpler_inliers: int
+    #: whether inlier counts may choose it (:func:`by_counts`): not an affine map of the
+    #: pooled candidates, whose wider spread lets a wrong affine map of a repeated texture
+    #: gather clearly more of them (two same-photo nulls, 43 against 31 and 35 against 24)
+    counted: bool = True
+
+
+def richer_fits(fit: Fit, view: View, best, outcomes: Sequence, check: ModelCheckParams,
+                spec: FitSpec, coarser: Optional[View] = None) -> List[Richer]:
+    """Each model of ``check.models`` richer than ``fit``'s, fitted (RANSAC, ``spec``) to the
+    winning scale's candidates ``best`` and to the pooled candidates of every scale matched in
+    full (``check.union``), in the images' own pixels: the maps compared with ``fit``
+    (:func:`chosen_model`). Maps that fold the finer image over are left out.
+
+    A viewpoint change makes a similarity hold on part of the image only; in perspective each
+    scale matches the band of the footprint whose local ratio is near it, so the pooled
+    candidates of neighbouring scales cover what the winning scale's leave out.
     """
-    asked, ransac, seed = spec.model, spec.ransac, spec.seed
-    t, inliers, model = fit
-    if (not check.enabled or not check.union or asked != "similarity"
-            or model == "homography" or "homography" not in check.models):
-        return fit
-    pool = _pooled(view, outcomes, coarser)
-    if pool is None:
-        return fit
-    src, dst = pool
-    before = int((residuals(model, t, src, dst) <= ransac.threshold_px).sum())
-    if not check.clearly_more(len(src), before):
-        return fit  # no homography could explain enough more: the fit is not tried (same answer)
-    est = estimate("homography", src, dst, ransac, seed=seed)
-    if est.transform is None or folded(est.transform, view.source_shape):
-        return fit
-    if check.clearly_more(est.n_inliers, before):
-        inl = est.inliers
-        return Fit(est.transform, np.hstack([src[inl], dst[inl]]), "homography")
-    return fit
+    richer = [m for m in check.models if MIN_SAMPLE[m] > MIN_SAMPLE[fit.model]]
+    if not richer:
+        return []
+    sets = [candidates_in_images(view, best, coarser)]
+    pool = _pooled(view, outcomes, coarser) if check.union else None
+    if pool is not None:
+        sets.append(pool)
+    out = []
+    for n, (src, dst) in enumerate(sets):
+        before = int((residuals(fit.model, fit.transform, src, dst) <=
+                      spec.ransac.threshold_px).sum())
+        for m in richer:
+            est = estimate(m, src, dst, spec.ransac, seed=spec.seed)
+            if est.transform is None or est.n_inliers <= MIN_SAMPLE[m] or \
+                    folded(est.transform, view.source_shape):
+                continue
+            inl = est.inliers
+            out.append(Richer(Fit(est.transform, np.hstack([src[inl], dst[inl]]), m), before,
+                              counted=not (n > 0 and m == "affine")))
+    return out
+
+
+def by_pixels(ncc: float, found: float, gain: float) -> bool:
+    """Whether a richer map of ZNCC ``ncc`` lines the pixels up clearly better than the map
+    found (``found``): by ``gain`` at least (nan: the pixels cannot tell, no)."""
+    return math.isfinite(ncc) and math.isfinite(found) and ncc >= found + gain
+
+
+def by_counts(counted: bool, ncc: float, found: float, gain: float) -> bool:
+    """Whether a richer map that explains clearly more candidates (``counted``) may answer:
+    unless the pixels refuse it, lining them up worse than the map found by more than
+    ``gain``, or not at all where the map found's can be measured (nan: its footprint leaves
+    the overlap). Where the map found's pixels cannot be measured either, the counts decide."""
+    if not math.isfinite(found):
+        return counted
+    return counted and math.isfinite(ncc) and ncc >= found - gain
+
+
+def chosen_model(nccs: Sequence[float], models: Sequence[str], allowed: Sequence[bool],
+                 gain: float) -> int:
+    """The index of the map to answer among maps of one match: ``nccs`` their ZNCC over the
+    overlap (:func:`scalematch.stages.pixelcheck.overlap_ncc`), ``models`` their models,
+    ``allowed`` which may answer (:func:`by_pixels`, :func:`by_counts`); the first is the map
+    found, which answers when no other may. Among those allowed the pixels choose: the
+    simplest model within ``gain`` of the best ZNCC, its best map (where the pixels cannot
+    tell, the first allowed).
+
+    >>> chosen_model([0.40, 0.54, 0.92, 0.75], ["similarity", "affine", "homography",
+    ...                                         "homography"], [True, True, True, True], 0.05)
+    2
+    >>> chosen_model([0.40, 0.80, 0.83], ["similarity", "affine", "homography"],
+    ...              [True, True, True], 0.05)
+    1
+    >>> chosen_model([0.95, 0.97], ["similarity", "affine"], [True, False], 0.05)
+    0
+    >>> chosen_model([float("nan"), float("nan")], ["similarity", "affine"], [True, True], 0.05)
+    1
+    """
+    ok = [k for k in range(1, len(nccs)) if allowed[k]]
+    if not ok:
+        return 0
+    v = {k: (nccs[k] if math.isfinite(nccs[k]) else -math.inf) for k in ok}
+    best = max(v.values())
+    if best == -math.inf:
+        return ok[0]
+    near = [k for k in ok if v[k] >= best - gain]
+    simplest = min(MIN_SAMPLE[models[k]] for k in near)
+    return max((k for k in near if MIN_SAMPLE[models[k]] == simplest), key=lambda k: v[k])
 
 
 def guided_refit(fit: Fit, source_shape: Tuple[int, int], outcomes: Sequence,

@@ -1,5 +1,5 @@
-"""refit: the union homography (perspective pairs), guided growth and the pin test on fabricated
-outcomes and points with a known map."""
+"""refit: the richer maps offered to the pixels (perspective pairs), guided growth and the pin
+test on fabricated outcomes and points with a known map."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from scalematch.search import ScaleOutcome
 from scalematch.stages.descriptors import Described
 from scalematch.stages.estimator import Estimate, FitSpec, estimate
 from scalematch.stages.guided import GuidedParams
-from scalematch.stages.refit import guided_refit, union_homography
+from scalematch.stages.refit import Fit, guided_refit, richer_fits
 from scalematch.stages.views import identity_view
 
 #: a perspective map of a 640x480 high image: the local ratio grows about 4x across it
@@ -39,16 +39,11 @@ def _outcomes(truth: np.ndarray, bands, n: int = 40, outliers: int = 10, seed: i
     return out
 
 
-def _union_args(config):
-    """union_homography's parameters after the outcomes, from a Config."""
-    return config.model_check, FitSpec(config.model, config.ransac, config.seed)
-
-
 def _similarity_on(outcome, config):
     """The similarity the winning scale alone would give: fitted to its own band."""
     est = estimate("similarity", outcome.src, outcome.dst, config.ransac, seed=0)
     inl = est.inliers
-    return est.transform, np.hstack([outcome.src[inl], outcome.dst[inl]]), "similarity"
+    return Fit(est.transform, np.hstack([outcome.src[inl], outcome.dst[inl]]), "similarity")
 
 
 def _grid_error(t: np.ndarray, truth: np.ndarray) -> float:
@@ -56,40 +51,46 @@ def _grid_error(t: np.ndarray, truth: np.ndarray) -> float:
     return float(np.max(np.linalg.norm(apply(t, xy) - apply(truth, xy), axis=1)))
 
 
-def test_a_perspective_answer_becomes_the_homography_of_every_scale():
+def _richer(fit, outcomes, config):
+    """:func:`richer_fits` of ``fit`` on a 640x480 finer image, the middle scale winning."""
+    return richer_fits(fit, identity_view(np.zeros((480, 640))), outcomes[1], outcomes,
+                       config.model_check, FitSpec(config.model, config.ransac, config.seed))
+
+
+def test_the_richer_maps_include_the_homography_of_every_scale():
     """Three scales each match a third of the footprint; the middle one's similarity is tens
-    of px off at the ends, the homography fitted to all three is exact (within 0.1 px)."""
+    of px off at the ends. Among the richer maps offered to the pixels, the homography fitted
+    to all three scales' candidates is exact (within 0.1 px)."""
     config = Config()
     outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
     fit = _similarity_on(outcomes[1], config)
     assert _grid_error(fit[0], PERSPECTIVE) > 10
-    t, inliers, model = union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
-                                         *_union_args(config))
-    assert model == "homography" and len(inliers) >= 110
-    assert _grid_error(t, PERSPECTIVE) < 0.1
+    options = [r.fit for r in _richer(fit, outcomes, config)]
+    assert sorted({o.model for o in options}) == ["affine", "homography"]
+    errors = [_grid_error(o.transform, PERSPECTIVE) for o in options if o.model == "homography"]
+    assert min(errors) < 0.1
+    assert max(len(o.inliers) for o in options) >= 110
 
 
-def test_a_plain_zoom_answer_keeps_its_similarity():
-    """Where the similarity explains the pooled candidates already, a homography fits a few more
-    outliers at best: the answer stays as it is."""
-    config = Config()
-    zoom = np.array([[0.25, -0.1, 300.0], [0.1, 0.25, 200.0], [0.0, 0.0, 1.0]])
-    outcomes = _outcomes(zoom, [(0, 213), (213, 426), (426, 639)], seed=1)
-    fit = _similarity_on(outcomes[1], config)
-    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
-                            *_union_args(config)) is fit
-
-
-@pytest.mark.parametrize("config", [
-    Config(model="affine"),  # a model the user chose is kept
-    Config(model_check=replace(Config().model_check, union=False)),
-    Config(model_check=replace(Config().model_check, models=("affine",))),
-], ids=["affine asked", "union off", "no homography in the model check"])
-def test_the_union_is_only_tried_for_a_similarity_with_the_model_check(config):
+@pytest.mark.parametrize("check,models", [
+    (replace(Config().model_check, union=False), {"affine", "homography"}),
+    (replace(Config().model_check, models=("affine",)), {"affine"}),
+    (replace(Config().model_check, models=()), set()),
+], ids=["union off", "affine only", "no richer model"])
+def test_the_richer_maps_are_the_model_checks_own(check, models):
+    """Only the models of the model check are offered; with ``union`` off, fitted to the
+    winning scale's candidates alone (which hold a third of the perspective: none exact)."""
     outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
     fit = _similarity_on(outcomes[1], Config())
-    assert union_homography(fit, identity_view(np.zeros((480, 640))), outcomes,
-                            *_union_args(config)) is fit
+    options = [r.fit for r in _richer(fit, outcomes, replace(Config(), model_check=check))]
+    assert {o.model for o in options} == models
+    assert len(options) == len(models) * (1 if not check.union else 2)
+
+
+def test_a_homography_is_offered_nothing_richer():
+    outcomes = _outcomes(PERSPECTIVE, [(0, 213), (213, 426), (426, 639)])
+    fit = Fit(PERSPECTIVE, np.zeros((0, 4)), "homography")
+    assert _richer(fit, outcomes, Config()) == []
 
 
 def test_a_match_on_a_view_of_the_coarser_image_is_refit_in_its_own_pixels():
