@@ -40,7 +40,7 @@ from .stages.finalchecks import (Claim, final_checks, plane_parallax, unique_thr
                                  windows_agree)
 from .stages.matcher import distinct_pairs
 from .stages.pixelcheck import overlap_ncc, pixel_check
-from .stages.refit import (Fit, Pinned, by_counts, by_pixels, candidates_in_images,
+from .stages.refit import (Fit, Pinned, allowed_maps, by_counts, by_pixels, candidates_in_images,
                            chosen_model, guided_refit, pinned_model, pooled_refit, refit_in_high,
                            richer_fits)
 from .stages.rivals import EpipolarFit, off_plane
@@ -94,11 +94,11 @@ def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
             whole = whole._replace(elsewhere=0.0)
         return windows_agree(whole, config.decision)
 
-    allowed = [True] + [
+    counted = [True] + [
         by_counts(r.counted and check.clearly_more(len(r.fit.inliers), r.simpler_inliers),
-                  n, nccs[0], gain)
-        or (by_pixels(n, nccs[0], gain) and vouched(r.fit.transform))
-        for r, n in zip(richer, nccs[1:])]
+                  n, nccs[0], gain) for r, n in zip(richer, nccs[1:])]
+    pixels = [False] + [by_pixels(n, nccs[0], gain) for n in nccs[1:]]
+    allowed = allowed_maps(nccs, counted, pixels, lambda k: vouched(options[k].transform), gain)
     return options[chosen_model(nccs, [o.model for o in options], allowed, gain)]
 
 

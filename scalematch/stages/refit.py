@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
+from typing import Any, Callable, ClassVar, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -253,6 +253,36 @@ def by_counts(counted: bool, ncc: float, found: float, gain: float) -> bool:
     if not math.isfinite(found):
         return counted
     return counted and math.isfinite(ncc) and ncc >= found - gain
+
+
+def allowed_maps(nccs: Sequence[float], counted: Sequence[bool], pixels: Sequence[bool],
+                 vouch: Callable[[int], bool], gain: float) -> List[bool]:
+    """Which maps of one match may answer (:func:`chosen_model`'s ``allowed``): the first (the
+    map found), each one ``counted`` (:func:`by_counts`), and each one the ``pixels`` ask for
+    (:func:`by_pixels`) that ``vouch(k)`` confirms. ``vouch`` is costly (a window map over the
+    whole coarser image), so it is asked only of maps that can still count: in descending ZNCC,
+    until one falls more than ``gain`` below the best map allowed so far, below which no map
+    can set the best or be chosen. The same answer as vouching every one.
+
+    >>> calls = []
+    >>> def vouch(k):
+    ...     calls.append(k)
+    ...     return k != 2
+    >>> allowed_maps([0.4, 0.6, 0.9, 0.88, 0.7], [False, True, False, False, False],
+    ...              [False, False, True, True, True], vouch, 0.05), calls
+    ([True, True, False, True, False], [2, 3])
+    """
+    allowed = [True] + [bool(c) for c in counted[1:]]
+    top = max((nccs[k] for k in range(1, len(nccs)) if allowed[k] and math.isfinite(nccs[k])),
+              default=-math.inf)
+    for k in sorted((k for k in range(1, len(nccs)) if pixels[k] and not allowed[k]),
+                    key=lambda k: -nccs[k]):
+        if nccs[k] < top - gain:
+            break
+        if vouch(k):
+            allowed[k] = True
+            top = max(top, nccs[k])
+    return allowed
 
 
 def chosen_model(nccs: Sequence[float], models: Sequence[str], allowed: Sequence[bool],

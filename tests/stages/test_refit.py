@@ -269,3 +269,28 @@ def test_the_pin_figures_are_given_in_the_coarser_images_own_px():
     assert figures == {"pin_px": 1.0, "unpinned_model": "homography", "unpinned_px": 4.0}
     # none refused: the one NaN object, so that two evidences of one answer compare equal
     assert Pinned(0.5).figures(factor=2.0)["unpinned_px"] is math.nan
+
+
+def test_vouching_only_the_maps_that_can_count_chooses_as_vouching_every_one():
+    """``allowed_maps`` asks ``vouch`` of as few maps as it can; the map chosen is the one
+    chosen when every map the pixels ask for is vouched for first (500 random draws of five
+    maps: ZNCC, which the counts allow, which the pixels ask for, which the windows vouch)."""
+    from scalematch.stages.refit import allowed_maps, chosen_model
+
+    rng = np.random.default_rng(0)
+    models = ["similarity", "affine", "homography", "affine", "homography"]
+    asked = needed = 0
+    for _ in range(500):
+        nccs = list(np.round(rng.uniform(0, 1, 5), 2))
+        counted = [True] + list(rng.random(4) < 0.3)
+        pixels = [False] + [n >= nccs[0] + 0.05 for n in nccs[1:]]
+        ok = rng.random(5) < 0.6
+        eager = [True] + [c or (p and bool(v)) for c, p, v in
+                          zip(counted[1:], pixels[1:], ok[1:])]
+        calls = []
+        lazy = allowed_maps(nccs, counted, pixels, lambda k: calls.append(k) or bool(ok[k]), 0.05)
+        assert chosen_model(nccs, models, lazy, 0.05) == chosen_model(nccs, models, eager, 0.05)
+        every = sum(1 for c, p in zip(counted[1:], pixels[1:]) if p and not c)
+        assert len(calls) <= every
+        asked, needed = asked + len(calls), needed + every
+    assert asked < needed
