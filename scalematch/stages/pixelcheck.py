@@ -224,15 +224,10 @@ def pixel_check(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     high = np.asarray(high, np.float32)
     if low.ndim != 2 or high.ndim != 2:
         raise ValueError(f"expected 2-D grey images, got shapes {low.shape} and {high.shape}")
-    placed = place(low, high.shape, t, params)
-    if isinstance(placed, str):
-        return _nan_check(placed)
-    low, t3, ratio, corners, area = placed
-    others = perturbations(t3, high.shape, params)
-    box = _common_box(low.shape, [corners] + [footprint(m, high.shape) for m in others])
-    if box is None:
-        return _nan_check("the footprint lies outside the low image")
-    score = _scorer(low, high, ratio, box, params)
+    scoring = _scoring(low, high, t, params, nearby=True)
+    if isinstance(scoring, str):
+        return _nan_check(scoring)
+    score, t3, area, others = scoring
     ncc, n = score(t3)
     fraction = n / area
     if n < params.min_overlap_px:
@@ -259,15 +254,28 @@ def overlap_ncc(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     >>> ncc > 0.9, abs(ncc - pixel_check(low, high, t).ncc) < 1e-6
     (True, True)
     """
-    high = np.asarray(high, np.float32)
-    placed = place(np.asarray(low, np.float32), high.shape, t, params)
+    scoring = _scoring(np.asarray(low, np.float32), np.asarray(high, np.float32), t, params,
+                       nearby=False)
+    if isinstance(scoring, str):
+        return float("nan")
+    score, t3, _, _ = scoring
+    return score(t3)[0]
+
+
+def _scoring(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: PixelParams,
+             nearby: bool):
+    """(score, t3, area, others): the hypothesis ``t`` placed on ``low`` (:func:`place`), its
+    nearby placements ``others`` (:func:`perturbations`; none without ``nearby``), and the
+    :func:`_scorer` of one box holding all their footprints; or why it cannot be placed."""
+    placed = place(low, high.shape, t, params)
     if isinstance(placed, str):
-        return float("nan")
-    low, t3, ratio, corners, _ = placed
-    box = _common_box(low.shape, [corners])
+        return placed
+    low, t3, ratio, corners, area = placed
+    others = perturbations(t3, high.shape, params) if nearby else []
+    box = _common_box(low.shape, [corners] + [footprint(m, high.shape) for m in others])
     if box is None:
-        return float("nan")
-    return _scorer(low, high, ratio, box, params)(t3)[0]
+        return "the footprint lies outside the low image"
+    return _scorer(low, high, ratio, box, params), t3, area, others
 
 
 def _common_box(low_shape: Tuple[int, int],
