@@ -31,7 +31,7 @@ import numpy as np
 from .config import Config
 from .geometry import answer_parts, finer_to_coarser
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
-from .search import Attempt, SearchRun, fit_spec, probe_best, searched, strongest
+from .search import Attempt, SearchRun, climbs, fit_spec, probe_best, searched, strongest
 from .sharing import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.epipolar import refine_fundamental
@@ -65,7 +65,8 @@ def final_fit(attempt: Attempt, search: Search) -> Fit:
 def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
     """``fit``, or a richer model of the same match (:func:`stages.refit.richer_fits`) chosen
     by the pixels (:func:`stages.refit.chosen_model`): for a similarity searched for (the
-    default), with the model check on.
+    default, or ``--model affine`` or ``homography``, the ceiling of the climb:
+    :func:`search.climbs`), with the model check on.
 
     A richer map may answer where it lines the pixels up clearly better than ``fit``
     (:func:`stages.refit.by_pixels`) and the pixels vouch for it window by window over the
@@ -76,7 +77,7 @@ def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
     a wrong affine map of a plane in perspective can fit more candidates than its homography.
     """
     config = search.config
-    check = config.model_check
+    check = replace(config.model_check, models=climbs(config))
     if not check.enabled or fit_spec(config).model != "similarity":
         return fit
     richer = richer_fits(fit, attempt.view, attempt.winning_outcome(), attempt.outcomes, check,
@@ -116,7 +117,8 @@ def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
     if not attempt.view.is_identity or attempt.coarser_view is not None:
         return fit  # a view's points and orientations are in the view's frame
     spec = fit_spec(config)
-    asked = config.model_check if spec.model == "similarity" else None  # as model_by_pixels
+    asked = replace(config.model_check, models=climbs(config)) \
+        if spec.model == "similarity" else None  # as model_by_pixels
     return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
                         search.memo.coarser[attempt.step.direction].described,
                         search.mode.guided, spec, asked)
@@ -294,7 +296,7 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
     has_candidate = shown.verdict.candidate is not None and shown.view.is_identity and \
         shown.coarser_view is None and not shown.matched
     rejected = None if not has_candidate else rejected_candidate(
-        verdict.candidate, verdict.candidate_inliers, config.model, shown.step.direction,
+        verdict.candidate, verdict.candidate_inliers, fit_spec(config).model, shown.step.direction,
         verdict.test, verdict.evidence.log10_nfa,
         figures(verdict.test, verdict.evidence, config.decision))
     return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,

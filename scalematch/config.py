@@ -291,9 +291,15 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
-    # the default searching for a homography (``--model homography``: Oxford, perspective
-    # pairs), so that the null set can be run with it (docs/NULLS.md, "Mode homography")
+    # the default with its answer allowed no further than an affine map, or than a homography
+    # (``--model affine``, ``--model homography``: search.CEILINGS), so that the null set can
+    # be run with each (docs/NULLS.md, "Mode homography")
+    "affine": lambda: Config(model="affine"),
     "homography": lambda: Config(model="homography"),
+    # a homography searched for at every scale (the model check off), as the paper's method
+    # fits the model asked for
+    "homography-searched": lambda: Config(model="homography",
+                                          model_check=ModelCheckParams(enabled=False)),
     # the default searching for a fundamental matrix (``--model fundamental``: 3-D scenes), so
     # that the null set can be run with it (docs/NULLS.md, "Mode fundamental")
     "fundamental": lambda: Config(model="fundamental"),

@@ -237,9 +237,11 @@ def _search_options() -> List[Callable]:
     """The options of the search: the model, the mode, the order, views, time, no-data, size."""
     return [
         click.option("--model", type=click.Choice(MODELS), default=None,
-                     help="Transform fitted from high-res px to low-res px: homography for a "
-                          "planar scene seen from another viewpoint or in perspective (Oxford "
-                          "graf, a facade from below). [default: similarity]"),
+                     help="Transform from high-res px to low-res px. similarity: searched "
+                          "at every scale, the answer rising to an affine map or a homography "
+                          "where the pixels ask for it (a plane in perspective); affine: no "
+                          "further than an affine map; homography: as the default; "
+                          "fundamental: a 3-D scene's epipolar geometry. [default: similarity]"),
         click.option("--mode", type=click.Choice(MODES), default="default", show_default=True,
                      help="'paper': the method as published (jets, Mahalanobis, semi-local "
                           "constraints, scales 1-8)."),

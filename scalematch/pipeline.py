@@ -173,6 +173,7 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
                 search: "Search") -> ScaleOutcome:
     """Candidate matching, constraints and robust estimation at one scale."""
     config, low, low_image = search.config, coarser.described, coarser.image
+    model = fit_spec(config).model
     s = level.s
     cand = match_descriptors(high.desc, low.desc, config.matcher)
     best: Optional[Estimate] = None
@@ -181,12 +182,12 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
     if len(cand):
         for mask in search.mode.constrain(high, low, cand, level, low_image):
             src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
-            est = estimate(config.model, src, dst, config.ransac, seed=config.seed)
+            est = estimate(model, src, dst, config.ransac, seed=config.seed)
             if best is None or est.n_inliers > best.n_inliers:
                 best, best_src, best_dst, kept = est, src, dst, len(src)
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
-    if n_in and model_of(config.model).has_ratio:
+    if n_in and model_of(model).has_ratio:
         # where the inliers are: a homography's ratio varies across the image (perspective)
         ratio, angle, _ = answer_parts(best.transform, best_src[best.inliers])
         ratio = usable_ratio(ratio)

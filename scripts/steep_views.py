@@ -53,8 +53,12 @@ VARIANTS = {
     "default": Config(),
     # the default without its third pass (t = 6 and 8)
     "tilt-4": Config.preset("tilt-4"),
-    # what a user who knows the pair is seen in perspective would ask for
-    "homography": Config(model="homography"),
+    # what a user who knows the pair is seen in perspective would ask for (the default's
+    # answer allowed as far as a homography: the same as the default), and a homography
+    # searched for at every scale
+    "homography": Config.preset("homography"),
+    "homography-searched": Config.preset("homography-searched"),
+    "affine": Config.preset("affine"),
     # the default with a time budget of 1 s: what the budget costs on pairs that have an answer
     "budget-1s": Config.preset("budget-1s"),
     # the default without the views of the coarser image

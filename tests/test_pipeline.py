@@ -120,12 +120,19 @@ def test_same_input_same_output(raccoon):
 
 @pytest.mark.parametrize("model", ["affine", "homography"])
 def test_other_models_recover_the_transform(raccoon, model):
+    """Searched for at every scale (the model check off), an affine map and a homography
+    recover a zoom pair; as a ceiling (``--model``), the pair keeps its similarity, the
+    simplest map that lines the pixels up."""
     pair = _pair(raccoon, 3.0, 0)
-    r = match(pair.low, pair.high, Config(model=model))
-    assert r.matched, r.reason
-    assert r.transform.shape == ((2, 3) if model == "affine" else (3, 3))
-    err = reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape)
-    assert err < ERROR_TOL_PX
+    searched = Config(model=model, model_check=ModelCheckParams(enabled=False))
+    for config, shape in ((searched, (2, 3) if model == "affine" else (3, 3)),
+                          (Config(model=model), (2, 3))):
+        r = match(pair.low, pair.high, config)
+        assert r.matched, r.reason
+        assert r.transform.shape == shape
+        assert r.model == (config.model if config is searched else "similarity")
+        err = reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape)
+        assert err < ERROR_TOL_PX
 
 
 def test_a_3d_scene_is_answered_with_its_epipolar_geometry(raccoon):
@@ -161,13 +168,18 @@ def _epipole_bearing(e, shape) -> float:
     return math.degrees(math.atan2(d[1], d[0])) % 180.0
 
 
+#: a homography searched for at every scale: ``--model homography`` names the richest model the
+#: answer may climb to from the similarity searched; with the model check off it is searched
+HOMOGRAPHY_SEARCHED = Config(model="homography", model_check=ModelCheckParams(enabled=False))
+
+
 def test_the_answer_is_grown_by_guided_matching(raccoon):
     """Step (iv) of the paper: a homography of few inliers (12 here, at ratio 5) predicts every
     point of the scales matched in full; it then explains more matches than the decision
     counted, each within the inlier threshold of it, and stays within the known answer's
     tolerances."""
     pair = _pair(raccoon, 5.0, 1)
-    r = match(pair.low, pair.high, Config(model="homography"))
+    r = match(pair.low, pair.high, HOMOGRAPHY_SEARCHED)
     _check_known_answer(r, pair)
     assert r.model == "homography"
     assert r.evidence.inliers < r.config.guided.grow_below_inliers
@@ -530,7 +542,7 @@ LOOSE_HOMOGRAPHIES = [
 @pytest.mark.parametrize("name,ratio,seed", LOOSE_HOMOGRAPHIES, ids=["x16", "x12"])
 def test_a_homography_its_inliers_do_not_pin_is_answered_as_the_simpler_model_they_pin(
         shared_dir, name, ratio, seed):
-    """``--model homography`` on a zoom pair whose inliers crowd part of a small footprint:
+    """A homography searched for on a zoom pair whose inliers crowd part of a small footprint:
     fitted as asked, the homography is more than 3 px off (a wrong claim); its inliers do not
     pin it within 1 px, and the simpler model they pin answers, within 3 px, the verdict
     naming the homography refused."""
@@ -539,7 +551,7 @@ def test_a_homography_its_inliers_do_not_pin_is_answered_as_the_simpler_model_th
 
     pair = next(pairs_from_photos([shared_dir / "data" / "photos" / name], [ratio], seed=seed,
                                   pick="least"))
-    config = Config(model="homography")
+    config = HOMOGRAPHY_SEARCHED
     as_fitted = match(pair.low, pair.high, replace(config, pin=replace(config.pin,
                                                                         enabled=False)))
     assert as_fitted.model == "homography" and as_fitted.order == "given"
@@ -569,6 +581,21 @@ def test_a_perspective_pair_is_answered_with_the_homography_the_pixels_choose(ra
     assert _error(result, pair) < 1.0
     assert pixels_off(match(pair.low, pair.high, replace(
         Config(), model_check=replace(Config().model_check, enabled=False))), pair) > 3.0
+
+
+def test_the_model_asked_for_is_the_most_general_the_answer_may_take(raccoon):
+    """The perspective pair above under ``--model homography`` gets the default's answer (the
+    similarity searched, the homography the pixels choose); under ``--model affine`` the
+    climb stops at an affine map, which no longer answers within 1 px."""
+    from scalematch.lab.synthetic import make_perspective_pair
+
+    pair = make_perspective_pair(raccoon, 2.0, 4.0, np.random.default_rng(3))
+    default = match(pair.low, pair.high)
+    ceiling = match(pair.low, pair.high, Config(model="homography"))
+    assert ceiling.model == "homography" and np.array_equal(ceiling.transform, default.transform)
+    affine = match(pair.low, pair.high, Config(model="affine"))
+    assert affine.model in ("similarity", "affine")
+    assert pixels_off(affine, pair) > _error(default, pair) + 1.0
 
 
 def pixels_off(result, pair) -> float:

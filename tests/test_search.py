@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from scalematch.config import Config
+from scalematch.config import MODELS, Config
 from scalematch.result import Direction, Evidence
-from scalematch.search import (Attempt, Step, search_plan, skips, stop_reason, strongest)
+from scalematch.search import (Attempt, Step, fit_spec, search_plan, skips, stop_reason,
+                               strongest)
 from scalematch.stages.acontrario import Decision
 from scalematch.stages.views import ViewParams, identity_view
 
@@ -115,3 +117,18 @@ def test_strongest_is_none_without_a_match_and_prefers_the_lowest_nfa():
 def test_every_plan_has_the_given_image_itself_first(config):
     plan = search_plan(config, BOTH)
     assert plan[0].direction is GIVEN and plan[0].view_pass == 0 and plan[0].views == ((1.0, 0.0),)
+
+
+def test_an_affine_map_or_a_homography_asked_for_is_the_ceiling_of_a_similarity_searched():
+    """``--model affine`` and ``homography`` search the similarity and let the answer climb no
+    further than the model named; the default climbs as far as the model check goes; with the
+    check off, the model asked for is searched at every scale."""
+    from scalematch.search import climbs, searched_model
+
+    assert [searched_model(Config(model=m)) for m in MODELS] == \
+        ["similarity", "similarity", "similarity", "fundamental"]
+    assert climbs(Config(model="affine")) == ("affine",)
+    assert climbs(Config(model="homography")) == climbs(Config()) == ("affine", "homography")
+    off = replace(Config().model_check, enabled=False)
+    assert searched_model(Config(model="homography", model_check=off)) == "homography"
+    assert fit_spec(Config(model="affine")).model == "similarity"

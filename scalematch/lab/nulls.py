@@ -429,8 +429,8 @@ def scalar_evidence(evidence: Any) -> Dict[str, Any]:
 
 
 #: The configurations a null set is run in (``Config.preset`` names)
-NULL_MODES = ("default", "paper", "tilt-4", "budget-1s", "homography", "fundamental",
-              "no-views")
+NULL_MODES = ("default", "paper", "tilt-4", "budget-1s", "affine", "homography",
+              "homography-searched", "fundamental", "no-views")
 
 
 def _config(mode: str, seed: int):
@@ -1046,9 +1046,10 @@ def run_nulls(*, shared: Optional[PathLike] = None, out_dir: PathLike = DEFAULT_
     mode : str
         A preset of ``NULL_MODES``: "default", "paper" (``Config.paper()``), "tilt-4"
         (the default without its views at tilts 6 and 8),
-        "budget-1s" (the default with a 1 s time budget), "homography" and "fundamental" (the
-        default searching for that model) or "no-views" (the default without tilted views,
-        ``--no-views``).
+        "budget-1s" (the default with a 1 s time budget), "affine" and "homography" (the
+        default's answer allowed no further than that model), "homography-searched" (a
+        homography searched at every scale), "fundamental" (the default searching for it) or
+        "no-views" (the default without tilted views, ``--no-views``).
     jobs : int
         Worker processes (1: this process).
     limit : int, optional
@@ -1264,8 +1265,9 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
 @click.option("--mode", type=click.Choice(NULL_MODES), default="default",
               show_default=True, help="scalematch's configuration (a preset: paper is "
               "Config.paper(), tilt-4 the default without its views at tilts 6 and 8, budget-1s "
-              "the default with --time-budget 1, homography the default with --model "
-              "homography, fundamental the default with --model fundamental, no-views the default "
+              "the default with --time-budget 1, affine and homography the default with --model "
+              "affine or homography, homography-searched a homography searched at every "
+              "scale, fundamental the default with --model fundamental, no-views the default "
               "with --no-views).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (more than 1: one OpenCV thread each).")
