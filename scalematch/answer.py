@@ -47,7 +47,7 @@ from .stages.rivals import EpipolarFit, off_plane
 from .stages.uniqueness import window_agreement
 from .working import WorkImages, shown_scale
 
-__all__ = ["build_result", "without_parallax"]
+__all__ = ["build_result", "plane_instead", "without_parallax"]
 
 
 def final_fit(attempt: Attempt, search: Search) -> Fit:
@@ -377,6 +377,19 @@ def answer_parallax(attempt: Attempt, t: np.ndarray, model: str, config: Config)
     k = len(distinct_pairs(src[held], dst[held])[0])
     return {"parallax_points": n,
             "parallax": n >= max(params.parallax_min_points, params.parallax_share * k)}
+
+
+def plane_instead(result: MatchResult, plane: MatchResult) -> MatchResult:
+    """The answer for a fundamental matrix asked for and not found (``result``, a "no"): the
+    plane map of the same pair, ``plane``, where it passed the decision and the candidates off
+    its map show no parallax (``Evidence.parallax``): a flat scene, where an epipolar geometry
+    has nothing to fix its epipole on, and where at high ratios its 8-point sample finds too few
+    inliers to stand out from chance; otherwise ``result``. Both are in the images' own
+    pixels; the time is both searches'."""
+    timings = dict(plane.timings, epipolar=result.seconds, total=result.seconds + plane.seconds)
+    if plane.matched and not plane.evidence.parallax:
+        return replace(plane, timings=timings, config=result.config)
+    return replace(result, timings=timings)
 
 
 def without_parallax(result: MatchResult, plane: MatchResult, config: Config) -> MatchResult:

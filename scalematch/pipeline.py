@@ -29,7 +29,7 @@ from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
                      StepRecord)
 from .features import (Describing, ImageViews, Roles, first_level, first_level_points,
                        image_views)
-from .answer import build_result, without_parallax
+from .answer import build_result, plane_instead, without_parallax
 from .sharing import Detected, LowFeatures, Measured, Memo, Meter, Probed, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
@@ -79,12 +79,14 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
                            decoded_factors)
     # 2-6. The search and its answer, in the images' own pixels
     result = searched_answer(work, config, progress, t0)
-    # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole: the
-    #    plane map of the same images answers instead (answer.without_parallax)
-    if result.matched and not model_of(config.model).has_ratio and not result.evidence.parallax:
+    # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole, and
+    #    none found says nothing of a flat scene: the plane map of the same images answers
+    #    instead (answer.without_parallax, answer.plane_instead)
+    if not model_of(config.model).has_ratio and not (result.matched and result.evidence.parallax):
         plane = searched_answer(work, replace(config, model=config.decision.plane_model),
                                 None, time.perf_counter())
-        result = without_parallax(result, plane, config)
+        result = without_parallax(result, plane, config) if result.matched else \
+            plane_instead(result, plane)
     return result
 
 

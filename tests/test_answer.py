@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from scalematch import Config, match
-from scalematch.answer import without_parallax
+from scalematch.answer import plane_instead, without_parallax
 from scalematch.result import Evidence, MatchResult
 from scalematch.stages.views import ViewParams
 
@@ -54,3 +54,22 @@ def test_a_plane_map_in_place_of_a_matrix_is_searched_without_match_calling_itse
     r = pipeline.match(pair.low, pair.high, Config(model="fundamental"))
     assert calls == [1]
     assert r.matched and r.model != "fundamental" and r.evidence.plane_inliers == r.n_inliers
+
+
+def test_a_matrix_not_found_gives_way_to_a_plane_map_without_parallax_only():
+    """``--model fundamental`` that found no matrix: a plane map that passed the decision and
+    shows no parallax answers (a flat scene), in the time of both searches; a plane map whose
+    candidates show parallax (a scene with depth) does not, and the "no" stays."""
+    no = MatchResult(matched=False, model="fundamental", reason="could arise by chance",
+                     timings={"total": 0.5})
+    flat = MatchResult(matched=True, model="similarity", transform=np.eye(3)[:2],
+                       inliers=np.zeros((0, 4)), timings={"total": 1.5},
+                       evidence=Evidence(inliers=30, parallax=False))
+    r = plane_instead(no, flat)
+    assert r.matched and r.model == "similarity" and r.seconds == 2.0
+    deep = replace(flat, evidence=Evidence(inliers=30, parallax=True))
+    r = plane_instead(no, deep)
+    assert not r.matched and r.reason == "could arise by chance" and r.seconds == 2.0
+    unmatched = MatchResult(matched=False, model="similarity", reason="too few inliers",
+                            timings={"total": 1.5})
+    assert not plane_instead(no, unmatched).matched
