@@ -73,6 +73,8 @@ def verdict(result: MatchResult) -> str:
     if not np.isnan(result.evidence.parallax_log10_nfa):  # a fundamental matrix was asked for
         plane = (", no parallax: the plane map answers (an epipolar geometry's epipole is not "
                  "fixed by its inliers)")
+    elif result.config is not None and not model_of(result.config.model).has_ratio:  # none found
+        plane = ", no epipolar geometry found: the plane map of a flat scene answers"
     return (f"matched ({model_said(result)}): ratio {result.resolution_ratio:.3f}, rotation "
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}"
             f"{plane}")

@@ -62,3 +62,18 @@ def test_the_evidence_line_says_when_windows_decided():
     refused = MatchResult(matched=False, model="similarity", evidence=build_evidence(look))
     assert "+0.05 against nearby placements; 20% of 37 windows agree there, 3% nearby" in \
         evidence_line(refused)
+
+
+def test_the_verdict_says_when_a_plane_map_answers_for_a_matrix_not_found():
+    """``--model fundamental`` answered by a plane map because no matrix was found says so; the
+    same map asked for by the default says nothing of epipolar geometry."""
+    from scalematch.config import Config
+
+    def plane(config):
+        return MatchResult(matched=True, model="similarity", resolution_ratio=9.9,
+                           rotation_deg=0.0, best_scale=10.1, config=config,
+                           transform=np.array([[0.1, 0, 0], [0, 0.1, 0.0]]),
+                           inliers=np.zeros((0, 4)))
+    assert verdict(plane(Config(model="fundamental"))).endswith(
+        "no epipolar geometry found: the plane map of a flat scene answers")
+    assert "epipolar" not in verdict(plane(Config()))
