@@ -31,7 +31,7 @@ import numpy as np
 from .config import Config
 from .geometry import answer_parts, finer_to_coarser
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
-from .search import Attempt, SearchRun, climbs, fit_spec, probe_best, searched, strongest
+from .search import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
 from .sharing import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.epipolar import refine_fundamental
@@ -77,11 +77,11 @@ def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
     a wrong affine map of a plane in perspective can fit more candidates than its homography.
     """
     config = search.config
-    check = replace(config.model_check, models=climbs(config))
-    if not check.enabled or fit_spec(config).model != "similarity":
+    check, spec = climbing(config), fit_spec(config)
+    if not check.enabled or spec.model != "similarity":
         return fit
     richer = richer_fits(fit, attempt.view, attempt.winning_outcome(), attempt.outcomes, check,
-                         fit_spec(config), attempt.coarser_view)
+                         spec, attempt.coarser_view)
     if not richer:
         return fit
     coarse, fine = search.work.shown(attempt.step.direction)
@@ -117,8 +117,7 @@ def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
     if not attempt.view.is_identity or attempt.coarser_view is not None:
         return fit  # a view's points and orientations are in the view's frame
     spec = fit_spec(config)
-    asked = replace(config.model_check, models=climbs(config)) \
-        if spec.model == "similarity" else None  # as model_by_pixels
+    asked = climbing(config) if spec.model == "similarity" else None  # as model_by_pixels
     return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
                         search.memo.coarser[attempt.step.direction].described,
                         search.mode.guided, spec, asked)
@@ -386,10 +385,17 @@ def plane_instead(result: MatchResult, plane: MatchResult) -> MatchResult:
     has nothing to fix its epipole on, and where at high ratios its 8-point sample finds too few
     inliers to stand out from chance; otherwise ``result``. Both are in the images' own
     pixels; the time is both searches'."""
-    timings = dict(plane.timings, epipolar=result.seconds, total=result.seconds + plane.seconds)
+    timings = _both_timings(result, plane)
     if plane.matched and not plane.evidence.parallax:
         return replace(plane, timings=timings, config=result.config)
     return replace(result, timings=timings)
+
+
+def _both_timings(result: MatchResult, plane: MatchResult) -> dict:
+    """The timings of an answer made of a fundamental matrix's search (``result``) and the
+    plane map's search after it (``plane``): the plane's steps, the matrix's as "epipolar",
+    and both in "total"."""
+    return dict(plane.timings, epipolar=result.seconds, total=result.seconds + plane.seconds)
 
 
 def without_parallax(result: MatchResult, plane: MatchResult, config: Config) -> MatchResult:
@@ -410,8 +416,7 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
     e = result.evidence
     figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
                 parallax_log10_nfa=e.parallax_log10_nfa)
-    timings = dict(plane.timings, epipolar=result.seconds,
-                   total=result.seconds + plane.seconds)
+    timings = _both_timings(result, plane)
     if plane.matched:
         return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
                        timings=timings, config=result.config)

@@ -17,7 +17,7 @@ pure functions of the configuration and of what the steps found (:class:`Attempt
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -27,6 +27,7 @@ from .stages.acontrario import Decision
 from .stages.descriptors import Described
 from .config import Config
 from .stages.estimator import Estimate, FitSpec, model_of
+from .stages.refit import ModelCheckParams
 from .stages.views import View, view_plan
 
 #: (tilt, longitude in degrees) of a view; (1, 0) is the image itself.
@@ -293,6 +294,12 @@ def climbs(config: Config) -> Tuple[str, ...]:
         return models
     top = model_of(config.model).min_sample
     return tuple(m for m in models if model_of(m).min_sample <= top)
+
+
+def climbing(config: Config) -> ModelCheckParams:
+    """The model check of ``config`` with its richer models cut at the ceiling
+    (:func:`climbs`): what the answer's climb and guided growth may take."""
+    return replace(config.model_check, models=climbs(config))
 
 
 def fit_spec(config: Config) -> FitSpec:
