@@ -140,7 +140,7 @@ def run_plan(search: Search, plan: Sequence[Step], t0: float) -> SearchRun:
     timings: Dict[str, float] = {}
     stopped = "plan done"
     for step in plan:
-        if skips(step, attempts):
+        if skips(step, attempts, config):
             search.meter.tick(step.cost)
             continue
         if out_of_time(time.perf_counter() - t0, len(records), config):

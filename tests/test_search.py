@@ -97,13 +97,30 @@ def test_a_weak_plain_match_is_confirmed_by_the_first_pass_of_views():
     plan = search_plan(config, BOTH)
     weak = attempt(plan[0], True, inliers=config.views.confirm_below_inliers - 1, lnfa=-12.6)
     assert stop_reason(plan[0], [weak], plan, config) is None
-    assert skips(plan[1], [weak]) and not skips(plan[2], [weak])
+    assert skips(plan[1], [weak], config) and not skips(plan[2], [weak], config)
     # the views find nothing: the weak match stands
     assert stop_reason(plan[2], [weak, attempt(plan[2], False)], plan, config) == "matched"
     # a view with stronger evidence wins
     strong = attempt(plan[2], True, inliers=60, lnfa=-80.0)
     assert stop_reason(plan[2], [weak, strong], plan, config) == "matched"
     assert strongest([weak, strong]) is strong
+
+
+def test_a_fundamental_matrix_searches_both_orders_and_the_strongest_answers():
+    """A map with a ratio found in the given order ends its pass; a fundamental matrix also
+    fits the wrong order (weakly, at s = 1), so the other order still runs."""
+    config = Config(model="fundamental")
+    plan = search_plan(config, BOTH)
+    assert [(s.direction, s.view_pass) for s in plan] == [(GIVEN, 0), (SWAPPED, 0)]
+    weak = attempt(plan[0], True, inliers=23, lnfa=-5.9)
+    assert not skips(plan[1], [weak], config)
+    assert stop_reason(plan[0], [weak], plan, config) is None
+    strong = attempt(plan[1], True, inliers=243, lnfa=-456.0)
+    assert stop_reason(plan[1], [weak, strong], plan, config) == "matched"
+    assert strongest([weak, strong]) is strong
+    # the same match under a model with a ratio skips the other order
+    default = search_plan(Config(), BOTH)
+    assert skips(default[1], [attempt(default[0], True, inliers=23)], Config())
 
 
 def test_strongest_is_none_without_a_match_and_prefers_the_lowest_nfa():
