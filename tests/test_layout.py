@@ -92,6 +92,68 @@ def test_no_product_function_is_longer_than_60_lines_or_takes_more_than_7_parame
     assert not too_long and not too_many, too_long + too_many
 
 
+#: the longest a product module may be (the lab's measurement modules are not product)
+MAX_MODULE_LINES = 700
+
+
+def _product_modules():
+    """(dotted name, path) of every product module: the package but its lab."""
+    for path in sorted((ROOT / "scalematch").rglob("*.py")):
+        rel = path.relative_to(ROOT)
+        if "lab" in rel.parts[1:]:
+            continue
+        parts = list(rel.with_suffix("").parts)
+        yield ".".join(parts[:-1] if parts[-1] == "__init__" else parts), path
+
+
+def _imported(module: str, path: Path, known: set) -> set:
+    """The product modules ``module`` imports anywhere in its file: at its top, under
+    ``TYPE_CHECKING``, or inside a function (a circle through a late import is still one)."""
+    import ast
+
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                head = package[:len(package) - (node.level - 1)]
+                base = ".".join(head + ([node.module] if node.module else []))
+            found.update(f"{base}.{a.name}" if f"{base}.{a.name}" in known else base
+                         for a in node.names)
+    return {m for m in found if m in known and m not in (module, "scalematch")}
+
+
+def test_no_product_module_is_longer_than_700_lines():
+    long = [f"{path.relative_to(ROOT)} ({n} lines)" for _, path in _product_modules()
+            if (n := len(path.read_text().splitlines())) > MAX_MODULE_LINES]
+    assert not long, long
+
+
+def test_no_import_circle():
+    """No product module imports, however late, a module that leads back to it: the layout
+    reads one way, from the command line down to the stages."""
+    modules = dict(_product_modules())
+    graph = {m: _imported(m, p, set(modules)) for m, p in modules.items()}
+    state: dict = {}
+
+    def circle(m: str, path: list):
+        state[m] = "open"
+        for n in sorted(graph[m]):
+            if state.get(n) == "open":
+                return path[path.index(n):] + [n] if n in path else [m, n]
+            if n not in state and (found := circle(n, path + [n])):
+                return found
+        state[m] = "done"
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (found := circle(m, [m])):
+            raise AssertionError(" -> ".join(found))
+
+
 def test_match_reads_as_numbered_steps():
     match = next(node for path, node in _functions()
                  if path.name == "pipeline.py" and node.name == "match")

@@ -267,7 +267,7 @@ def _scoring(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: PixelPara
     """(score, t3, area, others): the hypothesis ``t`` placed on ``low`` (:func:`place`), its
     nearby placements ``others`` (:func:`perturbations`; none without ``nearby``), and the
     :func:`_scorer` of one box holding all their footprints; or why it cannot be placed."""
-    placed = place(low, high.shape, t, params)
+    placed = place(low, high.shape, t, params.min_overlap_px, params.max_side_px)
     if isinstance(placed, str):
         return placed
     low, t3, ratio, corners, area = placed
@@ -387,7 +387,7 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     nan = float("nan")
     low = np.asarray(low, np.float32)
     high = np.asarray(high, np.float32)
-    placed = place(low, high.shape, t, params)
+    placed = place(low, high.shape, t, params.min_overlap_px, params.max_side_px)
     if isinstance(placed, str):
         return NearWindows(0, nan, nan)
     low, t3, ratio, corners, area = placed

@@ -15,16 +15,12 @@ Pixel convention: OpenCV's, (x, y), pixel centres at integers.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, NamedTuple, Tuple, Union
+from typing import NamedTuple, Tuple, Union
 
 import cv2
 import numpy as np
 
 from ..geometry import as_matrix3, footprint, ratio_at
-
-if TYPE_CHECKING:  # pixelcheck imports this module: PixelParams is named for the annotations only
-    from .pixelcheck import PixelParams
-
 
 def blurred_for_ratio(high: np.ndarray, ratio: float,
                       camera_blur_px: float = 0.5) -> Tuple[np.ndarray, int]:
@@ -125,20 +121,22 @@ def local_ratio(t3: np.ndarray, high_shape: Tuple[int, int]) -> float:
 
 
 def place(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
-          params: PixelParams) -> Union[Placed, str]:
+          min_overlap_px: float, max_side_px: float) -> Union[Placed, str]:
     """The hypothesis ``t`` placed on ``low`` (:class:`Placed`), or why it cannot be: no
-    footprint, a footprint under ``min_overlap_px``, a singular map."""
+    footprint, a footprint under ``min_overlap_px`` low px^2, a singular map. A footprint
+    larger than ``max_side_px`` (sqrt of its area) is placed on ``low`` shrunk to it
+    (``PixelParams.min_overlap_px`` and ``max_side_px`` of :mod:`scalematch.stages.pixelcheck`)."""
     t3 = as_matrix3(np.asarray(t, np.float64))
     corners = footprint(t3, high_shape)
     if corners is None or not np.all(np.isfinite(t3)):
         return "the transform has no footprint"
     area = quad_area(corners)
-    if area < params.min_overlap_px:
-        return f"footprint of {area:.0f} low px^2 (< {params.min_overlap_px})"
+    if area < min_overlap_px:
+        return f"footprint of {area:.0f} low px^2 (< {min_overlap_px:g})"
     ratio = local_ratio(t3, high_shape)
     if not (math.isfinite(ratio) and ratio > 0):
         return "the transform is singular"
-    q = min(1.0, params.max_side_px / math.sqrt(area))
+    q = min(1.0, max_side_px / math.sqrt(area))
     if q < 1.0:  # work on the low image shrunk by 1/q: the maps gain a centre-aligned scaling
         low, shrink = shrunk(low, 1.0 / q)
         t3 = shrink @ t3

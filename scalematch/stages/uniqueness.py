@@ -25,7 +25,7 @@ tests (:mod:`scalematch.stages.decision`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
 import cv2
@@ -202,8 +202,8 @@ def unique_template(low: np.ndarray, high: np.ndarray, t: np.ndarray, params: Pi
     size (``unique_side_px``), compared where both images show the scene and, with ``vouched``
     (the inliers, finer px), within ``vouch_radius`` of them; None when it cannot tell: too
     small an overlap, flat, or no room elsewhere."""
-    placed = place(np.asarray(low, np.float32), high.shape, t,
-                   replace(params, max_side_px=params.unique_side_px))
+    placed = place(np.asarray(low, np.float32), high.shape, t, params.min_overlap_px,
+                   params.unique_side_px)
     if isinstance(placed, str):
         return None
     low, t3, ratio, _, _ = placed

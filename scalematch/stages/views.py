@@ -26,7 +26,7 @@ import numpy as np
 
 from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds, in_range, one_of
 from ..geometry import apply, compose, invert, resize_map
-from .nodata import away_from, distance_inside
+from .nodata import distance_inside
 from .scalespace import antialias_sigma, gaussian_blur
 
 
@@ -337,13 +337,6 @@ def _blurred_resized(image: np.ndarray, sigma: float, factor: float) -> np.ndarr
     blurred = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=0.01)
     nw = max(int(round(image.shape[1] / factor)), 1)
     return cv2.resize(blurred, (nw, image.shape[0]), interpolation=cv2.INTER_LINEAR)
-
-
-def keep_inside(view: View, xy: np.ndarray, margin_px: float) -> np.ndarray:
-    """Boolean mask of the points (N, 2) (view px) at least ``margin_px`` from the view's edge."""
-    if view.inside_distance is None or len(xy) == 0:
-        return np.ones(len(xy), bool)
-    return away_from(view.inside_distance, xy, margin_px)
 
 
 def valid_in(view: View) -> Optional[np.ndarray]:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from scalematch.geometry import apply
-from scalematch.stages.views import (View, ViewParams, compressed_x, keep_inside, longitudes,
+from scalematch.stages.nodata import away_from
+from scalematch.stages.views import (View, ViewParams, compressed_x, longitudes,
                                      tilt_view, to_high, view_plan, view_scales)
 
 
@@ -46,8 +47,9 @@ def test_points_near_the_empty_corners_are_dropped():
     view = tilt_view(high, 2.0, 36.0)  # a turned image: the canvas corners are empty
     centre = apply(view.to_view, np.array([[50.0, 50.0]]))
     corner = np.array([[0.0, 0.0]])  # canvas corner: outside the turned image
-    assert keep_inside(view, centre, 8.0).all()
-    assert not keep_inside(view, corner, 8.0).any()
+    # the detector drops points by the view's distance to its empty canvas (detect_on_level)
+    assert away_from(view.inside_distance, centre, 8.0).all()
+    assert not away_from(view.inside_distance, corner, 8.0).any()
 
 
 @pytest.mark.parametrize("tilt,phi", [(2.0, 0.0), (4.0, 126.0)])
