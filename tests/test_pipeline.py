@@ -204,6 +204,28 @@ def test_a_flat_scene_asked_for_a_fundamental_matrix_is_answered_with_its_plane_
     assert "no parallax: the plane map answers" in verdict(r)
 
 
+def test_a_camera_turned_about_its_centre_asked_for_a_fundamental_matrix_answers_its_homography(
+        raccoon):
+    """A camera that turns about its centre (and zooms) sees every point through one
+    homography, K' R K^-1, whatever the depth: the epipole is undefined, so under
+    ``--model fundamental`` the answer is that homography, within 1 px over the overlap (the
+    degenerate configuration of a fundamental matrix named in Hartley & Zisserman, 11.9)."""
+    high = cv2.resize(raccoon, (640, 480), interpolation=cv2.INTER_AREA)
+    focal, zoom = 560.0, 0.5
+    k = np.array([[focal, 0, 319.5], [0, focal, 239.5], [0, 0, 1]])
+    k2 = np.array([[focal * zoom, 0, 159.5], [0, focal * zoom, 119.5], [0, 0, 1]])
+    turn = cv2.Rodrigues(np.radians([4.0, 12.0, 6.0]))[0]  # pitch, yaw, roll
+    truth = k2 @ turn @ np.linalg.inv(k)  # high px -> low px
+    low = cv2.warpPerspective(high, truth, (320, 240), flags=cv2.INTER_AREA)
+    r = match(low, high, Config(model="fundamental"))
+    assert r.matched and r.model == "homography" and r.order == "given", r.reason
+    grid = np.array([[x, y] for x in range(40, 640, 40) for y in range(40, 480, 40)], float)
+    seen = apply(truth, grid)
+    inside = np.all((seen >= 0) & (seen <= (319, 239)), axis=1)
+    assert inside.sum() > 50
+    assert np.max(np.linalg.norm(apply(r.transform, grid[inside]) - seen[inside], axis=1)) < 1.0
+
+
 def test_paper_mode_matches_a_ratio_3_pair(raccoon):
     pair = _pair(raccoon, 3.0, 0, size=(480, 360))
     r = match(pair.low, pair.high, Config.paper())
