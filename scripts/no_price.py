@@ -61,6 +61,15 @@ def commands(old: str) -> dict:
             "sift": ([python, str(ROOT / "scripts" / "sift_reference.py")], [])}
 
 
+def compiled(tree: str) -> None:
+    """The bytecode of ``tree``'s package written, as installing a wheel writes it: with
+    ``PYTHONDONTWRITEBYTECODE`` set (our machines), a source tree's modules are otherwise
+    compiled again by every process, about 80 ms of each (docs/design/SPEED.md, "Start-up")."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(Path(tree) / "scalematch")],
+                   stdout=subprocess.DEVNULL, check=True, env=dict(os.environ,
+                                                              PYTHONDONTWRITEBYTECODE=""))
+
+
 def timed(way: tuple, low: str, high: str) -> tuple:
     """(seconds, peak MB, exit code) of one whole process."""
     cmd, extra = way
@@ -180,6 +189,8 @@ def main() -> int:
     a = ap.parse_args()
     every_way = commands(a.old)
     cmds = {k: every_way[k] for k in a.ways.split(",")}
+    for tree in {str(ROOT)} | ({a.old} if "old" in cmds else set()):
+        compiled(tree)
     print(f"`python scripts/no_price.py --old {a.old} --nulls {a.nulls} --every {a.every} "
           f"--sized {a.sized} --zoom {a.zoom} --big {a.big} --rounds {a.rounds} "
           f"--ways \"{a.ways}\"`; load average before "
