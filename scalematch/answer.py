@@ -29,7 +29,7 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 
 from .config import Config
-from .geometry import answer_parts, finer_to_coarser
+from .geometry import finer_to_coarser
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
 from .search import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
 from .sharing import Search
@@ -345,10 +345,10 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
             work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
     if not has_ratio and len(inliers) >= model_of(model).min_sample:
         t = refine_fundamental(t, inliers[:, :2], inliers[:, 2:])  # LM on the Sampson error
+    parts = model_of(model).parts
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
-                                           has_ratio)
-    ratio, angle, tr = answer_parts(t, inliers[:, :2]) if has_ratio else (
-        math.nan, math.nan, (math.nan, math.nan))
+                                           parts)
+    ratio, angle, tr = parts(t, inliers[:, :2])
     return MatchResult(**dict(_common(search, run, winner), model=model,
                               best_scale=winner.verdict.best_scale * winner.view.scale),
                        matched=True, transform=t, resolution_ratio=ratio, rotation_deg=angle,

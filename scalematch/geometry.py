@@ -192,17 +192,18 @@ def invert(t: np.ndarray) -> np.ndarray:
     return _like(np.linalg.inv(as_matrix3(t)), np.shape(t) == (2, 3))
 
 
-def finer_to_coarser(t: np.ndarray, pairs: np.ndarray, swapped: bool, has_ratio: bool = True):
+def finer_to_coarser(t: np.ndarray, pairs: np.ndarray, swapped: bool, parts=None):
     """(t, pairs, swapped) turned round when ``t`` implies a ratio below 1 (the image taken as
     the finer is the coarser one): ``t`` inverted, the columns of ``pairs`` (N, 4: x, y in
-    each image) exchanged and ``swapped`` negated; otherwise unchanged. ``has_ratio`` False
-    (a fundamental matrix) never turns.
+    each image) exchanged and ``swapped`` negated; otherwise unchanged. ``parts``: the model's
+    (``estimator.Model.parts``; :func:`answer_parts` by default); a model without a ratio (a
+    fundamental matrix) never turns.
 
     >>> t, pairs, swapped = finer_to_coarser(similarity_matrix(2.0, 0.0), np.zeros((1, 4)), False)
     >>> round(similarity_parts(t)[0], 6), swapped
     (2.0, True)
     """
-    ratio = answer_parts(t, pairs[:, :2])[0] if has_ratio else float("nan")
+    ratio = (parts or answer_parts)(t, pairs[:, :2])[0]
     if not (math.isfinite(ratio) and ratio < 1.0):
         return t, pairs, swapped
     return invert(t), pairs[:, [2, 3, 0, 1]], not swapped

@@ -23,7 +23,7 @@ from typing import Callable, Dict, Iterator, List, NamedTuple, Optional, Sequenc
 import numpy as np
 
 from .config import Config
-from .geometry import answer_parts, usable_ratio
+from .geometry import usable_ratio
 from .greylevels import grey_levels
 from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
                      StepRecord)
@@ -189,9 +189,9 @@ def _full_scale(level: Level, kp: Keypoints, high: Described, coarser: "LowFeatu
                 best, best_src, best_dst, kept = est, src, dst, len(src)
     n_in = best.n_inliers if best is not None and best.transform is not None else 0
     ratio = angle = float("nan")
-    if n_in and model_of(model).has_ratio:
+    if n_in:
         # where the inliers are: a homography's ratio varies across the image (perspective)
-        ratio, angle, _ = answer_parts(best.transform, best_src[best.inliers])
+        ratio, angle, _ = model_of(model).parts(best.transform, best_src[best.inliers])
         ratio = usable_ratio(ratio)
     initial = len(distinct_pairs(high.xy[cand.i], low.xy[cand.j])[0])
     row = ScaleRow(s=s, ratio=ratio, points=len(kp), initial=initial, kept=kept,

@@ -28,8 +28,7 @@ from typing import Dict, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .geometry import (answer_parts, apply, as_matrix3, compose, finer_to_coarser, invert,
-                       resize_map)
+from .geometry import apply, finer_to_coarser, invert, resize_map
 from .imagefile import DEFAULT_MAX_PIXELS
 from .imageio import Decoded, read_reduced
 from .result import Direction, MatchResult
@@ -160,22 +159,14 @@ def _to_original(f: float) -> np.ndarray:
     return resize_map(f)
 
 
-def _transform_in_original(t: np.ndarray, model: str, s_fine: np.ndarray,
-                           s_coarse: np.ndarray) -> np.ndarray:
-    """``t`` (finer working px -> coarser working px) in the original pixels of both images,
-    given each image's ``S`` (working px -> original px)."""
-    if not model_of(model).has_ratio:  # the fundamental matrix: x_coarse^T F x_fine = 0
-        return as_matrix3(invert(s_coarse)).T @ t @ as_matrix3(invert(s_fine))
-    return compose(s_coarse, compose(t, invert(s_fine)))
-
-
 def _mapped(result, s_low: np.ndarray, s_high: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """(transform, inliers) of a matched ``result`` (or a ``Rejected`` candidate) with each
     image's pixels mapped by its map (2x3: ``s_low`` for the first image given, ``s_high`` for
     the second), the finer and coarser one as ``result.order`` says."""
     swapped = result.order == Direction.SWAPPED
     s_fine, s_coarse = (s_low, s_high) if swapped else (s_high, s_low)
-    t = _transform_in_original(result.transform, result.model, s_fine, s_coarse)
+    # in the original pixels of both images (working px -> original px: each image's S)
+    t = model_of(result.model).carried(result.transform, s_fine, s_coarse)
     pts = np.asarray(result.inliers, np.float64).reshape(-1, 4)
     return t, np.hstack([apply(s_fine, pts[:, :2]), apply(s_coarse, pts[:, 2:4])])
 
@@ -214,11 +205,10 @@ def in_original(result: MatchResult, work: WorkImages, config) -> MatchResult:
         return _rejected_mapped(out, _to_original(f_low), _to_original(f_high), turn=True)
     swapped = result.order == Direction.SWAPPED
     t, inliers = _mapped(result, _to_original(f_low), _to_original(f_high))
-    if not model_of(result.model).has_ratio:
-        return replace(out, transform=t, inliers=inliers)
     # the shrinking can make the finer working image the coarser original one
-    t, inliers, swapped = finer_to_coarser(t, inliers, swapped)
-    ratio, angle, tr = answer_parts(t, inliers[:, :2])
+    parts = model_of(result.model).parts
+    t, inliers, swapped = finer_to_coarser(t, inliers, swapped, parts)
+    ratio, angle, tr = parts(t, inliers[:, :2])
     return replace(out, transform=t, inliers=inliers, resolution_ratio=ratio,
                    rotation_deg=angle, translation=tr,
                    order=Direction.SWAPPED if swapped else Direction.GIVEN)

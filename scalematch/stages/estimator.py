@@ -21,7 +21,8 @@ import cv2
 import numpy as np
 
 from ..checks import Bounds, COUNT, POSITIVE, PROBABILITY, check_bounds
-from ..geometry import epipolar_distances, transfer_error
+from ..geometry import (answer_parts, as_matrix3, compose, epipolar_distances, invert,
+                        transfer_error)
 
 #: Most RANSAC iterations a fit may run: 20 times the default cap. Every scale of every search
 #: runs its own RANSAC, so the cap multiplies the time of a "no"; beyond it the confidence
@@ -100,6 +101,23 @@ def _epipolar_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.nd
     return epipolar_distances(f, src, dst).max(axis=1)
 
 
+def _no_parts(t: np.ndarray, finer_xy=None) -> Tuple[float, float, Tuple[float, float]]:
+    """A fundamental matrix maps a point to a line: no ratio, rotation or translation."""
+    return math.nan, math.nan, (math.nan, math.nan)
+
+
+def _map_carried(t: np.ndarray, s_fine: np.ndarray, s_coarse: np.ndarray) -> np.ndarray:
+    """A point map ``t`` (finer px -> coarser px) in other pixels of both images, given each
+    image's map to them (``s_fine``, ``s_coarse``, 2x3): ``S_coarse o T o S_fine^-1``."""
+    return compose(s_coarse, compose(t, invert(s_fine)))
+
+
+def _matrix_carried(f: np.ndarray, s_fine: np.ndarray, s_coarse: np.ndarray) -> np.ndarray:
+    """A fundamental matrix (``x_coarse^T F x_fine = 0``) in other pixels of both images:
+    ``S_coarse^-T F S_fine^-1``."""
+    return as_matrix3(invert(s_coarse)).T @ f @ as_matrix3(invert(s_fine))
+
+
 def _disc_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
     """A point predicted by the model: a disc of radius ``threshold_px``."""
     return math.pi * threshold_px ** 2
@@ -159,6 +177,9 @@ class Model:
     fit to all pairs given. ``residuals(t, src, dst)`` is each pair's error in low px.
     ``chance_area(threshold_px, low_shape)`` is the area, px^2, of the low image where a random
     point fits a prediction of the model (the a-contrario test's p is it over the image area).
+    ``parts(t, finer_xy)`` is an answer's (ratio, rotation in degrees, translation), NaN where
+    the model has none; ``carried(t, s_fine, s_coarse)`` is ``t`` in other pixels of both
+    images (each image's 2x3 map to them).
     """
 
     name: str
@@ -174,6 +195,8 @@ class Model:
     #: its residual; an unweighted 8-point refit on the 3 px inliers moved the ef pairs' median
     #: error from 0.61 to 0.75 px, the worst from 0.95 to 1.02)
     refit_inliers: bool = True
+    parts: Callable = field(default=answer_parts, repr=False)
+    carried: Callable = field(default=_map_carried, repr=False)
 
 
 #: The models of the paper (section 5 and "Further examples"), by name.
@@ -182,7 +205,7 @@ MODELS: Dict[str, Model] = {m.name: m for m in (
     Model("affine", 3, _fit_affine, transfer_error, _disc_area),
     Model("homography", 4, _fit_homography, transfer_error, _disc_area),
     Model("fundamental", 8, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False,
-          refit_inliers=False),
+          refit_inliers=False, parts=_no_parts, carried=_matrix_carried),
 )}
 #: minimal sample of each model by name (kept for callers of the mapping; see MODELS)
 MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}
