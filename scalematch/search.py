@@ -193,8 +193,8 @@ def ends_its_pass(config) -> bool:
     for the finer, its scales cannot reach the true ratio, yet at s = 1 an epipolar geometry
     absorbs the zoom and fits a few of the candidates (on the Adelaide scenes with one image
     shrunk by 2, 20 to 26 inliers at log10 NFA -4 to -16, 3 to 19 px off, where the right order
-    finds 210 to 244 at -400; ``scripts/adelaide_pairs.py``). So its pass runs both orders and
-    the strongest answers (:func:`strongest`)."""
+    finds 84 to 244 at -120 to -457; ``scripts/adelaide_pairs.py``). So its pass runs both
+    orders and the strongest answers (:func:`strongest`)."""
     return model_of(config.model).has_ratio
 
 

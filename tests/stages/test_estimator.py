@@ -142,3 +142,30 @@ def test_no_product_module_special_cases_a_model_by_name():
             continue
         assert '== "fundamental"' not in path.read_text(), path
         assert '!= "fundamental"' not in path.read_text(), path
+
+
+def test_each_model_carries_its_parts_and_its_change_of_pixels():
+    """A point map has a ratio, a rotation and a translation, and is carried into other pixels
+    of both images by composition; a fundamental matrix has none, and is carried so that the
+    pairs it holds still hold in the new pixels."""
+    import math
+
+    from scalematch.stages.estimator import model_of
+
+    t = similarity_matrix(0.25, 30.0, 5.0, -2.0)  # finer px -> coarser px
+    ratio, angle, _ = model_of("similarity").parts(t, np.array([[7.0, 9.0]]))
+    assert ratio == pytest.approx(4.0) and angle == pytest.approx(30.0)
+    assert all(math.isnan(v) for v in model_of("fundamental").parts(np.eye(3))[:2])
+    s_fine = similarity_matrix(0.5, 0.0, 0.25, 0.25)
+    s_coarse = similarity_matrix(1 / 3, 0.0, 1.0, 1.0)
+    xy = np.array([[10.0, 20.0], [-4.0, 7.5]])
+    carried = model_of("similarity").carried(t, s_fine, s_coarse)
+    assert apply(carried, apply(s_fine, xy)) == pytest.approx(apply(s_coarse, apply(t, xy)))
+    f = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # y_coarser = y_finer
+    fine, coarse = np.array([[3.0, 8.0], [50.0, 2.0]]), np.array([[40.0, 8.0], [1.0, 2.0]])
+    assert residuals("fundamental", f, fine, coarse) == pytest.approx([0.0, 0.0])
+    moved = model_of("fundamental").carried(f, s_fine, s_coarse)
+    assert residuals("fundamental", moved, apply(s_fine, fine), apply(s_coarse, coarse)) == \
+        pytest.approx([0.0, 0.0], abs=1e-9)
+    swapped = apply(s_coarse, coarse[::-1])  # each coarser point with the other's finer one
+    assert residuals("fundamental", moved, apply(s_fine, fine), swapped).min() > 1
