@@ -34,7 +34,6 @@ from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_
 from .search import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
 from .sharing import Search
 from .stages.acontrario import FinalFigures, figures
-from .stages.epipolar import refine_fundamental
 from .stages.estimator import model_of, residuals
 from .stages.finalchecks import (Claim, final_checks, plane_parallax, unique_threshold,
                                  windows_agree)
@@ -343,8 +342,7 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
         work = search.work
         seen = dict(seen, **pinned.figures(
             work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
-    if not has_ratio and len(inliers) >= model_of(model).min_sample:
-        t = refine_fundamental(t, inliers[:, :2], inliers[:, 2:])  # LM on the Sampson error
+    t = model_of(model).refined(t, inliers)  # a matrix: LM on the Sampson error
     parts = model_of(model).parts
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
                                            parts)

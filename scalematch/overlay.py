@@ -456,9 +456,9 @@ def rejected_footprint(result: MatchResult, high_shape) -> "np.ndarray | None":
     """(4, 2) the footprint of a "no"'s refused candidate in the coarser image, or None (a
     match, no candidate, a fundamental matrix, a corner at infinity)."""
     rej = result.rejected
-    if result.matched or rej is None or not model_of(rej.model).has_ratio:
+    if result.matched or rej is None:
         return None
-    return footprint(np.asarray(rej.transform, np.float64), high_shape)
+    return model_of(rej.model).footprint(np.asarray(rej.transform, np.float64), high_shape)
 
 
 def dashed_polygon(image: np.ndarray, corners: np.ndarray, colour, thick: int,

@@ -23,6 +23,8 @@ import numpy as np
 from ..checks import Bounds, COUNT, POSITIVE, PROBABILITY, check_bounds
 from ..geometry import (answer_parts, as_matrix3, compose, epipolar_distances, invert,
                         transfer_error)
+from ..geometry import footprint as _map_footprint
+from .epipolar import refine_fundamental
 
 #: Most RANSAC iterations a fit may run: 20 times the default cap. Every scale of every search
 #: runs its own RANSAC, so the cap multiplies the time of a "no"; beyond it the confidence
@@ -118,6 +120,25 @@ def _matrix_carried(f: np.ndarray, s_fine: np.ndarray, s_coarse: np.ndarray) -> 
     return as_matrix3(invert(s_coarse)).T @ f @ as_matrix3(invert(s_fine))
 
 
+def _no_footprint(f: np.ndarray, high_shape: Tuple[int, ...]) -> None:
+    """A fundamental matrix maps a point to a line: the finer image has no footprint."""
+    return None
+
+
+def _as_fitted(t: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """A point map's answer is its fit: refined on its inliers where it was found."""
+    return t
+
+
+def _matrix_refined(f: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """A fundamental matrix refined by Levenberg-Marquardt on the Sampson error of its
+    inliers ``pairs`` ((N, 4): finer px, coarser px; :mod:`scalematch.stages.epipolar`), when
+    they are at least its minimal sample."""
+    if len(pairs) < 8:
+        return f
+    return refine_fundamental(f, pairs[:, :2], pairs[:, 2:])
+
+
 def _disc_area(threshold_px: float, low_shape: Tuple[int, int]) -> float:
     """A point predicted by the model: a disc of radius ``threshold_px``."""
     return math.pi * threshold_px ** 2
@@ -179,7 +200,9 @@ class Model:
     point fits a prediction of the model (the a-contrario test's p is it over the image area).
     ``parts(t, finer_xy)`` is an answer's (ratio, rotation in degrees, translation), NaN where
     the model has none; ``carried(t, s_fine, s_coarse)`` is ``t`` in other pixels of both
-    images (each image's 2x3 map to them).
+    images (each image's 2x3 map to them); ``footprint(t, high_shape)`` the finer image's
+    corners in the coarser image (None where it has none); ``refined(t, inliers)`` the answer
+    refined on its inliers once it is accepted.
     """
 
     name: str
@@ -197,6 +220,8 @@ class Model:
     refit_inliers: bool = True
     parts: Callable = field(default=answer_parts, repr=False)
     carried: Callable = field(default=_map_carried, repr=False)
+    footprint: Callable = field(default=_map_footprint, repr=False)
+    refined: Callable = field(default=_as_fitted, repr=False)
 
 
 #: The models of the paper (section 5 and "Further examples"), by name.
@@ -205,7 +230,8 @@ MODELS: Dict[str, Model] = {m.name: m for m in (
     Model("affine", 3, _fit_affine, transfer_error, _disc_area),
     Model("homography", 4, _fit_homography, transfer_error, _disc_area),
     Model("fundamental", 8, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False,
-          refit_inliers=False, parts=_no_parts, carried=_matrix_carried),
+          refit_inliers=False, parts=_no_parts, carried=_matrix_carried,
+          footprint=_no_footprint, refined=_matrix_refined),
 )}
 #: minimal sample of each model by name (kept for callers of the mapping; see MODELS)
 MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}

@@ -145,9 +145,9 @@ def test_no_product_module_special_cases_a_model_by_name():
 
 
 def test_each_model_carries_its_parts_and_its_change_of_pixels():
-    """A point map has a ratio, a rotation and a translation, and is carried into other pixels
-    of both images by composition; a fundamental matrix has none, and is carried so that the
-    pairs it holds still hold in the new pixels."""
+    """A point map has a ratio, a rotation, a translation and a footprint, and is carried into
+    other pixels of both images by composition; a fundamental matrix has none of them, and is
+    carried so that the pairs it holds still hold in the new pixels."""
     import math
 
     from scalematch.stages.estimator import model_of
@@ -169,3 +169,9 @@ def test_each_model_carries_its_parts_and_its_change_of_pixels():
         pytest.approx([0.0, 0.0], abs=1e-9)
     swapped = apply(s_coarse, coarse[::-1])  # each coarser point with the other's finer one
     assert residuals("fundamental", moved, apply(s_fine, fine), swapped).min() > 1
+    corners = model_of("similarity").footprint(similarity_matrix(0.5, 0.0), (40, 60))
+    assert corners.tolist() == [[-0.25, -0.25], [29.75, -0.25], [29.75, 19.75], [-0.25, 19.75]]
+    assert model_of("fundamental").footprint(f, (40, 60)) is None
+    # accepted: a point map stands as fitted; a matrix of too few pairs for its refinement too
+    assert model_of("affine").refined(t, np.zeros((20, 4))) is t
+    assert model_of("fundamental").refined(f, np.zeros((7, 4))) is f
