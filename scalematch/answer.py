@@ -335,18 +335,17 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     its ratio, angle and translation, and its evidence with the answer's parallax and how
     firmly its inliers pin it (``pinned``, :func:`pinned_answer`)."""
     t, inliers, model = fit
-    has_ratio = model_of(model).has_ratio
-    seen = answer_parallax(winner, t, model, search.config) if has_ratio else plane_parallax(
+    kind = model_of(model)
+    seen = answer_parallax(winner, t, model, search.config) if kind.has_ratio else plane_parallax(
         inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
     if pinned is not None:
         work = search.work
         seen = dict(seen, **pinned.figures(
             work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
-    t = model_of(model).refined(t, inliers)  # a matrix: LM on the Sampson error
-    parts = model_of(model).parts
+    t = kind.refined(t, inliers)  # a matrix: LM on the Sampson error
     t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
-                                           parts)
-    ratio, angle, tr = parts(t, inliers[:, :2])
+                                           kind.parts)
+    ratio, angle, tr = kind.parts(t, inliers[:, :2])
     return MatchResult(**dict(_common(search, run, winner), model=model,
                               best_scale=winner.verdict.best_scale * winner.view.scale),
                        matched=True, transform=t, resolution_ratio=ratio, rotation_deg=angle,

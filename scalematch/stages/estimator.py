@@ -103,6 +103,11 @@ def _epipolar_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.nd
     return epipolar_distances(f, src, dst).max(axis=1)
 
 
+#: Pairs that determine a fundamental matrix: its 7 degrees of freedom, by the linear 8-point
+#: solver (Hartley & Zisserman, "Multiple View Geometry", 2nd ed., 11.1)
+FUNDAMENTAL_SAMPLE = 8
+
+
 def _no_parts(t: np.ndarray, finer_xy=None) -> Tuple[float, float, Tuple[float, float]]:
     """A fundamental matrix maps a point to a line: no ratio, rotation or translation."""
     return math.nan, math.nan, (math.nan, math.nan)
@@ -134,7 +139,7 @@ def _matrix_refined(f: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """A fundamental matrix refined by Levenberg-Marquardt on the Sampson error of its
     inliers ``pairs`` ((N, 4): finer px, coarser px; :mod:`scalematch.stages.epipolar`), when
     they are at least its minimal sample."""
-    if len(pairs) < 8:
+    if len(pairs) < FUNDAMENTAL_SAMPLE:
         return f
     return refine_fundamental(f, pairs[:, :2], pairs[:, 2:])
 
@@ -229,7 +234,7 @@ MODELS: Dict[str, Model] = {m.name: m for m in (
     Model("similarity", 2, _fit_similarity, transfer_error, _disc_area),
     Model("affine", 3, _fit_affine, transfer_error, _disc_area),
     Model("homography", 4, _fit_homography, transfer_error, _disc_area),
-    Model("fundamental", 8, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False,
+    Model("fundamental", FUNDAMENTAL_SAMPLE, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False,
           refit_inliers=False, parts=_no_parts, carried=_matrix_carried,
           footprint=_no_footprint, refined=_matrix_refined),
 )}
