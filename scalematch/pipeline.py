@@ -302,7 +302,8 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
         scores = probe_scores([detected[i].probe for i in usable], low.described, config.probe,
                               matcher=config.matcher, orientation=search.mode.orientation,
                               fit=quick, scale_agreement=config.decision.scale_agreement)
-        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep))
+        run = sorted(usable[j] for j in select_scales(scores, config.probe.keep,
+                                                               config.probe.min_score))
         best = max(scores, default=0.0)
     else:
         run, best = usable, math.inf

@@ -32,6 +32,12 @@ class ProbeParams:
     #: the 38 photos at ratios 8 and 10; 100 is 16 % faster)
     points: int = 100
     keep: int = 3  #: best-scoring scales kept, each with its two neighbours
+    #: a scale is among the best only with at least this score: its quick fit holds a point
+    #: beyond its minimal sample (a similarity is fixed by 2 points, so 2 inliers are no
+    #: evidence). A null pair's scales score 0 to 2 at nearly every scale, and were matched in
+    #: full for nothing; on the gate's pairs, no run was lost and 4 moved by under 0.2 px
+    #: (docs/design/SPEED.md, "The probe's floor"). 0 keeps the best scales whatever they score
+    min_score: float = 3.0
     #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
     #: with 99.9 % confidence down to an inlier fraction of 12 %
     ransac_iters: int = 500
@@ -99,13 +105,14 @@ def _score(high: Described, low: Described, cand: Candidates,
     return best
 
 
-def select_scales(scores: List[float], keep: int) -> List[int]:
+def select_scales(scores: List[float], keep: int, min_score: float = 0.0) -> List[int]:
     """Indices of the ``keep`` best-scoring scales and their immediate neighbours.
 
     >>> select_scales([0.0, 5.0, 1.0, 0.0, 9.0], keep=1)
     [3, 4]
     """
-    order = sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
+    order = [i for i in sorted(range(len(scores)), key=lambda i: (-scores[i], i))[:keep]
+             if scores[i] >= min_score]
     chosen = set()
     for i in order:
         chosen.update(j for j in (i - 1, i, i + 1) if 0 <= j < len(scores))
