@@ -15,7 +15,7 @@ from typing import ClassVar, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..checks import AT_LEAST_ONE, Bounds, check_bounds
+from ..checks import AT_LEAST_ONE, NON_NEGATIVE, Bounds, check_bounds
 from ..geometry import similarity_parts
 from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
@@ -46,6 +46,7 @@ class ProbeParams:
     BOUNDS: ClassVar[Mapping[str, Bounds]] = {
         "points": AT_LEAST_ONE,
         "keep": AT_LEAST_ONE,
+        "min_score": NON_NEGATIVE,
         "ransac_iters": AT_LEAST_ONE,
     }
 
