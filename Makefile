@@ -45,19 +45,19 @@ regress: $(STAMP)
 	  $(if $(UPDATE),--update --write-doc docs/REGRESS.md) \
 	  $(if $(TREE),--tree $(TREE)) $(if $(IF_SHARED),--if-shared)
 
-## the benchmark against the peers (needs ../shared); writes docs/BENCHMARKS.md
+## the benchmark against the peers (needs ../shared); writes docs/results/BENCHMARKS.md
 bench: $(STAMP)
-	$(BIN)/scalematch lab bench --out-dir bench-out --write-doc docs/BENCHMARKS.md
+	$(BIN)/scalematch lab bench --out-dir bench-out --write-doc docs/results/BENCHMARKS.md
 
 ## the real-pair benchmark (needs ../shared): Oxford both ways, tilted and swapped pairs; writes its
-## tables into docs/BENCHMARKS.md
+## tables into docs/results/BENCHMARKS.md
 bench-real: $(STAMP)
-	$(BIN)/scalematch lab real-pairs --write-doc docs/BENCHMARKS.md
+	$(BIN)/scalematch lab real-pairs --write-doc docs/results/BENCHMARKS.md
 
 ## the repeatability of standard vs scale-adapted Harris (needs ../shared); writes
-## docs/repeatability.csv, .json and .png (docs/REPEATABILITY.md explains them)
+## docs/results/repeatability.csv, .json and .png (docs/results/REPEATABILITY.md explains them)
 repeatability: $(STAMP)
-	$(BIN)/scalematch lab repeatability --out-dir docs
+	$(BIN)/scalematch lab repeatability --out-dir docs/results
 
 clean:
 	rm -rf $(VENV) out bench-out

@@ -5,7 +5,7 @@ Here, what every part of a batch shares: ``Pair`` (a row of the CSV), ``BatchErr
 of one pair (``match_pair``: one pair -> one JSON line, never raises; ``error_line``),
 ``Counts`` (the lines written, by verdict) and ``bounded``, the loop of every runner: it yields
 the lines in the order pairs finish and keeps at most a few pairs per worker in flight, so the
-main process stays the same size however many pairs there are (docs/BATCH.md).
+main process stays the same size however many pairs there are (docs/results/BATCH.md).
 
 The parts, in the order a run uses them: the pairs CSV (:mod:`scalematch.batchcsv`:
 ``read_rows``, ``unique_pairs``); the output file an earlier run left, checked and resumed

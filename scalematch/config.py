@@ -96,7 +96,7 @@ class Config:
     #: scales s of the high-resolution image to try: 1 to 16 by third octaves (13 scales;
     #: the paper: 1..8 in unit steps, PAPER_SCALES). Ratios up to 16 need scales past 8; a
     #: scale within 2^(1/6) = 12 % of the true ratio matches well. Quarter octaves measured 1
-    #: more success in 38 at ratio 10 for 12 % more time (docs/ABLATION.md; docs/DESIGN.md,
+    #: more success in 38 at ratio 10 for 12 % more time (docs/results/ABLATION.md; docs/DESIGN.md,
     #: "Descriptors, matching and scales").
     #: A scale at which the finer image would span fewer than ``min_footprint_px`` coarser px
     #: is not searched (the search's reach follows the image sizes).
@@ -160,7 +160,7 @@ class Config:
     #: Checked between steps, never before the first (the given order's plain search), so a
     #: step under way finishes: a "no" comes sooner, but a pair only a later step would solve
     #: (the other order, tilted views) is then missed, and the answer depends on the machine's
-    #: speed. docs/design/VIEWS.md, "The time budget", and docs/NULLS.md, "Mode budget-1s",
+    #: speed. docs/design/VIEWS.md, "The time budget", and docs/results/NULLS.md, "Mode budget-1s",
     #: measure what a 1 s budget saves on the null set and what it costs on tilted pairs
     time_budget_s: Optional[float] = None
 
@@ -264,8 +264,8 @@ def _paper() -> Config:
 
 
 #: Named configurations: the two modes, and the steps between them that the lab's ablation
-#: measures (``scalematch lab bench --methods``; docs/ABLATION.md says what each step bought).
-#: Each value makes its Config; ``Config.preset(name, **changes)`` is the way to get one.
+#: measures (``scalematch lab bench --methods``; docs/results/ABLATION.md says what each step
+#: bought). Each value makes its Config; ``Config.preset(name, **changes)`` is the way to get one.
 PRESETS: Dict[str, Callable[[], Config]] = {
     "default": Config,
     "paper": _paper,
@@ -281,19 +281,19 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # (docs/design/VIEWS.md, "The third pass")
     "tilt-4": lambda: Config(views=ViewParams(passes=TILT4_PASSES)),
     # the default with a time budget of 1 s (docs/design/VIEWS.md, "The time budget"): no step
-    # of the plan starts after 1 s, so a "no" costs about that much; docs/NULLS.md, "Mode
+    # of the plan starts after 1 s, so a "no" costs about that much; docs/results/NULLS.md, "Mode
     # budget-1s", measures it on the null set (what a "no" then costs, and that no claim
     # appears)
     "budget-1s": lambda: Config(time_budget_s=1.0),
     # the default without tilted views (``--no-views``): the plain search in both orders only.
     # A "no" comes about 3 times sooner on 1 MP images, 1.5 to 2 times on 12-16 MP photos
     # (options.NO_VIEWS_SPEEDUP, measured in docs/design/SPEED.md), for batches over archives of mostly unrelated pairs, at the cost
-    # of the tilted pairs only views solve (docs/NULLS.md, "Mode no-views";
+    # of the tilted pairs only views solve (docs/results/NULLS.md, "Mode no-views";
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
     # the default with its answer allowed no further than an affine map, or than a homography
     # (``--model affine``, ``--model homography``: search.CEILINGS), so that the null set can
-    # be run with each (docs/NULLS.md, "Mode homography")
+    # be run with each (docs/results/NULLS.md, "Mode homography")
     "affine": lambda: Config(model="affine"),
     "homography": lambda: Config(model="homography"),
     # a homography searched for at every scale (the model check off), as the paper's method
@@ -301,7 +301,7 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     "homography-searched": lambda: Config(model="homography",
                                           model_check=ModelCheckParams(enabled=False)),
     # the default searching for a fundamental matrix (``--model fundamental``: 3-D scenes), so
-    # that the null set can be run with it (docs/NULLS.md, "Mode fundamental")
+    # that the null set can be run with it (docs/results/NULLS.md, "Mode fundamental")
     "fundamental": lambda: Config(model="fundamental"),
     # the default without the rotation-consistency filter: one group holding every candidate
     "default-no-rotation-check": lambda: Config(

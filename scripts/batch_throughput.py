@@ -1,4 +1,4 @@
-"""Throughput and memory of ``scalematch batch`` (docs/BATCH.md).
+"""Throughput and memory of ``scalematch batch`` (docs/results/BATCH.md).
 
 Usage: python scripts/batch_throughput.py [--pairs 200] [--memory-pairs 2000] [--repeats 2]
 

@@ -2,7 +2,7 @@
 
 Usage: python scripts/boat_truth_check.py   (needs ../shared, or $SCALEMATCH_SHARED)
 
-Its output is docs/BOAT.md's table.
+Its output is docs/results/BOAT.md's table.
 
 For each pair: scalematch's homography and its inliers; the residual of both homographies on
 those inliers (median, 90th percentile, low px); the EVALUATION.md error between them; and the

@@ -57,8 +57,8 @@ from .synthetic import (CROP_PICKS, ZoomPair, pairs_from_photos, unrelated_indic
 #: Ratios of the synthetic pairs (EVALUATION.md step 4).
 RATIOS = (2, 3, 4, 6, 8, 10, 12, 16)
 #: scalematch configurations by name: the two modes, and the ablation steps from the paper's
-#: method to the default (``--methods`` takes any of them; docs/ABLATION.md reports what each
-#: step bought). Values: (one-line description, name of the preset in ``config.PRESETS``).
+#: method to the default (``--methods`` takes any of them; docs/results/ABLATION.md reports what
+#: each step bought). Values: (one-line description, name of the preset in ``config.PRESETS``).
 VARIANTS: Dict[str, Tuple[str, str]] = {
     "scalematch": ("the default", "default"),
     "scalematch-paper": ("the paper: jets, Mahalanobis, semi-local constraints, scales 1-8",
@@ -772,7 +772,8 @@ def _git_commit() -> str:
         return ""
 
 
-def write_benchmarks_doc(report: BenchReport, path: PathLike = "docs/BENCHMARKS.md") -> Path:
+def write_benchmarks_doc(report: BenchReport,
+                         path: PathLike = "docs/results/BENCHMARKS.md") -> Path:
     """Write ``path`` (Markdown): the tables and plot of ``report``, the command, machine, date.
 
     The plot is copied next to it, named after the page (BENCHMARKS.md -> benchmarks.png, so
@@ -874,7 +875,7 @@ def _command_line(ctx: click.Context) -> str:
               show_default=True, help="Where results.csv, summary.json and the plot go.")
 @click.option("--crop", type=click.Choice(CROP_PICKS), default="most", show_default=True,
               help="Which of 6 random crops each pair's high image is: the most textured "
-                   "(EVALUATION.md) or the least (the hard set, docs/HARDSET.md).")
+                   "(EVALUATION.md) or the least (the hard set, docs/results/HARDSET.md).")
 @click.option("--ratios", default=",".join(map(str, RATIOS)), show_default=True,
               callback=_csv_floats,
               help="Zoom ratios of the synthetic pairs.")
@@ -892,7 +893,7 @@ def _command_line(ctx: click.Context) -> str:
 @click.option("--no-large", is_flag=True, help="Skip the 6000x4000 pair.")
 @click.option("--no-boat", is_flag=True, help="Skip the boat pairs.")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write this Markdown page (e.g. docs/BENCHMARKS.md).")
+              help="Also write this Markdown page (e.g. docs/results/BENCHMARKS.md).")
 @click.option("--silent", is_flag=True, help="No progress lines (the table is still printed).")
 @click.pass_context
 def bench_command(ctx, shared, out_dir, crop, ratios, photos, seed, methods, unrelated, jobs,

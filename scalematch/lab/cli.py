@@ -50,6 +50,6 @@ def lab() -> None:
     \b
     Examples:
       scalematch lab bench --photos 10 --methods scalematch,sift
-      scalematch lab repeatability --out-dir docs
+      scalematch lab repeatability --out-dir docs/results
       scalematch lab covariance photos/*.jpg -o my_covariance.json
     """

@@ -25,7 +25,7 @@ nearest neighbour in descriptor space, among **all** the points of the copy, is 
   share of the failures, without the detector's); (e) = (c) likewise; (f) jets Mahalanobis on
   the five invariants v2, v3, v4, v6, v8 only (the 5x5 block of Lambda), a diagnostic.
 
-Run it: ``python -m scalematch.lab.descriptor_study --photos 38 --out docs/DESCRIPTORS.md``.
+Run it: ``python -m scalematch.lab.descriptor_study --photos 38 --out docs/results/DESCRIPTORS.md``.
 """
 
 from __future__ import annotations
@@ -265,7 +265,7 @@ def existing_reading(path: PathLike) -> str:
 
 def write_doc(results: Sequence[PhotoResult], path: PathLike, command: str, seed: int,
               params: StudyParams, seconds: float, reading: str = "") -> Path:
-    """docs/DESCRIPTORS.md: command, protocol, table, reading (``reading`` is markdown)."""
+    """docs/results/DESCRIPTORS.md: command, protocol, table, reading (``reading`` is markdown)."""
     mu = means(results)
     prov = load_covariance().provenance
     recipe = prov.get("recipe", {})
@@ -357,7 +357,7 @@ Means over {len(results)} photos: partnered {_pct(mu["partnered"])}; (a)
 @click.option("--seed", type=int, default=0, show_default=True,
               help="The one seed (crops, angles, gains, offsets, noise).")
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
-              help="Write the report (markdown) here, e.g. docs/DESCRIPTORS.md.")
+              help="Write the report (markdown) here, e.g. docs/results/DESCRIPTORS.md.")
 @click.option("--silent", is_flag=True, help="No progress messages.")
 def descriptor_study_command(images, n_photos, seed, out, silent):
     """Nearest-neighbour identification of jets and gradient descriptors under rotation + lighting.
@@ -366,7 +366,7 @@ def descriptor_study_command(images, n_photos, seed, out, silent):
     <repo>/../shared). Prints the table; --out writes it with the protocol as markdown (the
     "## Reading" section of an existing --out file is kept: it is written by hand).
 
-    Example: scalematch lab descriptor-study --photos 38 --out docs/DESCRIPTORS.md
+    Example: scalematch lab descriptor-study --photos 38 --out docs/results/DESCRIPTORS.md
     """
     paths, progress = study_photos(images, n_photos, silent)
     params = StudyParams()

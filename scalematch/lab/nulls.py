@@ -1184,14 +1184,14 @@ def doc_section(mode: str) -> Tuple[str, str]:
     return f"nulls {mode}", f"scalematch lab nulls --mode {mode}"
 
 
-def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Path:
+def write_nulls_doc(report: NullReport, path: PathLike = "docs/results/NULLS.md") -> Path:
     """Write the run's mode's section of ``path`` (Markdown): command, machine, the tables, the
     chart. Only the block between the mode's markers (:func:`doc_section`) is rewritten, or
     appended when they are absent: each mode keeps its own section, and the page's
     introduction stays as it is. The chart is copied next to the page as ``<page stem>.png``
     for the default mode and ``<page stem>-<mode>.png`` for the others, lower case
-    (docs/nulls.png, docs/nulls-no-views.png). Generated: re-run the command rather than edit
-    the section."""
+    (docs/results/nulls.png, docs/results/nulls-no-views.png). Generated: re-run the command rather
+    than edit the section."""
     from .realpairs import write_section
 
     p = Path(path)
@@ -1282,8 +1282,8 @@ def write_nulls_doc(report: NullReport, path: PathLike = "docs/NULLS.md") -> Pat
 @click.option("--max-minutes", type=click.FloatRange(min=0), default=None,
               help="Start no new run after this many minutes (resume later).")
 @click.option("--write-doc", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write the mode's section of this Markdown page (e.g. docs/NULLS.md) "
-                   "and its chart.")
+              help="Also write the mode's section of this Markdown page (e.g. "
+                   "docs/results/NULLS.md) and its chart.")
 @click.option("--silent", is_flag=True, help="No progress lines (the tables are still printed).")
 @click.pass_context
 def nulls_command(ctx, shared, out_dir, ratios, photos, seed, mode, jobs, limit, sample, sift,

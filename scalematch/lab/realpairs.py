@@ -472,7 +472,7 @@ def by_tilt(rows: Sequence[Dict[str, Any]]) -> List[Tuple[str, str, float, int, 
 #: realistic pairs (every set run is one of ``REALISTIC_SETS``)
 SECTIONS = {
     "real-pairs": ("Real pairs, either order, tilt",
-                   "Protocol: [EVALUATION-TILT.md](EVALUATION-TILT.md)."),
+                   "Protocol: [EVALUATION-TILT.md](../EVALUATION-TILT.md)."),
     "realistic": ("Pairs with what real photographs bring",
                   "Protocol: ../shared/EVALUATION.md, \"Pairs with what real photographs "
                   "bring\" (`scalematch.lab.realistic`): no-data borders (padded), occluders, "
@@ -597,7 +597,7 @@ def real_pairs_command(shared, sets, methods, photo_step, asift_pairs, seed, out
 
     \b
     Example:
-      scalematch lab real-pairs --write-doc docs/BENCHMARKS.md
+      scalematch lab real-pairs --write-doc docs/results/BENCHMARKS.md
       scalematch lab real-pairs --sets oxford --methods scalematch,sift
     """
     import datetime as _dt

@@ -125,7 +125,7 @@ def texture_score(crop: np.ndarray, ratio: float) -> float:
 
 
 #: Which of the candidate crops a pair takes: EVALUATION.md's "most" textured, or the "least"
-#: (the hard set, docs/HARDSET.md: a crop of plain sky or a smooth wall is what starves the
+#: (the hard set, docs/results/HARDSET.md: a crop of plain sky or a smooth wall is what starves the
 #: detector)
 CROP_PICKS = ("most", "least")
 

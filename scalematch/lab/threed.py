@@ -107,9 +107,9 @@ FLANN_CHECKS = 128
 #: inlier set stops changing within two on the scenes here
 REFERENCE_ROUNDS = 3
 #: Two photos overlap when the first look has at least ``MIN_FIRST_LOOK_INLIERS`` inliers
-#: (the 24 candidate pairs of no overlap have 9 to 12, the 16 others 46 to 702: docs/THREED.md,
-#: "The references") and the reference at least ``MIN_REFERENCE_INLIERS``, three times the
-#: guided matching's chance inliers on a pair of no overlap (14)
+#: (the 24 candidate pairs of no overlap have 9 to 12, the 16 others 46 to 702:
+#: docs/results/THREED.md, "The references") and the reference at least ``MIN_REFERENCE_INLIERS``,
+#: three times the guided matching's chance inliers on a pair of no overlap (14)
 MIN_FIRST_LOOK_INLIERS = 30
 MIN_REFERENCE_INLIERS = 40
 #: The semi-local check of the reference's inliers, after the semi-local constraints of
@@ -148,8 +148,8 @@ ORDERS = ("A,B", "B,A")
 #: The methods, in the order they are reported (efpairs' runners)
 METHODS = ("scalematch", "sift-magsac")
 #: The check by eye of the references (``scalematch lab 3d-reference --draw``, one picture a
-#: pair: every sample point as a pair of crops, docs/THREED.md): the references dropped (pair
-#: label -> why), and the sample points dropped from references kept (pair label -> (x_A, y_A)
+#: pair: every sample point as a pair of crops, docs/results/THREED.md): the references dropped
+#: (pair label -> why), and the sample points dropped from references kept (pair label -> (x_A, y_A)
 #: of each, px, and why). A point is matched to the sample within ``BY_EYE_POINT_PX``
 BY_EYE_DROPPED: Dict[str, str] = {
     "sceaux 100_7100~100_7110": "repeated windows: 5 of its 11 sample points pair a window, a "
@@ -1411,11 +1411,11 @@ def threed_pairs_command(shared, reference_path, pairs, scenes, kinds, methods, 
     """The fundamental matrix on the real 3-D pairs of the multi-view scenes of
     ../shared/data/photos, each photo shrunk by 4 in turn, both orders: scalematch (model
     fundamental) and SIFT + USAC_MAGSAC in the same run, scored against the reference F of
-    each pair; with the 8 ef pairs. docs/THREED.md.
+    each pair; with the 8 ef pairs. docs/results/THREED.md.
 
     \b
     Example:
-      scalematch lab 3d-pairs --write-doc docs/THREED.md
+      scalematch lab 3d-pairs --write-doc docs/results/THREED.md
       scalematch lab 3d-pairs --scenes sceaux --kinds photos --methods scalematch --no-ef
     """
     from .efpairs import EF_SUBDIR

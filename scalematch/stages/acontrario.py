@@ -43,7 +43,7 @@ class DecisionParams:
     min_agreeing_scales: int = 1  #: other scales that must agree with the winner ...
     #: ... unless the winner alone is this far beyond chance (log10 NFA): the best transforms of
     #: 39 unrelated pairs measured during development never went below -1.05, true ones at
-    #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/BENCHMARKS.md)
+    #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/results/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the coarser image, px^2 (8x8)
     #: a best transform with at least this many distinct inliers, and fewer than
@@ -55,7 +55,7 @@ class DecisionParams:
     #: ground for each threshold"), down to this many ...
     few_min_inliers: int = 4
     #: ... when its log10 NFA is at most this (null runs' best transforms: median +4, none
-    #: below -6 but the repeated structures, docs/NULLS.md) ...
+    #: below -6 but the repeated structures, docs/results/NULLS.md) ...
     few_max_log_nfa: float = -6.0
     #: ... its guided growth keeps at least this many inliers (0: growth is recorded, not
     #: required: at the coarse scales where few points remain there is nothing to grow into;
@@ -83,7 +83,7 @@ class DecisionParams:
     #: the coarser one: the misfit (1 - ZNCC) of the best other placement at least this many
     #: times the claimed one's (``stages.uniqueness.uniqueness``). A repeated structure (the
     #: windows of a facade) is matched by many points wherever a copy of it stands. Measured
-    #: (docs/NULLS.md): the 12 claims of the hardest nulls (two halves of one photo; 6 to 13
+    #: (docs/results/NULLS.md): the 12 claims of the hardest nulls (two halves of one photo; 6 to 13
     #: inliers, log10 NFA down to -38) 0.48 to 1.1; 152 true zoom pairs 3.75 to 898 (median
     #: 148); Oxford pairs 4.8 to 12.6; tilted pairs 10.7 and more. 2 sits between 1.1 and 3.75.
     #: Compared near the inliers (``PixelParams.vouch_radius``) the facades score 0.70 to 1.83
@@ -132,18 +132,18 @@ class DecisionParams:
     #: the pixel tests above are measured and recorded, not decisive, unless a second transform
     #: (``second_share``) shows a repeated structure. The pixels of a real pair are broken by
     #: what the points never see: an occluder, a relit or parallax-ridden scene, a no-data
-    #: border. Measured (docs/NULLS.md, docs/design/DECISION.md): the lowest log10 NFA of any
-    #: null run's best transform is -38 (a facade cut in two, refused as ambiguous by its
+    #: border. Measured (docs/results/NULLS.md, docs/design/DECISION.md): the lowest log10 NFA of
+    #: any null run's best transform is -38 (a facade cut in two, refused as ambiguous by its
     #: pixels); true answers refused by the pixels alone had -135 to -2080 (occluded,
-    #: padded and 3-D pairs, docs/BENCHMARKS.md). -60 leaves 22 orders of magnitude below the
-    #: worst null
+    #: padded and 3-D pairs, docs/results/BENCHMARKS.md). -60 leaves 22 orders of magnitude below
+    #: the worst null
     max_log_nfa_geometry: float = -60.0
     #: a repeated structure shows as a second transform of the same scale and angle, shifted,
     #: among the candidates the winner leaves over: with at least this share of the winner's
     #: inliers (and ``min_inliers``, beyond chance) the match is refused as ambiguous. Matching
     #: a repeated structure splits each point's nearest neighbour among the copies, so the
     #: copies' support is comparable. Measured on the 500 solved pairs of the realistic sets
-    #: (docs/BENCHMARKS.md, "Pairs with what real photographs bring"): 0 to 0.286 (median 0,
+    #: (docs/results/BENCHMARKS.md, "Pairs with what real photographs bring"): 0 to 0.286 (median 0,
     #: 99th percentile 0.25); the strongest null facade's second transform: 11 / 13 = 0.85
     second_share: float = 0.5
     #: the second transform's scale within this factor, and its angle within

@@ -97,7 +97,7 @@ def _epipolar_distance(f: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.nd
     sides is within that band, so the count stays within the chance the test assumes. The
     Sampson distance is not: where the epipole lies among the points (|F x| small) it lets a
     pair lie far from its line, and unrelated photos found F of 53 such "inliers" at log10
-    NFA -37 (docs/NULLS.md, "Mode fundamental"; ORSA counts the one-sided distance, Moisan &
+    NFA -37 (docs/results/NULLS.md, "Mode fundamental"; ORSA counts the one-sided distance, Moisan &
     Stival 2004).
     """
     return epipolar_distances(f, src, dst).max(axis=1)

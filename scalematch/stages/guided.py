@@ -64,7 +64,7 @@ class GuidedParams:
     #: this: there its map is loose away from them. On the Oxford and perspective pairs (lab
     #: real-pairs, both orders) the answers under 30 inliers were 0.82 px off (median), 0.52
     #: once grown (graf 1->5 0.97 -> 0.28 px; a perspective facade 4.9 px off as a similarity,
-    #: 0.49 as the homography its growth showed); no pair was lost (docs/BENCHMARKS.md)
+    #: 0.49 as the homography its growth showed); no pair was lost (docs/results/BENCHMARKS.md)
     grow_below_inliers: int = 30
     #: high points sampled (evenly, no randomness) to estimate the fraction of compatible pairs
     #: behind ``Growth.chance`` (:func:`chance_matches`) ...

@@ -54,8 +54,8 @@ class ModelCheckParams:
     """A similarity answer is checked against richer models of the same match.
 
     A viewpoint change (tilt, perspective) makes a similarity hold on part of the image only:
-    measured on graf, wall and tilted zoom pairs (docs/BENCHMARKS.md), the best similarity was
-    tens of px off away from its inliers. An affine map and a homography are fitted to the
+    measured on graf, wall and tilted zoom pairs (docs/results/BENCHMARKS.md), the best similarity
+    was tens of px off away from its inliers. An affine map and a homography are fitted to the
     match's candidates (:func:`richer_fits`) and the pixels choose (:func:`chosen_model`):
     inlier counts cannot, since a model with more freedom always fits a few more by chance and
     a wrong affine map of a plane in perspective can fit more candidates than its homography.
@@ -332,7 +332,7 @@ def guided_refit(fit: Fit, source_shape: Tuple[int, int], outcomes: Sequence,
     scene does reaches the far corners. A similarity that stays one is returned as it was:
     four parameters are pinned by its own inliers, and the guided matches, looser, moved the
     zoom pairs' answers by hundredths of a px either way (median 0.157 -> 0.19 px on 220
-    answers of under 30 inliers, docs/BENCHMARKS.md). ``source_shape``: the finer image's
+    answers of under 30 inliers, docs/results/BENCHMARKS.md). ``source_shape``: the finer image's
     (H, W), which no answer may fold over; ``low``: the coarser image's points (s = 1, its
     px); ``spec``: the RANSAC parameters and seed of the refits. Only for a search made on the
     images themselves: a view's points and orientations are in the view's frame.

@@ -53,8 +53,8 @@ class ViewParams:
     enabled: bool = True  #: False: never simulate views (the plain search in both orders only)
     #: passes of tilts, each run only when every earlier pass found nothing. Morel & Yu sample
     #: t = sqrt(2)^k; the gradient descriptor tolerates a tilt of about 2 on its own (measured
-    #: on tilted zoom pairs, docs/BENCHMARKS.md), so views at t = 2 then 4 (a sampling ratio of
-    #: 2) cover tilts up to about 6 with 15 views instead of 27; t = 6 and 8 reach 8 and more
+    #: on tilted zoom pairs, docs/results/BENCHMARKS.md), so views at t = 2 then 4 (a sampling ratio
+    #: of 2) cover tilts up to about 6 with 15 views instead of 27; t = 6 and 8 reach 8 and more
     #: (docs/design/VIEWS.md, "The third pass")
     passes: Tuple[Tuple[float, ...], ...] = PASSES
     #: longitude step at tilt t is ``longitude_step_deg / t`` over [0, 180) (Morel & Yu: 72)
@@ -96,7 +96,7 @@ class ViewParams:
     #: a match of the plain search with fewer distinct inliers than this is compared with the
     #: views, and the stronger answer is taken: a tilted view of a repeated facade gave a plain
     #: similarity of 6 wrong inliers at log10 NFA -12.6 on a tilted zoom pair (t = 2.83) where
-    #: the views find the truth (docs/BENCHMARKS.md)
+    #: the views find the truth (docs/results/BENCHMARKS.md)
     confirm_below_inliers: int = 12
     #: the vote probes every N-th level of a tilted view (N = 1: each one); the view pairs
     #: matched in full are matched at every level near their best cells. Detection is most of

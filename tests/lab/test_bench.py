@@ -41,7 +41,7 @@ def test_tiny_benchmark_run_writes_its_outputs(shared_dir, tmp_path):
 
 
 def test_a_rewritten_page_keeps_the_real_and_the_realistic_pairs_sections(tmp_path):
-    """What ``make bench`` keeps of docs/BENCHMARKS.md: the blocks that ``scalematch lab
+    """What ``make bench`` keeps of docs/results/BENCHMARKS.md: the blocks that ``scalematch lab
     real-pairs`` wrote (the real pairs, and the realistic pairs of ``--sets realistic``), each
     with its markers, in the page's order; nothing else of the old page."""
     page = tmp_path / "BENCHMARKS.md"

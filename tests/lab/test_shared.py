@@ -1,7 +1,7 @@
 """Real data from ../shared (skipped when absent): the boat zoom sequence and real photos.
 
 Known answers: boat img1 -> imgN with the published homographies (1->6 is left out: every
-method, SIFT included, is 5-6 px from that reference, see docs/BOAT.md); synthetic pairs
+method, SIFT included, is 5-6 px from that reference, see docs/results/BOAT.md); synthetic pairs
 cut from real photos by the EVALUATION.md protocol; unrelated pairs must not be claimed.
 """
 

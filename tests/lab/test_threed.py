@@ -251,7 +251,7 @@ def test_the_stored_references():
     assert meta["command"].startswith("scalematch lab 3d-reference") and meta["commit"]
     assert meta["settings"]["magsac_px"] == REFERENCE_PX
     good = [e for e in doc["pairs"] if accepted(e)]
-    assert len(good) == 15  # 16 overlap, one dropped by eye (docs/THREED.md)
+    assert len(good) == 15  # 16 overlap, one dropped by eye (docs/results/THREED.md)
     for e in good:
         f, pts = np.array(e["f"]), threed.sample_of(e)
         assert e["inliers"] >= threed.MIN_REFERENCE_INLIERS and len(pts) >= 5

@@ -13,8 +13,8 @@ from scalematch.stages.finalchecks import one_to_one
 
 
 def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
-    """The uniqueness check (docs/NULLS.md, the hardest nulls): the finer image warped by the
-    transform must fit its place at least min_unique_ratio times better (misfit 1 - ZNCC) than
+    """The uniqueness check (docs/results/NULLS.md, the hardest nulls): the finer image warped by
+    the transform must fit its place at least min_unique_ratio times better (misfit 1 - ZNCC) than
     any other place in the coarser image."""
     import cv2
 
