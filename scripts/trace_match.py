@@ -2,6 +2,7 @@
 that climb back up to a module still waiting below (a callback, a hub re-entered).
 
 Usage: python scripts/trace_match.py [--low LOW --high HIGH] [--no-pair LOW HIGH] [--path]
+       [--write-doc docs/DESIGN.md]
 
 Runs ``scalematch.match`` on a pair that matches (the demo pair by default) and on a pair with
 no answer (the demo's coarser image against a noise image by default) under a profiler that
@@ -17,12 +18,16 @@ What it counts, for each pair:
 * *climbs back*: crossings into a module that is still on the call stack below the caller (a
   stage calling back into the pipeline that called it: a layer that reaches up), by module.
 
-Prints the figures and, with ``--path``, every climb back as caller -> callee.
+Prints the figures and, with ``--path``, the modules in the order the data first enters them
+(each with the function it enters by and the module that calls it) and every climb back as
+caller -> callee. ``--write-doc`` writes both pairs' figures and paths into the page's section
+between ``BEGIN`` and ``END`` below (DESIGN.md, "The path of one match").
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 from collections import Counter
 from pathlib import Path
@@ -40,6 +45,9 @@ PACKAGE = str(ROOT / "scalematch") + "/"
 LAB = PACKAGE + "lab/"
 #: Modules whose calls are their caller's: a map over threads calls back what it is given
 TRANSPARENT = {"stages/threads.py"}
+#: The markers of the section ``--write-doc`` rewrites
+BEGIN = "<!-- made by scripts/trace_match.py --write-doc: begin -->"
+END = "<!-- made by scripts/trace_match.py --write-doc: end -->"
 
 
 def module_of(filename: str) -> str:
@@ -54,6 +62,8 @@ class Trace(NamedTuple):
     crossings: int  #: calls from one module into another (first calls)
     climbs: List[Tuple[str, str]]  #: (caller, callee) of each call into a module below
     matched: bool
+    #: (module, the function it is first entered by, the calling module), in that order
+    entries: List[Tuple[str, str, str]]
 
 
 def trace(low: np.ndarray, high: np.ndarray) -> Trace:
@@ -62,6 +72,7 @@ def trace(low: np.ndarray, high: np.ndarray) -> Trace:
     seen: Set[Tuple[str, int]] = set()
     modules: Set[str] = set()
     climbs: List[Tuple[str, str]] = []
+    entries: List[Tuple[str, str, str]] = []
     crossings = 0
 
     def profile(frame, event, arg):  # noqa: ARG001 (the profiler's signature)
@@ -80,6 +91,8 @@ def trace(low: np.ndarray, high: np.ndarray) -> Trace:
         if not module or module in TRANSPARENT or key in seen:
             return
         seen.add(key)
+        if module not in modules:
+            entries.append((module, code.co_name, caller))
         modules.add(module)
         if caller and caller != module:
             crossings += 1
@@ -92,7 +105,7 @@ def trace(low: np.ndarray, high: np.ndarray) -> Trace:
         result = scalematch.match(low, high)
     finally:
         sys.setprofile(None)
-    return Trace(modules, crossings, climbs, result.matched)
+    return Trace(modules, crossings, climbs, result.matched, entries)
 
 
 def report(name: str, t: Trace, path: bool) -> str:
@@ -102,8 +115,23 @@ def report(name: str, t: Trace, path: bool) -> str:
              f"{len(t.modules)} modules, {t.crossings} crossings, {len(t.climbs)} climbs back"
              f"{f' ({most})' if most else ''}"]
     if path:
-        lines += [f"  {a} -> {b}" for a, b in t.climbs]
+        lines += [f"  {k:2d}. {m} ({fn}, from {caller or 'the caller of match'})"
+                  for k, (m, fn, caller) in enumerate(t.entries, 1)]
+        lines += [f"  climbs back: {a} -> {b}" for a, b in t.climbs]
     return "\n".join(lines)
+
+
+def write_doc(page: Path, text: str, command: str) -> None:
+    """Put ``text`` (the report) between the page's markers, with the command and commit."""
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip() or "unknown"
+    old = page.read_text()
+    if BEGIN not in old or END not in old:
+        raise SystemExit(f"{page}: no section marked {BEGIN} ... {END}")
+    head, rest = old.split(BEGIN, 1)
+    tail = rest.split(END, 1)[1]
+    body = f"`{command}` (on {commit}):\n\n```text\n{text}\n```\n"
+    page.write_text(f"{head}{BEGIN}\n{body}{END}{tail}")
 
 
 def main() -> None:
@@ -112,7 +140,10 @@ def main() -> None:
     ap.add_argument("--high", default=str(ROOT / "data" / "demo_high.png"))
     ap.add_argument("--no-pair", nargs=2, metavar=("LOW", "HIGH"),
                     help="a pair with no answer [default: the demo's low image against noise]")
-    ap.add_argument("--path", action="store_true", help="also the module of every stop")
+    ap.add_argument("--path", action="store_true",
+                    help="also the modules in the order entered, and every climb back")
+    ap.add_argument("--write-doc", metavar="PAGE",
+                    help="write the figures and paths into PAGE's marked section")
     args = ap.parse_args()
     low, high = read_grey(args.low), read_grey(args.high)
     if args.no_pair:
@@ -124,8 +155,12 @@ def main() -> None:
         no_low = low
         no_high = cv2.GaussianBlur(rng.uniform(0, 255, high.shape).astype(np.float32), (0, 0), 2)
     scalematch.match(low, high)  # imports and first-call work out of the trace
-    for name, (a, b) in (("a match", (low, high)), ('a "no"', (no_low, no_high))):
-        print(report(name, trace(a, b), args.path))
+    text = "\n".join(report(name, trace(a, b), args.path or bool(args.write_doc))
+                     for name, (a, b) in (("a match", (low, high)), ('a "no"', (no_low, no_high))))
+    print(text)
+    if args.write_doc:
+        write_doc(Path(args.write_doc), text, "python scripts/trace_match.py --write-doc "
+                  + args.write_doc)
 
 
 if __name__ == "__main__":
