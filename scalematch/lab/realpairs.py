@@ -337,7 +337,9 @@ def run_scalematch(pair: Pair) -> Tuple[Optional[np.ndarray], bool, Dict[str, An
             "second_inliers": e.second_inliers, "parallax": e.parallax,
             "pixel_margin": e.pixel_margin, "footprint_inside": e.footprint_inside,
             "unique_windows": e.unique_windows, "windows_agreeing": e.windows_agreeing,
-            "windows_elsewhere": e.windows_elsewhere}
+            "windows_elsewhere": e.windows_elsewhere, "final_margin": e.final_margin,
+            "near_windows": e.near_windows, "near_windows_agreeing": e.near_windows_agreeing,
+            "near_windows_nearby": e.near_windows_nearby}
     return (r.transform if r.matched else None), r.order == "given", info
 
 
@@ -385,7 +387,8 @@ def run_limited(name: str, pair: Pair, timeout: float):
 #: What a row keeps of a method's own figures
 JUDGED_KEYS = ("inliers", "order", "model", "reason", "view_tilt", "best_inliers", "log10_nfa",
                "judged_by", "unique_ratio", "second_inliers", "parallax", "pixel_margin",
-               "footprint_inside", "unique_windows", "windows_agreeing", "windows_elsewhere")
+               "footprint_inside", "unique_windows", "windows_agreeing", "windows_elsewhere",
+               "final_margin", "near_windows", "near_windows_agreeing", "near_windows_nearby")
 
 
 def judge(method: str, pair: Pair, out) -> Dict[str, Any]:
