@@ -84,7 +84,7 @@ FIGURES = (("geo_log10_nfa", "geometric"), ("pix_log10_nfa", "pixel"), ("combine
 #: the same with the floor max(q, 1/m) instead of the rule of succession
 FIGURES_ALT = (("pix_log10_nfa_alt", "pixel, q_hat = max(q, 1/m)"),
                ("combined_alt", "combined, q_hat = max(q, 1/m)"))
-#: fewer windows than this is "tiny" (DecisionParams.min_windows: the window tests' least)
+#: fewer windows than this is "tiny": 16 windows of 8 px cover a quarter of the 64 px template
 TINY_M = 16
 
 

@@ -16,7 +16,7 @@ from typing import ClassVar, Mapping, Optional
 
 import numpy as np
 
-from ..checks import AT_LEAST_ONE, Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
+from ..checks import Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
 from ..result import Evidence, build_evidence
 from .estimator import model_of
 
@@ -98,17 +98,15 @@ class DecisionParams:
     #: measured with ``--no-views`` had 2.88 (an occluded pair at ratio 8, 5 inliers; the
     #: realistic and tilted sets, both orders); true zoom pairs 3.75 and more
     unconfirmed_min_unique_ratio: float = 2.5
-    #: ... or, compared window by window (``stages.uniqueness.window_agreement``), at least
-    #: ``min_windows`` windows of which this share agree at the claim ...
+    #: ... or, compared window by window (``stages.uniqueness.window_agreement``), windows
+    #: agreeing at the claim beyond chance (:func:`windows_chance` at most ``max_log_nfa``), of
+    #: which this share ...
     min_window_agreement: float = 0.6
     #: ... and this many times the share that agrees anywhere else. An occluder loses only
     #: the windows it covers. Measured (docs/design/DECISION.md, "Windows that agree"): the
     #: null facades that reach the test agree at 0.33 to 0.50 of their windows; the occluded
     #: true pairs one ZNCC refuses at 0.70 to 0.88, 2.7 to 15 times their best elsewhere
     min_window_ratio: float = 2.0
-    #: fewest windows for the agreement to count: 16 of 8 px cover a quarter of a 64 px
-    #: template (``PixelParams.window_px``, ``unique_side_px``)
-    min_windows: int = 16
     #: the final (refit) transform must line the pixels up better than its nearby wrong
     #: placements by more than this ZNCC (``Evidence.final_margin``). The search's own check
     #: (``pixel_margin``) cannot serve: it measures the similarity found in a view, which a
@@ -119,9 +117,10 @@ class DecisionParams:
     #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
     #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
     min_final_margin: float = 0.0
-    #: ... or, where that one ZNCC refuses, compared window by window
-    #: (``stages.pixelcheck.near_windows``: at least ``min_windows`` windows over the whole
-    #: footprint) at least this share agree at the claim, and ``min_window_ratio`` times the
+    #: ... or, where that one ZNCC refuses, compared window by window over the whole
+    #: footprint (``stages.pixelcheck.near_windows``): windows agreeing at the claim beyond
+    #: chance (:func:`windows_chance` at the best nearby placement's share, at most
+    #: ``max_log_nfa``), at least this share of them, and ``min_window_ratio`` times the
     #: share at the best nearby placement. An occluder loses only the windows it covers.
     #: Measured (docs/design/DECISION.md, "Nearby placements, window by window"): the
     #: occluded true claims this margin refused agree at 0.36 to 0.54 of their windows, their
@@ -211,7 +210,6 @@ class DecisionParams:
         "min_unique_ratio": NON_NEGATIVE,
         "min_window_agreement": SHARE,
         "min_window_ratio": NON_NEGATIVE,
-        "min_windows": AT_LEAST_ONE,
         "min_final_margin": MARGIN,
         "min_near_windows": SHARE,
         "max_log_nfa_geometry": FINITE,
@@ -311,6 +309,44 @@ def log10_binom(n: int, k: int) -> float:
     if k < 0 or k > n:
         return -math.inf
     return (math.lgamma(n + 1) - math.lgamma(k + 1) - math.lgamma(n - k + 1)) / math.log(10)
+
+
+def log10_binomial_tail(n: int, k: int, p: float) -> float:
+    """log10 P[Bin(n, p) >= k], summed exactly (n is a few hundred at most here).
+
+    >>> round(log10_binomial_tail(4, 4, 0.5), 4) == round(math.log10(1 / 16), 4)
+    True
+    >>> log10_binomial_tail(10, 0, 0.3)
+    0.0
+    """
+    if k <= 0:
+        return 0.0
+    if k > n or p <= 0.0:
+        return -math.inf
+    if p >= 1.0:
+        return 0.0
+    terms = [log10_binom(n, i) + i * math.log10(p) + (n - i) * math.log10(1.0 - p)
+             for i in range(k, n + 1)]
+    top = max(terms)
+    return top + math.log10(sum(10.0 ** (t - top) for t in terms))
+
+
+def windows_chance(windows: int, claimed: float, other: float) -> float:
+    """log10 of the chance that ``claimed`` (a share) of ``windows`` windows agree at a
+    placement where each agrees as often as at the best other placement (``other``, a share):
+    the binomial tail at that rate, the rate read by the rule of succession, (c + 1) / (n + 2)
+    of c agreeing in n (Laplace), so that no share of 0 makes the chance 0. A handful of
+    windows cannot carry a claim however many agree (1 of 1 against 0 of 1: 10^-0.5); 8 of 11
+    against 2 of 11 can (10^-3.2). A share that is nan (nothing compared) gives +inf.
+
+    >>> round(windows_chance(11, 8 / 11, 2 / 11), 2), round(windows_chance(1, 1.0, 0.0), 2)
+    (-3.18, -0.48)
+    """
+    if windows <= 0 or not math.isfinite(claimed):
+        return math.inf
+    other = other if math.isfinite(other) else 0.0
+    agree, elsewhere = round(claimed * windows), round(other * windows)
+    return log10_binomial_tail(windows, agree, (elsewhere + 1) / (windows + 2))
 
 
 def log10_nfa(n: int, k: int, m: int, p: float, tests: float) -> float:

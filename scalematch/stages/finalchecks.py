@@ -16,7 +16,7 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from ..result import Evidence
-from .acontrario import DecisionParams, FinalFigures, log10_nfa
+from .acontrario import DecisionParams, FinalFigures, log10_nfa, windows_chance
 from .estimator import FitSpec, estimate, model_of
 from .pixelcheck import NearWindows, PixelParams, near_windows, pixel_check
 from .threads import thread_map
@@ -111,16 +111,21 @@ def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
 
 def windows_agree(a: Agreement, params: DecisionParams) -> bool:
     """Whether the windows of a claim (:func:`scalematch.stages.uniqueness.window_agreement`)
-    show it unique: enough of them, most agreeing at the claim, far fewer anywhere else.
+    show it unique: agreeing at the claim beyond chance at the rate elsewhere
+    (:func:`scalematch.stages.acontrario.windows_chance` at most ``max_log_nfa``), most of
+    them, far fewer anywhere else.
 
     >>> p = DecisionParams()
     >>> windows_agree(Agreement(40, 0.8, 0.2), p), windows_agree(Agreement(40, 0.5, 0.1), p)
     (True, False)
-    >>> windows_agree(Agreement(40, 0.8, 0.5), p), windows_agree(Agreement(9, 1.0, 0.0), p)
+    >>> windows_agree(Agreement(40, 0.8, 0.5), p), windows_agree(Agreement(2, 1.0, 0.0), p)
     (False, False)
+    >>> windows_agree(Agreement(11, 8 / 11, 2 / 11), p)  # an occluded map: 8 of 11 windows
+    True
     """
-    return (a.windows >= params.min_windows and a.claimed >= params.min_window_agreement
-            and a.claimed >= params.min_window_ratio * a.elsewhere)
+    return (a.claimed >= params.min_window_agreement
+            and a.claimed >= params.min_window_ratio * a.elsewhere
+            and windows_chance(a.windows, a.claimed, a.elsewhere) <= params.max_log_nfa)
 
 
 def unique_threshold(params: DecisionParams, unconfirmed: bool) -> float:
@@ -208,13 +213,16 @@ def _nearby_windows(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, final
 
 def near_windows_agree(w: NearWindows, params: DecisionParams) -> bool:
     """Whether a claim's windows (:func:`scalematch.stages.pixelcheck.near_windows`) fit it
-    better than its nearby wrong placements: enough of them, ``min_near_windows`` agreeing at
-    the claim, ``min_window_ratio`` times the share at the best nearby placement.
+    better than its nearby wrong placements: agreeing at the claim beyond chance at the best
+    nearby placement's rate (:func:`scalematch.stages.acontrario.windows_chance` at most
+    ``max_log_nfa``), ``min_near_windows`` of them, ``min_window_ratio`` times the share at the
+    best nearby placement.
 
     >>> p = DecisionParams()
     >>> [near_windows_agree(NearWindows(n, at, near), p)
-    ...  for n, at, near in ((40, 0.45, 0.02), (40, 0.1, 0.0), (40, 0.45, 0.3), (9, 0.9, 0.0))]
+    ...  for n, at, near in ((40, 0.45, 0.02), (40, 0.1, 0.0), (40, 0.45, 0.3), (2, 1.0, 0.0))]
     [True, False, False, False]
     """
-    return (w.windows >= params.min_windows and w.claimed >= params.min_near_windows
-            and w.claimed >= params.min_window_ratio * w.nearby)
+    return (w.claimed >= params.min_near_windows
+            and w.claimed >= params.min_window_ratio * w.nearby
+            and windows_chance(w.windows, w.claimed, w.nearby) <= params.max_log_nfa)

@@ -26,3 +26,21 @@ def test_chance_probability():
     assert p == __import__("pytest").approx(math.pi * 9 / 1e4)
     assert chance_probability(3.0, (100, 100), "similarity", True, 20.0) == \
         __import__("pytest").approx(p * 40 / 360)
+
+
+def test_windows_chance_is_the_binomial_tail_at_the_rate_elsewhere():
+    """windows_chance: log10 P[Bin(n, q) >= j], q = (c + 1) / (n + 2) (Laplace's rule of
+    succession), checked against the sum written out by hand."""
+    from math import comb, log10
+
+    from scalematch.stages.acontrario import windows_chance
+
+    n, j, c = 11, 8, 2
+    q = (c + 1) / (n + 2)
+    by_hand = log10(sum(comb(n, i) * q ** i * (1 - q) ** (n - i) for i in range(j, n + 1)))
+    assert abs(windows_chance(n, j / n, c / n) - by_hand) < 1e-9
+    # more windows agreeing at the same shares is stronger evidence; none compared is none
+    assert windows_chance(44, 32 / 44, 8 / 44) < windows_chance(11, 8 / 11, 2 / 11)
+    assert windows_chance(0, float("nan"), float("nan")) == float("inf")
+    # as many agreeing elsewhere as at the claim: no evidence (the tail is over a half)
+    assert windows_chance(20, 0.5, 0.5) > -0.31

@@ -162,7 +162,8 @@ def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_on
     """A margin short of ``few_min_margin`` (an occluder sinks the one ZNCC) is made up by the
     windows of the nearby placements (``min_near_windows``, as the final map's), but only in
     the first tier (log10 NFA at most ``few_max_log_nfa``); nearby placements that agree as
-    often, or too few windows, confirm nothing. The figures are those measured on a true
+    often, or windows too few for their agreement to be beyond chance (2 of 2: 10^-1.2),
+    confirm nothing; 7 of 12 with none nearby is beyond it (10^-5.3). The figures are those measured on a true
     occluded map at ratio 8 (37 windows, 0.35 at the map, 0.03 nearby; margin 0.09)."""
     from scalematch.config import Config
     from scalematch.stages.decision import decide
@@ -176,7 +177,10 @@ def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_on
     assert asked == [params.few_min_margin]
     assert good.matched, good.reason
     assert good.evidence.pixel_windows == 37 and good.evidence.pixel_windows_agreeing == 0.35
-    for windows in (NearWindows(37, 0.35, 0.2), NearWindows(12, 0.6, 0.0),
+    few = decide(strong, (768, 1024), (480, 640), **_params(Config()),
+                 sight=_look(grown=5, margin=0.09, windows=NearWindows(12, 7 / 12, 0.0)))
+    assert few.matched, few.reason
+    for windows in (NearWindows(37, 0.35, 0.2), NearWindows(2, 1.0, 0.0),
                     NearWindows(37, 0.2, 0.0)):
         verdict = decide(strong, (768, 1024), (480, 640), **_params(Config()),
                          sight=_look(grown=5, margin=0.09, windows=windows))

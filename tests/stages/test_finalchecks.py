@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from scalematch.geometry import similarity_matrix
-from scalematch.stages.acontrario import chance_probability, log10_nfa
+from scalematch.stages.acontrario import chance_probability, log10_nfa, windows_chance
 from scalematch.stages.finalchecks import one_to_one
 
 
@@ -51,7 +51,7 @@ def test_a_plain_match_no_view_confirmed_must_be_more_clearly_unique(raccoon):
     ratio = final_checks(scene, high, Claim(t, math.inf), Config().decision)[0].unique_ratio
     # between the two thresholds, the windows' rescue (for occluders) out of reach
     params = replace(Config().decision, min_unique_ratio=ratio / 2,
-                     unconfirmed_min_unique_ratio=ratio * 2, min_windows=10 ** 6)
+                     unconfirmed_min_unique_ratio=ratio * 2, min_window_ratio=10.0 ** 6)
     assert final_checks(scene, high, Claim(t, math.inf), params)[1] == ""
     _, reason, test = final_checks(scene, high, Claim(t, math.inf, unconfirmed=True), params)
     assert reason.startswith("ambiguous") and test == "uniqueness"
@@ -173,7 +173,8 @@ def test_an_occluded_map_the_margin_refuses_is_confirmed_by_its_windows(raccoon)
     params = replace(Config().decision, min_final_margin=0.99, min_unique_ratio=0.0)
     final, reason, _ = final_checks(low, high, Claim(t, math.inf), params)
     assert reason == "", reason
-    assert final.near_windows >= params.min_windows
+    assert windows_chance(final.near_windows, final.near_windows_agreeing,
+                          final.near_windows_nearby) <= params.max_log_nfa
     assert final.near_windows_agreeing >= params.min_near_windows
     turn = cv2.getRotationMatrix2D((80.0, 60.0), 10.0, 1.0)
     final, reason, test = final_checks(low, high, Claim(compose(turn, t), math.inf), params)
