@@ -71,7 +71,8 @@ from scalematch.lab.datasets import find_shared, list_photos, scene_of  # noqa: 
 from scalematch.lab.evaluation import SUCCESS_PX  # noqa: E402
 from scalematch.lab.realistic import KINDS as REALISTIC_KINDS  # noqa: E402
 from scalematch.result import Direction  # noqa: E402
-from scalematch.stages.acontrario import log10_binom  # noqa: E402
+from scalematch.stages.acontrario import log10_binomial_tail as log10_tail  # noqa: E402
+from scalematch.stages.acontrario import succession  # noqa: E402
 from scalematch.stages.estimator import model_of  # noqa: E402
 from scalematch.stages.pixelcheck import PixelParams, near_windows, perturbations  # noqa: E402
 # _far: the placements that agreement_of counts as elsewhere (half a footprint away)
@@ -91,27 +92,6 @@ TINY_M = 16
 # --------------------------------------------------------------------------------------------
 # The pixel figures of one map
 # --------------------------------------------------------------------------------------------
-
-def log10_tail(m: int, j: int, q: float) -> float:
-    """log10 P[Bin(m, q) >= j] (``acontrario.log10_binom`` terms, summed in log space).
-
-    >>> round(log10_tail(10, 10, 0.5), 4), log10_tail(10, 0, 0.3), log10_tail(5, 3, 1.0)
-    (-3.0103, 0.0, 0.0)
-    """
-    if j <= 0 or q >= 1.0:
-        return 0.0
-    if j > m or q <= 0.0:
-        return -math.inf
-    terms = [log10_binom(m, i) + i * math.log10(q) + (m - i) * math.log10(1.0 - q)
-             for i in range(j, m + 1)]
-    top = max(terms)
-    return top + math.log10(sum(10.0 ** (t - top) for t in terms))
-
-
-def succession(count: int, n: int) -> float:
-    """The rule of succession: the chance of one more success after ``count`` of ``n``."""
-    return (count + 1.0) / (n + 2.0)
-
 
 def pixel_figures(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray,
                   pixel: PixelParams = PixelParams()) -> Dict[str, Any]:

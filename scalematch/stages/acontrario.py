@@ -331,11 +331,17 @@ def log10_binomial_tail(n: int, k: int, p: float) -> float:
     return top + math.log10(sum(10.0 ** (t - top) for t in terms))
 
 
+def succession(count: int, n: int) -> float:
+    """Laplace's rule of succession: the chance of one more success after ``count`` of ``n``,
+    (c + 1) / (n + 2), which no count of 0 makes 0."""
+    return (count + 1.0) / (n + 2.0)
+
+
 def windows_chance(windows: int, claimed: float, other: float) -> float:
     """log10 of the chance that ``claimed`` (a share) of ``windows`` windows agree at a
     placement where each agrees as often as at the best other placement (``other``, a share):
-    the binomial tail at that rate, the rate read by the rule of succession, (c + 1) / (n + 2)
-    of c agreeing in n (Laplace), so that no share of 0 makes the chance 0. A handful of
+    the binomial tail at that rate, the rate read by the rule of succession
+    (:func:`succession` of the count agreeing there). A handful of
     windows cannot carry a claim however many agree (1 of 1 against 0 of 1: 10^-0.5); 8 of 11
     against 2 of 11 can (10^-3.2). A share that is nan (nothing compared) gives +inf.
 
@@ -346,7 +352,7 @@ def windows_chance(windows: int, claimed: float, other: float) -> float:
         return math.inf
     other = other if math.isfinite(other) else 0.0
     agree, elsewhere = round(claimed * windows), round(other * windows)
-    return log10_binomial_tail(windows, agree, (elsewhere + 1) / (windows + 2))
+    return log10_binomial_tail(windows, agree, succession(elsewhere, windows))
 
 
 def log10_nfa(n: int, k: int, m: int, p: float, tests: float) -> float:

@@ -123,9 +123,8 @@ def windows_agree(a: Agreement, params: DecisionParams) -> bool:
     >>> windows_agree(Agreement(11, 8 / 11, 2 / 11), p)  # an occluded map: 8 of 11 windows
     True
     """
-    return (a.claimed >= params.min_window_agreement
-            and a.claimed >= params.min_window_ratio * a.elsewhere
-            and windows_chance(a.windows, a.claimed, a.elsewhere) <= params.max_log_nfa)
+    return _beyond_the_rest(a.windows, a.claimed, a.elsewhere, params.min_window_agreement,
+                            params)
 
 
 def unique_threshold(params: DecisionParams, unconfirmed: bool) -> float:
@@ -223,6 +222,13 @@ def near_windows_agree(w: NearWindows, params: DecisionParams) -> bool:
     ...  for n, at, near in ((40, 0.45, 0.02), (40, 0.1, 0.0), (40, 0.45, 0.3), (2, 1.0, 0.0))]
     [True, False, False, False]
     """
-    return (w.claimed >= params.min_near_windows
-            and w.claimed >= params.min_window_ratio * w.nearby
-            and windows_chance(w.windows, w.claimed, w.nearby) <= params.max_log_nfa)
+    return _beyond_the_rest(w.windows, w.claimed, w.nearby, params.min_near_windows, params)
+
+
+def _beyond_the_rest(windows: int, claimed: float, other: float, least: float,
+                     params: DecisionParams) -> bool:
+    """The rule both window tests share: at least ``least`` of the ``windows`` agreeing at the
+    claim, ``min_window_ratio`` times the share ``other`` at the best other placement, and so
+    many beyond chance at that share (``windows_chance`` at most ``max_log_nfa``)."""
+    return (claimed >= least and claimed >= params.min_window_ratio * other
+            and windows_chance(windows, claimed, other) <= params.max_log_nfa)
