@@ -4,7 +4,9 @@ The search (:mod:`scalematch.pipeline`, the plan of :mod:`scalematch.search`) ha
 attempt it made, each decided (:func:`scalematch.stages.decision.decide`). Here the answer is
 made of them, in this order (:func:`build_result`):
 
-1. the best fit: the matched attempt whose map, refit in the finer image's own pixels
+1. for an epipolar geometry, the strongest matched attempt refit in the images' own pixels,
+   with the parallax its inliers show (:func:`matrix_answer`), and nothing more; for a map,
+   the best fit: the matched attempt whose map, refit in the finer image's own pixels
    (:func:`final_fit`: :mod:`scalematch.stages.refit`) as the model the pixels choose
    (:func:`model_by_pixels`), lines the pixels up best
    (:func:`best_fitting`); with none, the "no" of the strongest refused attempt
@@ -46,18 +48,21 @@ from .stages.rivals import EpipolarFit, off_plane
 from .stages.uniqueness import window_agreement
 from .working import WorkImages, shown_scale
 
-__all__ = ["build_result", "plane_instead", "without_parallax"]
+__all__ = ["answered_by_a_matrix", "build_result", "plane_instead", "without_parallax"]
+
+
+def in_images(attempt: Attempt, search: Search) -> Fit:
+    """A matched attempt's transform refit in the images' own pixels, on its winning scale's
+    inliers."""
+    return refit_in_high(attempt.view, attempt.verdict, attempt.winning_outcome(),
+                         fit_spec(search.config), attempt.coarser_view)
 
 
 def final_fit(attempt: Attempt, search: Search) -> Fit:
-    """A matched attempt's transform refit in the images' own pixels, refined on every scale
-    matched in full, and the model the pixels choose (:func:`model_by_pixels`)."""
-    config = search.config
-    best = attempt.winning_outcome()
-    view, coarser = attempt.view, attempt.coarser_view
-    spec = fit_spec(config)
-    fit = refit_in_high(view, attempt.verdict, best, spec, coarser)
-    fit = pooled_refit(fit, view, attempt.outcomes, spec.ransac, coarser)
+    """A matched attempt's map refit in the images' own pixels (:func:`in_images`), refined on
+    every scale matched in full, and the model the pixels choose (:func:`model_by_pixels`)."""
+    fit = pooled_refit(in_images(attempt, search), attempt.view, attempt.outcomes,
+                       fit_spec(search.config).ransac, attempt.coarser_view)
     return model_by_pixels(fit, attempt, search)
 
 
@@ -146,7 +151,7 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     """
     config, work = search.config, search.work
     matched = [a for a in attempts if a.matched]
-    if len(matched) <= 1 or not model_of(config.model).has_ratio:
+    if len(matched) <= 1:
         winner = strongest(attempts)
         return winner, (final_fit(winner, search) if winner is not None else None), None
     fits = [final_fit(a, search) for a in matched]
@@ -239,18 +244,39 @@ def build_result(search: Search, run: SearchRun) -> MatchResult:
     """
     if not run.attempts:  # an empty plan: no scale asked for is within reach of these images
         return unreachable(search, run)
+    if answered_by_a_matrix(search.config):
+        return matrix_answer(search, run)
     winner, fit, near = best_fitting(search, run.attempts)
-    shown = winner or best_refused(run.attempts) or run.attempts[0]
     if winner is None:
-        return refused(search, run, shown)
-    final = pinned = None
-    if model_of(fit.model).has_ratio:
-        final, refusal = judged_by_pixels(search, run, winner, fit, near)
-        if refusal is not None:
-            return refusal
-        fit = grown_answer(winner, fit, search)
-        fit, pinned = pinned_answer(winner, fit, search)
-    return answered(search, run, winner, fit, final, pinned)
+        return refused(search, run, best_refused(run.attempts) or run.attempts[0])
+    final, refusal = judged_by_pixels(search, run, winner, fit, near)
+    if refusal is not None:
+        return refusal
+    fit = grown_answer(winner, fit, search)
+    fit, pinned = pinned_answer(winner, fit, search)
+    seen = answer_parallax(winner, fit.transform, fit.model, search.config)
+    return answered(search, run, winner, fit, seen, final, pinned)
+
+
+def answered_by_a_matrix(config: Config) -> bool:
+    """Whether ``config.model`` answers with a matrix (the fundamental matrix: a point maps to a
+    line; :func:`matrix_answer`) rather than a map; where the matrix shows no parallax, or none
+    is found, the plane map of a second search answers instead (:func:`without_parallax`,
+    :func:`plane_instead`)."""
+    return not model_of(config.model).has_ratio
+
+
+def matrix_answer(search: Search, run: SearchRun) -> MatchResult:
+    """The answer of a search for an epipolar geometry: its strongest matched attempt
+    (:func:`search.strongest`), refit in the images' own pixels, with the parallax its inliers
+    show by themselves (:func:`stages.finalchecks.plane_parallax`). No pixels judge it and it
+    is not grown: a point maps to a line, so there is no place to check or predict."""
+    winner = strongest(run.attempts)
+    if winner is None:
+        return refused(search, run, best_refused(run.attempts) or run.attempts[0])
+    fit, config = in_images(winner, search), search.config
+    seen = plane_parallax(fit.inliers, winner.verdict.evidence, fit_spec(config), config.decision)
+    return answered(search, run, winner, fit, seen)
 
 
 def _common(search: Search, run: SearchRun, shown: Attempt) -> dict:
@@ -329,15 +355,15 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
         evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
 
 
-def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
-             final: Optional[FinalFigures], pinned: Optional[Pinned] = None) -> MatchResult:
+def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit, seen: dict,
+             final: Optional[FinalFigures] = None, pinned: Optional[Pinned] = None
+             ) -> MatchResult:
     """The match: the winner's final ``fit`` turned to map the finer image to the coarser one,
-    its ratio, angle and translation, and its evidence with the answer's parallax and how
-    firmly its inliers pin it (``pinned``, :func:`pinned_answer`)."""
+    its ratio, angle and translation, and its evidence with the answer's parallax figures
+    (``seen``), its pixel tests' (``final``) and how firmly its inliers pin it (``pinned``,
+    :func:`pinned_answer`)."""
     t, inliers, model = fit
     kind = model_of(model)
-    seen = answer_parallax(winner, t, model, search.config) if kind.has_ratio else plane_parallax(
-        inliers, winner.verdict.evidence, fit_spec(search.config), search.config.decision)
     if pinned is not None:
         work = search.work
         seen = dict(seen, **pinned.figures(

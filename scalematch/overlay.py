@@ -160,7 +160,10 @@ def overlay(low: np.ndarray, high: np.ndarray, result: MatchResult,
     t = None if result.transform is None else np.asarray(result.transform, dtype=np.float64)
     lines = [verdict(result), evidence_line(result)]
     outline = None  # (M, 1, 2) int32 in 1/16 px, and its thickness: drawn over the caption
-    if result.matched and t is not None and model_of(result.model).has_ratio:
+    # a match warps the finer image where the model gives it a footprint (a map); a matrix's
+    # inliers are drawn as dots
+    if result.matched and t is not None and \
+            model_of(result.model).footprint(t, high.shape) is not None:
         out, outline, legend = _blended(low_grey, high, t, enlarged_by, _nodata_rule(result))
         lines.append(legend)
         plan = inset_plan(outline, out.shape[:2]) if outline is not None else None

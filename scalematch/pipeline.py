@@ -29,7 +29,7 @@ from .result import (Direction, MatchResult, NoDataSeen, ScaleRow,
                      StepRecord)
 from .features import (Describing, ImageViews, Roles, first_level, first_level_points,
                        image_views)
-from .answer import build_result, plane_instead, without_parallax
+from .answer import answered_by_a_matrix, build_result, plane_instead, without_parallax
 from .sharing import Detected, LowFeatures, Measured, Memo, Meter, Probed, Search
 from .search import (Attempt, ScaleOutcome, SearchRun, Step, coarser_viewed, fit_spec,
                      out_of_time, overwhelming, search_plan, skips, stop_reason)
@@ -82,7 +82,7 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     # 7. A fundamental matrix whose inliers show no parallax does not fix its epipole, and
     #    none found says nothing of a flat scene: the plane map of the same images answers
     #    instead (answer.without_parallax, answer.plane_instead)
-    if not model_of(config.model).has_ratio and not (result.matched and result.evidence.parallax):
+    if answered_by_a_matrix(config) and not (result.matched and result.evidence.parallax):
         plane = searched_answer(work, replace(config, model=config.decision.plane_model),
                                 None, time.perf_counter())
         result = without_parallax(result, plane, config) if result.matched else \

@@ -16,7 +16,6 @@ from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .geometry import epipoles
 from .stages.estimator import model_of
 
 
@@ -362,9 +361,11 @@ class MatchResult:
         """A matched fundamental matrix's epipoles by image, "low" and "high"
         (:func:`scalematch.geometry.epipoles`: ``[x, y, 1]`` px, or ``[dx, dy, 0]`` at
         infinity); None for other answers."""
-        if not self.matched or self.transform is None or model_of(self.model).has_ratio:
+        found = model_of(self.model).epipoles(self.transform) \
+            if self.matched and self.transform is not None else None
+        if found is None:
             return None
-        finer, coarser = (np.round(e, 3).tolist() for e in epipoles(self.transform))
+        finer, coarser = (np.round(e, 3).tolist() for e in found)
         low, high = (finer, coarser) if self.order == Direction.SWAPPED else (coarser, finer)
         return {"low": low, "high": high}
 

@@ -12,7 +12,6 @@ import numpy as np
 from .chart import Marks, Titles, bar_chart
 from .result import MatchResult, ScaleRow
 from .stages.decision import disagrees
-from .stages.estimator import model_of
 
 
 def scale_labels(rows: Sequence[ScaleRow]) -> list:
@@ -69,7 +68,7 @@ def disagreeing_rows(result: MatchResult) -> list:
     decision's ``scale_agreement``): the decision does not count them (a fit that collapses
     many finer points onto a few coarser ones can have many inliers). None for a model
     without a ratio, or without the configuration."""
-    if result.config is None or not model_of(result.model).has_ratio:
+    if result.config is None:
         return []
     return [i for i, r in enumerate(result.scales)
-            if not r.skipped and disagrees(r, result.config.decision)]
+            if not r.skipped and disagrees(r, result.model, result.config.decision)]

@@ -110,7 +110,7 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
               for d in order}
     directions = [d for d in order if scales[d]]
     plan = [Step(d, 0, PLAIN, tuple(scales[d]), 1) for d in directions]
-    if directions and model_of(config.model).has_ratio and config.mode == "default":
+    if directions and searched_as_a_map(config) and config.mode == "default":
         both = tuple((d, tuple(scales[d])) for d in directions)
         plan += [Step(directions[0], k, tuple(keys), tuple(scales[directions[0]]),
                       config.views.full_searches, "both", both)
@@ -182,14 +182,17 @@ def strongest(attempts: Sequence[Attempt]) -> Optional[Attempt]:
 
 def skips(step: Step, attempts: Sequence[Attempt], config) -> bool:
     """A step is skipped when its pass already found a match (in the other direction) that
-    ends the pass (:func:`ends_its_pass`)."""
-    return ends_its_pass(config) and any(
+    ends the pass: a map's (:func:`searched_as_a_map`)."""
+    return searched_as_a_map(config) and any(
         a.matched and a.step.view_pass == step.view_pass for a in attempts)
 
 
-def ends_its_pass(config) -> bool:
-    """Whether a match found in one order ends its pass, the other order skipped: for a map
-    with a ratio. A fundamental matrix fits the wrong order too: with the coarser image taken
+def searched_as_a_map(config) -> bool:
+    """Whether ``config.model`` is searched as a map (a point maps to a point): through the
+    views after the plain steps, each view's map refit in the images themselves, and a match
+    found in one order ends its pass, the other order skipped. A fundamental matrix is searched
+    by the plain steps alone (a view's matrix has no refit in the images that keeps it one), and
+    it fits the wrong order too: with the coarser image taken
     for the finer, its scales cannot reach the true ratio, yet at s = 1 an epipolar geometry
     absorbs the zoom and fits a few of the candidates (on the Adelaide scenes with one image
     shrunk by 2, 20 to 26 inliers at log10 NFA -4 to -16, 3 to 19 px off, where the right order

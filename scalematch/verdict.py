@@ -18,6 +18,12 @@ from .stages.estimator import model_of
 NEAR_ONE_RATIO = 1.05
 
 
+def said_as_matrix(model: str) -> bool:
+    """Whether an answer of ``model`` is told as a matrix (its inliers and parallax) rather
+    than as a map (its ratio, rotation and footprint): a point maps to a line."""
+    return not model_of(model).has_ratio
+
+
 def verdict(result: MatchResult) -> str:
     """The one-line verdict of a match, for the command line and the captions alike.
 
@@ -57,7 +63,7 @@ def verdict(result: MatchResult) -> str:
         reason = result.reason or "the evidence is too weak"
         named = "scale" in reason  # "... at scale 2", "(the best, at scale 1, ...)"
         return f"no reliable match: {reason}" + (f", {best}" if best and not named else "")
-    if not model_of(result.model).has_ratio:
+    if said_as_matrix(result.model):
         return f"matched ({result.model} matrix): {result.n_inliers} inliers, {best}"
     tilt = float(result.evidence.view_tilt)
     whose = " (the coarser image)" if result.evidence.view_of == "coarser" else ""
@@ -73,7 +79,7 @@ def verdict(result: MatchResult) -> str:
     if not np.isnan(result.evidence.parallax_log10_nfa):  # a fundamental matrix was asked for
         plane = (", no parallax: the plane map answers (an epipolar geometry's epipole is not "
                  "fixed by its inliers)")
-    elif result.config is not None and not model_of(result.config.model).has_ratio:  # none found
+    elif result.config is not None and said_as_matrix(result.config.model):  # none found
         plane = ", no epipolar geometry found: the plane map of a flat scene answers"
     return (f"matched ({model_said(result)}): ratio {result.resolution_ratio:.3f}, rotation "
             f"{result.rotation_deg:.1f} deg, {result.n_inliers} inliers, {best}{view}{order}"
@@ -111,7 +117,7 @@ def evidence_line(result: MatchResult) -> str:
                      f"place, {e.windows_elsewhere:.0%} elsewhere")
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
-    if result.matched and e.parallax and not model_of(result.model).has_ratio:
+    if result.matched and e.parallax and said_as_matrix(result.model):
         parts.append(f"parallax: {e.parallax_points} inliers off the dominant plane, log10 "
                      f"NFA {e.parallax_log10_nfa:.1f}")
     elif result.matched and e.parallax:

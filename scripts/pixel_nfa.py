@@ -73,7 +73,7 @@ from scalematch.lab.realistic import KINDS as REALISTIC_KINDS  # noqa: E402
 from scalematch.result import Direction  # noqa: E402
 from scalematch.stages.acontrario import log10_binomial_tail as log10_tail  # noqa: E402
 from scalematch.stages.acontrario import succession  # noqa: E402
-from scalematch.stages.estimator import model_of  # noqa: E402
+from scalematch.stages.decision import maps_points  # noqa: E402
 from scalematch.stages.pixelcheck import PixelParams, near_windows, perturbations  # noqa: E402
 # _far: the placements that agreement_of counts as elsewhere (half a footprint away)
 from scalematch.stages.uniqueness import _far, agreement_of, unique_template  # noqa: E402
@@ -190,7 +190,7 @@ def run_one(job: Tuple[str, np.ndarray, np.ndarray, str]) -> Dict[str, Any]:
     row.update(map="claim" if r.matched else "rejected", test=test, map_model=found_model,
                map_order=order.value, inliers=int(kept), geo_log10_nfa=_plain(float(lnfa)),
                transform=np.round(as_matrix3(np.asarray(t, float)), 9).tolist())
-    if not model_of(found_model).has_ratio:
+    if not maps_points(found_model):
         row["pix_status"] = "fundamental matrix: no placement"
         return row
     t1 = time.perf_counter()

@@ -74,6 +74,6 @@ def test_a_degenerate_fits_ratio_is_none_in_the_table_and_the_json():
     from scalematch.stages.decision import disagrees
 
     row = ScaleRow(8.0, usable_ratio(7.49e19), 346, 102, 24, 5, 95.1, 150.5)
-    assert math.isnan(row.ratio) and disagrees(row, DecisionParams())
+    assert math.isnan(row.ratio) and disagrees(row, "similarity", DecisionParams())
     res = dataclasses.replace(collapsed_fit_result(), scales=(row,))
     assert json.loads(res.to_json("a.png", "b.png"))["scales"][0]["ratio"] is None

@@ -538,9 +538,9 @@ def footprint_ncc(low: np.ndarray, high: np.ndarray, transform: np.ndarray) -> f
 def _maps_points(row: Dict[str, Any]) -> bool:
     """Whether a row's transform maps a point to a point (has a footprint): not a fundamental
     matrix, which maps a point to a line."""
-    from ..stages.estimator import model_of
+    from ..stages.decision import maps_points
 
-    return model_of(row.get("model") or "similarity").has_ratio
+    return maps_points(row.get("model") or "similarity")
 
 
 def add_footprint_ncc(rows: Sequence[Dict[str, Any]], entries: Dict[str, Dict[str, Any]],

@@ -42,7 +42,6 @@ from ..result import build_evidence
 from .acontrario import Decision, DecisionParams, Winner, chance_probability, log10_nfa
 from .constraints import OrientationParams
 from .estimator import FitSpec, model_of
-from .finalchecks import one_to_one
 from .rivals import mean_transfer_gap, same_scale_and_angle, second_transform, Second
 from .secondlook import (Look, Sight, few_confirmed, look_confirms, look_windows_below,
                          placed_better_nearby)
@@ -151,11 +150,22 @@ def ratio_distance(ratio: float, s: float) -> float:
     return abs(math.log(ratio / s)) if ratio > 0 and math.isfinite(ratio) else math.inf
 
 
-def disagrees(row, params: "DecisionParams") -> bool:
-    """True when a per-scale row's fit has a ratio that contradicts its scale (beyond
-    ``params.scale_agreement``): not that scale's answer, whatever its inliers (a fit that
-    collapses many finer points onto a few coarser ones counts many). False without a fit."""
-    return row.inliers > 0 and ratio_distance(row.ratio, row.s) > math.log(params.scale_agreement)
+def disagrees(row, model: str, params: "DecisionParams") -> bool:
+    """True when a per-scale row's fit of ``model`` has a ratio that contradicts its scale
+    (beyond ``params.scale_agreement``): not that scale's answer, whatever its inliers (a fit
+    that collapses many finer points onto a few coarser ones counts many; a NaN ratio is as far
+    from its scale as any). False without a fit, and for a model without a ratio (an epipolar
+    geometry absorbs the zoom: no scale to contradict)."""
+    return maps_points(model) and row.inliers > 0 and \
+        ratio_distance(row.ratio, row.s) > math.log(params.scale_agreement)
+
+
+def maps_points(model: str) -> bool:
+    """Whether the decision tests ``model``'s answer as a map: a point maps to a point, so it
+    implies a ratio to check against its scale, a footprint and the pixels under it. An
+    epipolar geometry maps a point to a line and faces the count alone, its inliers counted one
+    to one (``Model.counted``)."""
+    return model_of(model).has_ratio
 
 
 def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
@@ -177,15 +187,13 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     (:func:`scalematch.stages.secondlook.look_confirms`). The accepted transform faces more tests
     once refit (:func:`scalematch.stages.finalchecks.final_checks`).
     """
-    spec = model_of(context.fit.model)
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
     if not with_t:
         return Decision(False, "no scale produced a transform (too few candidate matches)",
                         math.nan, None, np.zeros((0, 4)), build_evidence())
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
-    plausible = [o for o in with_t if not spec.has_ratio
-                 or _closeness(o) <= math.log(params.scale_agreement)]
+    plausible = [o for o in with_t if not disagrees(o.row, context.fit.model, params)]
     if not plausible:
         return _implausible(with_t, context.shown_scale)
     best = min(plausible, key=lambda o: (-o.row.inliers, _closeness(o), o.row.s))
@@ -209,13 +217,11 @@ def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext,
              same_point_px: float) -> Winner:
     """The winning outcome ``best`` with its a-contrario count over all of ``outcomes``; an
     epipolar geometry's inliers counted one to one
-    (:func:`scalematch.stages.finalchecks.one_to_one`, ``same_point_px``)."""
+    (:func:`scalematch.stages.epipolar.one_to_one`, ``same_point_px``)."""
     orientation = context.orientation
     model = context.fit.model
-    k = best.row.inliers
-    if not model_of(model).has_ratio:  # a point matched many times lies on every line through it
-        k = len(one_to_one(np.hstack([best.src[best.estimate.inliers],
-                                      best.dst[best.estimate.inliers]]), same_point_px))
+    k = model_of(model).counted(np.hstack([best.src[best.estimate.inliers],
+                                           best.dst[best.estimate.inliers]]), same_point_px)
     n = max(best.candidates, k)
     m = model_of(model).min_sample
     oriented = orientation is not None
@@ -232,7 +238,6 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     (or few, confirmed by the second look), beyond chance, a plausible footprint, agreeing
     scales, no repeated structure. ``shapes``: (coarser, finer) (H, W)."""
     best, k, lnfa = w.outcome, w.k, w.log10_nfa
-    spec = model_of(context.fit.model)
     shown = best.row.s * context.shown_scale
     t = best.estimate.transform
     pairs = np.hstack([best.src[best.estimate.inliers], best.dst[best.estimate.inliers]])
@@ -245,8 +250,9 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     # the second look decides only below min_inliers, or for a footprint mostly outside the
     # coarser image (the final map's pixel tests follow every match, final_checks): elsewhere
     # it would cost a tenth of a plain pair's time for nothing
+    placed = maps_points(context.fit.model)  # a footprint and pixels to test
     second = sight.look(t, best, look_windows_below(lnfa, params)) \
-        if sight is not None and spec.has_ratio and (
+        if sight is not None and placed and (
             params.look_min_inliers <= k < params.min_inliers
             or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)
@@ -264,7 +270,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
         return no(f"the best transform ({_inliers_said(k, len(pairs))} of {w.n} candidates at "
                   f"scale {shown:.3g}) could arise by chance ({_count_said(lnfa, w.m, params)})",
                   "chance")
-    if not spec.has_ratio:  # no footprint to check
+    if not placed:
         return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
     figs, refusal = _footprint_tests(t, shapes, w, figs, params, second)
     if refusal is None:
@@ -279,7 +285,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
 
 def _inliers_said(k: int, matches: int) -> str:
     """The inliers counted, as a reason says them: with the matches they stand for when an
-    epipolar geometry counted them one to one (:func:`scalematch.stages.finalchecks.one_to_one`), so
+    epipolar geometry counted them one to one (:func:`scalematch.stages.epipolar.one_to_one`), so
     that the reason and the ``rejected`` block (its ``n_inliers`` are the matches) give the same
     figures.
 

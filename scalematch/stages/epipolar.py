@@ -15,7 +15,7 @@ coarser one.
 from __future__ import annotations
 
 import math
-from typing import Tuple
+from typing import Dict, Tuple
 
 import numpy as np
 
@@ -28,6 +28,43 @@ LM_TOLERANCE = 1e-10
 #: Step of the forward differences of the Jacobian, in the units of the parameters (radians of
 #: the rotations, the singular-value ratio): about sqrt of the float64 epsilon
 LM_STEP = 1e-7
+
+def one_to_one(pairs: np.ndarray, same_point_px: float) -> np.ndarray:
+    """Row indices of ``pairs`` ((N, 4): x, y finer; x, y coarser) that share no point with an
+    earlier row kept: a row is dropped when its finer point, or its coarser point, lies within
+    ``same_point_px`` of a kept row's (0: the same position only). In first order.
+
+    An epipolar geometry maps a point to a line, so many points matched to one point all fit
+    any geometry whose epipole lies on it: counted once, they are one inlier.
+
+    >>> one_to_one(np.array([[0, 0, 5, 5], [9, 9, 5.4, 5], [20, 0, 30, 0], [20.5, 0, 40, 0],
+    ...                      [50, 50, 60, 60]], float), 1.0).tolist()
+    [0, 2, 4]
+    """
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    cell = max(float(same_point_px), 1e-3)
+    seen: Tuple[Dict[Tuple[int, int], list], Dict[Tuple[int, int], list]] = ({}, {})
+    keep = []
+    for i, row in enumerate(pairs):
+        points = (row[:2], row[2:])
+        if any(_near(table, xy, cell) for table, xy in zip(seen, points)):
+            continue
+        keep.append(i)
+        for table, xy in zip(seen, points):
+            table.setdefault(_cell(xy, cell), []).append(xy)
+    return np.asarray(keep, int)
+
+
+def _cell(xy: np.ndarray, cell: float) -> Tuple[int, int]:
+    return int(math.floor(xy[0] / cell)), int(math.floor(xy[1] / cell))
+
+
+def _near(table: Dict[Tuple[int, int], list], xy: np.ndarray, cell: float) -> bool:
+    """Whether a point of ``table`` (points by grid cell of side ``cell``) is within ``cell``."""
+    cx, cy = _cell(xy, cell)
+    return any(np.hypot(*(q - xy)) <= cell for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+               for q in table.get((cx + dx, cy + dy), ()))
+
 
 def homogeneous(xy: np.ndarray) -> np.ndarray:
     xy = np.asarray(xy, np.float64).reshape(-1, 2)

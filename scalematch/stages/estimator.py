@@ -21,10 +21,10 @@ import cv2
 import numpy as np
 
 from ..checks import Bounds, COUNT, POSITIVE, PROBABILITY, check_bounds
-from ..geometry import (answer_parts, as_matrix3, compose, epipolar_distances, invert,
-                        transfer_error)
+from ..geometry import (answer_parts, as_matrix3, compose, epipolar_distances, epipoles,
+                        invert, transfer_error)
 from ..geometry import footprint as _map_footprint
-from .epipolar import refine_fundamental
+from .epipolar import one_to_one, refine_fundamental
 
 #: Most RANSAC iterations a fit may run: 20 times the default cap. Every scale of every search
 #: runs its own RANSAC, so the cap multiplies the time of a "no"; beyond it the confidence
@@ -130,6 +130,23 @@ def _no_footprint(f: np.ndarray, high_shape: Tuple[int, ...]) -> None:
     return None
 
 
+def _all_counted(pairs: np.ndarray, same_point_px: float) -> int:
+    """A point map's inliers each count: a point matched twice fits it at most once."""
+    return len(pairs)
+
+
+def _counted_one_to_one(pairs: np.ndarray, same_point_px: float) -> int:
+    """An epipolar geometry's inliers counted one to one (:func:`.epipolar.one_to_one`): a
+    point matched many times lies on every line through it, so it fits any geometry whose
+    epipole is on such a line."""
+    return len(one_to_one(pairs, same_point_px))
+
+
+def _no_epipoles(t: np.ndarray):
+    """A point map has no epipoles."""
+    return None
+
+
 def _as_fitted(t: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """A point map's answer is its fit: refined on its inliers where it was found."""
     return t
@@ -207,7 +224,9 @@ class Model:
     the model has none; ``carried(t, s_fine, s_coarse)`` is ``t`` in other pixels of both
     images (each image's 2x3 map to them); ``footprint(t, high_shape)`` the finer image's
     corners in the coarser image (None where it has none); ``refined(t, inliers)`` the answer
-    refined on its inliers once it is accepted.
+    refined on its inliers once it is accepted; ``counted(pairs, same_point_px)`` how many
+    inliers ``pairs`` ((N, 4): finer px, coarser px) the a-contrario test counts;
+    ``epipoles(t)`` a matrix's epipoles (:func:`scalematch.geometry.epipoles`; None for a map).
     """
 
     name: str
@@ -216,7 +235,11 @@ class Model:
     residuals: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] = field(repr=False)
     chance_area: Callable[[float, Tuple[int, int]], float] = field(repr=False)
     #: True: a point maps to a point, so the transform has a resolution ratio, a rotation, a
-    #: footprint and an overlay; False (the fundamental matrix): a point maps to a line
+    #: footprint and an overlay; False (the fundamental matrix): a point maps to a line. What
+    #: differs beyond the callables here is asked once a stage: how the model is searched
+    #: (``search.searched_as_a_map``), decided (``decision.maps_points``), answered
+    #: (``answer.answered_by_a_matrix``), told (``verdict.said_as_matrix``) and grown
+    #: (:func:`map_model`)
     has_ratio: bool = True
     #: True: :func:`refine` refits the model by least squares on the pairs it explains; False:
     #: the robust fit is its own local optimisation and is kept (MAGSAC++ weights each pair by
@@ -227,6 +250,8 @@ class Model:
     carried: Callable = field(default=_map_carried, repr=False)
     footprint: Callable = field(default=_map_footprint, repr=False)
     refined: Callable = field(default=_as_fitted, repr=False)
+    counted: Callable[[np.ndarray, float], int] = field(default=_all_counted, repr=False)
+    epipoles: Callable = field(default=_no_epipoles, repr=False)
 
 
 #: The models of the paper (section 5 and "Further examples"), by name.
@@ -236,7 +261,8 @@ MODELS: Dict[str, Model] = {m.name: m for m in (
     Model("homography", 4, _fit_homography, transfer_error, _disc_area),
     Model("fundamental", FUNDAMENTAL_SAMPLE, _fit_fundamental, _epipolar_distance, _band_area, has_ratio=False,
           refit_inliers=False, parts=_no_parts, carried=_matrix_carried,
-          footprint=_no_footprint, refined=_matrix_refined),
+          footprint=_no_footprint, refined=_matrix_refined, counted=_counted_one_to_one,
+          epipoles=epipoles),
 )}
 #: minimal sample of each model by name (kept for callers of the mapping; see MODELS)
 MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}
@@ -251,6 +277,16 @@ def model_of(name: str) -> Model:
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; one of {', '.join(MODELS)}")
     return MODELS[name]
+
+
+def map_model(name: str) -> Model:
+    """The :class:`Model` called ``name`` where it maps a point to a point (a map has a place
+    to predict each point at); ``ValueError`` for the fundamental matrix, which maps a point
+    to a line, or an unknown name."""
+    spec = model_of(name)
+    if not spec.has_ratio:
+        raise ValueError(f"a point-to-point model is needed, not {name!r}")
+    return spec
 
 
 def residuals(model: str, t: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:

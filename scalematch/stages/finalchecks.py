@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, Optional
 
 import numpy as np
 
 from ..result import Evidence
 from .acontrario import DecisionParams, FinalFigures, log10_nfa, windows_chance
+from .epipolar import one_to_one
 from .estimator import FitSpec, estimate, model_of
 from .pixelcheck import NearWindows, PixelParams, near_windows, pixel_check
 from .threads import thread_map
@@ -34,43 +35,6 @@ class Claim:
     #: a plain match of few inliers that no pass of views confirmed: its pixels must show it
     #: unique by ``DecisionParams.unconfirmed_min_unique_ratio``
     unconfirmed: bool = False
-
-
-def one_to_one(pairs: np.ndarray, same_point_px: float) -> np.ndarray:
-    """Row indices of ``pairs`` ((N, 4): x, y finer; x, y coarser) that share no point with an
-    earlier row kept: a row is dropped when its finer point, or its coarser point, lies within
-    ``same_point_px`` of a kept row's (0: the same position only). In first order.
-
-    An epipolar geometry maps a point to a line, so many points matched to one point all fit
-    any geometry whose epipole lies on it: counted once, they are one inlier.
-
-    >>> one_to_one(np.array([[0, 0, 5, 5], [9, 9, 5.4, 5], [20, 0, 30, 0], [20.5, 0, 40, 0],
-    ...                      [50, 50, 60, 60]], float), 1.0).tolist()
-    [0, 2, 4]
-    """
-    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
-    cell = max(float(same_point_px), 1e-3)
-    seen: Tuple[Dict[Tuple[int, int], list], Dict[Tuple[int, int], list]] = ({}, {})
-    keep = []
-    for i, row in enumerate(pairs):
-        points = (row[:2], row[2:])
-        if any(_near(table, xy, cell) for table, xy in zip(seen, points)):
-            continue
-        keep.append(i)
-        for table, xy in zip(seen, points):
-            table.setdefault(_cell(xy, cell), []).append(xy)
-    return np.asarray(keep, int)
-
-
-def _cell(xy: np.ndarray, cell: float) -> Tuple[int, int]:
-    return int(math.floor(xy[0] / cell)), int(math.floor(xy[1] / cell))
-
-
-def _near(table: Dict[Tuple[int, int], list], xy: np.ndarray, cell: float) -> bool:
-    """Whether a point of ``table`` (points by grid cell of side ``cell``) is within ``cell``."""
-    cx, cy = _cell(xy, cell)
-    return any(np.hypot(*(q - xy)) <= cell for dx in (-1, 0, 1) for dy in (-1, 0, 1)
-               for q in table.get((cx + dx, cy + dy), ()))
 
 
 def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,

@@ -33,7 +33,7 @@ import numpy as np
 from ..checks import ANGLE, AT_LEAST_ONE, Bounds, COUNT, POSITIVE, check_bounds
 from ..geometry import apply, pairs_within, similarity_parts
 from .descriptors import Described
-from .estimator import RansacParams, model_of, refine
+from .estimator import RansacParams, map_model, refine
 from .matcher import distinct_pairs
 
 
@@ -255,9 +255,7 @@ def grow(t: np.ndarray, high: Described, low: Described, model: str = "similarit
     ValueError
         For the fundamental matrix (a point maps to a line: there is no position to predict).
     """
-    spec = model_of(model)
-    if not spec.has_ratio:
-        raise ValueError(f"guided growth needs a point-to-point model, not {model!r}")
+    map_model(model)  # guided growth predicts where each point goes
     t = np.asarray(t, np.float64)
     chance = chance_matches(t, high, low, params)
     best_t, best_in, counts = grow_rounds(t, model, Points([high], low), params, ransac)

@@ -41,7 +41,7 @@ from ..geometry import compose, invert
 from .acontrario import Decision
 from .decision import folded
 from .descriptors import Described
-from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, model_of, refine,
+from .estimator import (MIN_SAMPLE, MODELS, FitSpec, RansacParams, estimate, refine,
                         residuals)
 from .guided import GuidedParams, Points, grow_rounds, guided_pool
 from .matcher import distinct_pairs
@@ -172,7 +172,7 @@ def _pooled(view: View, outcomes: Sequence,
 
 def pooled_refit(fit: Fit, view: View, outcomes: Sequence, ransac: RansacParams,
                  coarser: Optional[View] = None) -> Fit:
-    """``fit`` refined on the candidates of every scale matched in full.
+    """``fit``, a map, refined on the candidates of every scale matched in full.
 
     The neighbouring scales of a true match find the same transform (the paper's Table 1) from
     other points; pooled, they spread the inliers wider over the image, which pins a homography
@@ -181,7 +181,7 @@ def pooled_refit(fit: Fit, view: View, outcomes: Sequence, ransac: RansacParams,
     scale (the pairs the decision counted) that the refined transform still explains.
     """
     t, inliers, model = fit
-    pool = _pooled(view, outcomes, coarser) if model_of(model).has_ratio else None
+    pool = _pooled(view, outcomes, coarser)
     if pool is None:
         return fit
     src, dst = pool
@@ -340,7 +340,7 @@ def guided_refit(fit: Fit, source_shape: Tuple[int, int], outcomes: Sequence,
     t, inliers, model = fit
     highs = [o.described for o in outcomes
              if o.estimate is not None and o.described is not None and len(o.described)]
-    if not model_of(model).has_ratio or not highs:
+    if not highs:
         return fit
     points, ransac = Points(highs, low), spec.ransac
 

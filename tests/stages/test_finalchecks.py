@@ -9,7 +9,7 @@ import numpy as np
 
 from scalematch.geometry import similarity_matrix
 from scalematch.stages.acontrario import chance_probability, log10_nfa, windows_chance
-from scalematch.stages.finalchecks import one_to_one
+from scalematch.stages.epipolar import one_to_one
 
 
 def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
