@@ -1,10 +1,11 @@
 """scalematch: match a low-resolution image against a high-resolution one with unknown zoom.
 
 Implements Dufournaud, Schmid & Horaud, "Image Matching with Scale Adjustment", CVIU 93 (2004).
-The pipeline, by module: ``stages/scalespace`` -> ``stages/detector`` -> ``stages/descriptors`` ->
-``stages/mahalanobis`` -> ``stages/matcher`` -> ``stages/constraints`` -> ``stages/estimator``
--> ``stages/decision``, run by ``pipeline``; then ``render``/``cli``. The research code (synthetic
-pairs, benchmark, studies) is ``scalematch.lab``, which this package never imports.
+The pipeline, by module: ``stages/scalespace`` -> ``stages/detector`` -> ``stages/descriptors``
+-> ``stages/mahalanobis`` -> ``stages/matcher`` -> ``stages/constraints`` ->
+``stages/estimator`` -> ``stages/decision``, run by the ``search`` package for ``pipeline``;
+then ``render``/``cli``. The research code (synthetic pairs, benchmark, studies) is
+``scalematch.lab``, which this package never imports.
 
 A scene and a copy shrunk 3 times and turned 20 degrees (``transform`` maps the finer image's
 pixels to the coarser one's):

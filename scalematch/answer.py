@@ -33,8 +33,8 @@ import numpy as np
 from .config import Config
 from .geometry import finer_to_coarser
 from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
-from .search import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
-from .sharing import Search
+from .search.plan import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
+from .search.shared import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.estimator import model_of, residuals
 from .stages.finalchecks import (Claim, final_checks, plane_parallax, unique_threshold,
@@ -70,7 +70,7 @@ def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
     """``fit``, or a richer model of the same match (:func:`stages.refit.richer_fits`) chosen
     by the pixels (:func:`stages.refit.chosen_model`): for a similarity searched for (the
     default, or ``--model affine`` or ``homography``, the ceiling of the climb:
-    :func:`search.climbs`), with the model check on.
+    :func:`plan.climbs`), with the model check on.
 
     A richer map may answer where it lines the pixels up clearly better than ``fit``
     (:func:`stages.refit.by_pixels`) and the pixels vouch for it window by window over the
@@ -142,7 +142,7 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     One matched attempt is the answer. When several matched (a weak plain match and a view
     of the pass that confirms it), each is refit and the one whose final transform lines the
     pixels up best (ZNCC, :func:`stages.pixelcheck.pixel_check`) wins; the lowest log10 NFA
-    (:func:`search.strongest`) decides where the pixels cannot (no overlap, no ratio). The NFA
+    (:func:`plan.strongest`) decides where the pixels cannot (no overlap, no ratio). The NFA
     alone favours few candidates that all agree: on a smooth least-textured crop (popos_jad
     x3; docs/design/DECISION.md, "The final map: fitting best, and better than its
     neighbours") a t = 2 view's affine map, 11 inliers of 12 candidates
@@ -220,7 +220,7 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
 def out_of_reach(config: Config, work: WorkImages) -> str:
     """Why an empty plan searched nothing: at every scale of ``config.scales`` the finer image
     of either order would span fewer than ``config.min_footprint_px`` coarser pixels
-    (:func:`scalematch.search.within_reach`)."""
+    (:func:`scalematch.search.plan.within_reach`)."""
     sizes = " and ".join(f"{w}x{h}" for h, w in (work.low.shape, work.high.shape))
     floor = f"under {config.min_footprint_px:g} px of the coarser one"
     if max(max(work.low.shape), max(work.high.shape)) < config.min_footprint_px:
@@ -268,7 +268,7 @@ def answered_by_a_matrix(config: Config) -> bool:
 
 def matrix_answer(search: Search, run: SearchRun) -> MatchResult:
     """The answer of a search for an epipolar geometry: its strongest matched attempt
-    (:func:`search.strongest`), refit in the images' own pixels, with the parallax its inliers
+    (:func:`plan.strongest`), refit in the images' own pixels, with the parallax its inliers
     show by themselves (:func:`stages.finalchecks.plane_parallax`). No pixels judge it and it
     is not grown: a point maps to a line, so there is no place to check or predict."""
     winner = strongest(run.attempts)
@@ -336,7 +336,7 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     t, inliers, model = fit
     coarse, fine = search.work.shown(winner.step.direction)
     # a plain match of few inliers is confirmed by the first pass of views
-    # (search.stop_reason); without one (no views, or the time budget spent), the
+    # (plan.stop_reason); without one (no views, or the time budget spent), the
     # pixels must show it more clearly unique
     unconfirmed = winner.step.view_pass == 0 and \
         verdict.evidence.inliers < config.views.confirm_below_inliers and \

@@ -292,7 +292,7 @@ PRESETS: Dict[str, Callable[[], Config]] = {
     # docs/design/SPEED.md, 'The time of a "no"')
     "no-views": lambda: Config(views=ViewParams(enabled=False)),
     # the default with its answer allowed no further than an affine map, or than a homography
-    # (``--model affine``, ``--model homography``: search.CEILINGS), so that the null set can
+    # (``--model affine``, ``--model homography``: plan.CEILINGS), so that the null set can
     # be run with each (docs/results/NULLS.md, "Mode homography")
     "affine": lambda: Config(model="affine"),
     "homography": lambda: Config(model="homography"),

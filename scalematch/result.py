@@ -142,7 +142,7 @@ class Evidence:
     probe_best: float = math.nan  #: the best probe score of every search made
     steps_run: int = 0  #: steps of the search plan run (``MatchResult.search``)
     steps_planned: int = 0  #: steps in the plan
-    stopped: str = ""  #: why the search stopped (``pipeline.STOP_REASONS``)
+    stopped: str = ""  #: why the search stopped (``plan.STOP_REASONS``)
     low_working_factor: float = 1.0  #: the low image was matched shrunk by this factor
     high_working_factor: float = 1.0  #: the high image was matched shrunk by this factor
 

@@ -6,7 +6,7 @@ Usage: python scripts/vote_ranking.py [--kinds tilted,steep,oblique,null-unrelat
 
 For each pair of the regression gate's kinds (``scalematch.lab.regress.cases``, given order:
 the pooled vote holds both orders), the plain steps run as ``match`` runs them, then every pass
-of views is voted (``pipeline.views_of_images``, ``side_cells``) and its view pairs ranked as
+of views is voted (``viewpass.views_of_images``, ``side_cells``) and its view pairs ranked as
 the search ranks them (``stages.vote.best_pairs``, without the bound on the NFA). A view pair at
 a scale is *right* when the truth, seen through the two views (``to_view``), is a similarity up
 to the tilt the descriptor tolerates (singular values within a factor ``RIGHT_TILT``) at that
@@ -33,10 +33,10 @@ from scalematch import pipeline as P  # noqa: E402
 from scalematch.geometry import compose, invert  # noqa: E402
 from scalematch.lab.datasets import find_shared  # noqa: E402
 from scalematch.lab.regress import cases  # noqa: E402
-from scalematch.modes import mode_of  # noqa: E402
+from scalematch.search.modes import mode_of  # noqa: E402
 from scalematch.result import Direction  # noqa: E402
-from scalematch.search import coarser_viewed, search_plan  # noqa: E402
-from scalematch.sharing import Memo, Meter  # noqa: E402
+from scalematch.search.plan import coarser_viewed, search_plan  # noqa: E402
+from scalematch.search.shared import Memo, Meter  # noqa: E402
 from scalematch.stages.views import ViewParams, tilt_view  # noqa: E402
 from scalematch.stages.vote import VoteParams, best_pairs, index_scale  # noqa: E402
 from scalematch.working import at_working_size  # noqa: E402

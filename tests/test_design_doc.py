@@ -74,14 +74,14 @@ def cited_tokens(text: str) -> List[str]:
 
 
 def module_name(head: str) -> Optional[str]:
-    """The dotted name of the product module called ``head`` (``pipeline``, ``views``), or
+    """The dotted name of the product module called ``head`` (``pipeline``, ``views``, ``plan``), or
     of the file ``head`` (``stages/views.py``, ``__init__.py``); None when there is none."""
     if head.endswith(".py"):
         parts = head.removeprefix("scalematch/").removesuffix(".py").split("/")
         if not (PACKAGE.joinpath(*parts[:-1]) / f"{parts[-1]}.py").is_file():
             return None
         return ".".join(["scalematch", *(parts if parts != ["__init__"] else [])])
-    for folder in ("", "stages"):
+    for folder in ("", "stages", "search"):
         if (PACKAGE / folder / f"{head}.py").is_file():
             return ".".join(["scalematch", *([folder] if folder else []), head])
     return None
@@ -214,18 +214,18 @@ def test_design_names_every_product_module():
 def test_a_renamed_or_misplaced_name_is_caught(known):
     """The check is not met by just any name: what the code lacks, or a name put in the row of
     a module that does not define it, is reported."""
-    assert missing("pipeline.run_step_renamed", known)
-    assert missing("search.search_plan_renamed", known)
+    assert missing("run.run_step_renamed", known)
+    assert missing("plan.search_plan_renamed", known)
     assert missing("stages/nowhere.py", known)
     assert missing("no_such_function()", known)
     assert missing("--no-such-option", known)
     assert missing("Config.no_such_field", known)
-    assert row_problems("| | `pipeline.py` | `run_step_renamed` | |", known)
-    assert row_problems("| | `render.py` | `run_step` (it lives in pipeline.py) | |", known)
+    assert row_problems("| | `search/run.py` | `run_step_renamed` | |", known)
+    assert row_problems("| | `render.py` | `run_step` (it lives in search/run.py) | |", known)
     assert row_problems("| 1 | `working.py` | | `no_such_parameter` |", known)
-    assert missing("pipeline.run_step", known) is None
+    assert missing("run.run_step", known) is None
     assert missing("View.to_view", known) is None
-    assert not row_problems("| | `pipeline.py` | `run_step` | `views` |", known)
+    assert not row_problems("| | `search/run.py` | `run_step` | `views` |", known)
 
 
 def test_every_markdown_link_resolves():

@@ -197,3 +197,14 @@ def test_evidence_is_made_only_by_its_builder():
             if made or changed:
                 offenders.append(f"{path.relative_to(ROOT)}:{call.lineno} in {owner}")
     assert not offenders, offenders
+
+
+def test_every_package_of_the_product_is_installed():
+    """pyproject.toml lists the packages a wheel holds: every folder of ``scalematch/`` with an
+    ``__init__.py`` (or data the code reads) is among them, so an installed copy has it all."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {".".join(p.parent.relative_to(ROOT).parts)
+               for p in (ROOT / "scalematch").rglob("__init__.py")}
+    assert folders <= listed, f"pyproject.toml's packages lack {sorted(folders - listed)}"

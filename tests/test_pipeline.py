@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from scalematch import Config, match, pipeline
+from scalematch import Config, match
+from scalematch.search import detect, shared, viewpass
 from scalematch.config import ModelCheckParams, ProbeParams
 from scalematch.geometry import apply, similarity_parts
 from scalematch.lab.evaluation import reprojection_error
@@ -82,7 +83,7 @@ def test_kept_and_recomputed_levels_give_the_same_result(raccoon, monkeypatch):
     pass (the memory bound); the answer must not depend on which path ran."""
     pair = _pair(raccoon, 3.0, 4)
     kept = match(pair.low, pair.high)
-    monkeypatch.setattr(pipeline, "KEEP_LEVELS_MAX_PX", 0)
+    monkeypatch.setattr(detect, "KEEP_LEVELS_MAX_PX", 0)
     again = match(pair.low, pair.high)
     assert kept.matched and again.matched
     assert np.array_equal(kept.transform, again.transform)
@@ -673,18 +674,18 @@ def test_low_dynamic_range_pairs_match(raccoon, tmp_path, name):
 
 
 def _search(config, low, high):
-    from scalematch.modes import mode_of
+    from scalematch.search.modes import mode_of
     from scalematch.working import at_working_size
 
-    return pipeline.Search(at_working_size(low, high, config), config, mode_of(config),
-                           pipeline.Memo(), pipeline.Meter(None, 0))
+    return shared.Search(at_working_size(low, high, config), config, mode_of(config),
+                           shared.Memo(), shared.Meter(None, 0))
 
 
 def test_each_image_is_viewed_once_in_a_pass_for_both_orders(raccoon, monkeypatch):
     """Features once per image: each of the two images has each of its views made once,
     whichever order reads it (as the finer image of one, the coarser of the other): an
     unrelated pair runs the three passes of 5, 10 and 35 views, 50 views made per image."""
-    from scalematch import features
+    from scalematch.search import features
 
     made = []
     real = features.view_of
@@ -703,13 +704,13 @@ def test_the_vote_counts_every_cell_of_every_pass(raccoon, monkeypatch):
     """The a-contrario count of a pass's cells multiplies the cells of every pass voted so far:
     the count a pass uses only grows."""
     counts = []
-    real = pipeline.cells_nfa
+    real = viewpass.cells_nfa
 
     def seen(cells, tried):
         counts.append(tried)
         return real(cells, tried)
 
-    monkeypatch.setattr(pipeline, "cells_nfa", seen)
+    monkeypatch.setattr(viewpass, "cells_nfa", seen)
     match(raccoon[:300, :400], raccoon[400:, 500:900])
     passes = sorted(set(counts))
     assert len(passes) == 3 and passes[0] > 0

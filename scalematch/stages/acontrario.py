@@ -378,7 +378,7 @@ def chance_probability(threshold_px: float, coarser_shape, model: str, oriented:
 class Winner:
     """The winning scale's outcome and its a-contrario count (:func:`log10_nfa`)."""
 
-    outcome: object = field(repr=False)  #: a ``search.ScaleOutcome``
+    outcome: object = field(repr=False)  #: a ``plan.ScaleOutcome``
     k: int  #: its inliers
     n: int  #: its candidates (at least ``k``)
     m: int  #: the model's minimal sample

@@ -237,7 +237,7 @@ class Model:
     #: True: a point maps to a point, so the transform has a resolution ratio, a rotation, a
     #: footprint and an overlay; False (the fundamental matrix): a point maps to a line. What
     #: differs beyond the callables here is asked once a stage: how the model is searched
-    #: (``search.searched_as_a_map``), decided (``decision.maps_points``), answered
+    #: (``plan.searched_as_a_map``), decided (``decision.maps_points``), answered
     #: (``answer.answered_by_a_matrix``), told (``verdict.said_as_matrix``) and grown
     #: (:func:`map_model`)
     has_ratio: bool = True

@@ -12,7 +12,7 @@ the similarity; these views absorb the compression. Each view is the image shrun
 The search first runs without any view, and adds the views only when the images themselves
 found nothing (Mishkin, Matas & Perdoch 2015, "MODS"), so ordinary pairs cost no more than
 before; the views of both images are then searched together, in one pooled vote
-(:mod:`scalematch.features`, :mod:`scalematch.stages.vote`).
+(:mod:`scalematch.search.features`, :mod:`scalematch.stages.vote`).
 """
 
 from __future__ import annotations

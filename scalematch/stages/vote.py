@@ -1,6 +1,6 @@
 """The pooled vote: which view pairs and scales of a search are worth matching in full.
 
-Every image is described once, in every view and at every scale (:mod:`scalematch.features`),
+Every image is described once, in every view and at every scale (:mod:`scalematch.search.features`),
 and the candidate matches of all view pairs are found in one pass of nearest neighbours per
 side. Each candidate pairs two oriented points at known scales, so it predicts a whole
 similarity between the two views: the ratio is the finer point's scale, the rotation the

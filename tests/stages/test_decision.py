@@ -32,7 +32,7 @@ def _outcomes(k: int, n: int, s: float = 8.0):
     """One scale whose similarity (ratio s) has k inliers among n candidates, and its
     neighbour with nothing: what a footprint 80 low px wide leaves at ratio 8."""
     from scalematch.result import ScaleRow
-    from scalematch.search import ScaleOutcome
+    from scalematch.search.plan import ScaleOutcome
     from scalematch.stages.estimator import Estimate
 
     t = similarity_matrix(1.0 / s, 30.0, 400.0, 300.0)
@@ -255,7 +255,7 @@ def _facade(shift, k=60, k2=40):
     ``shift`` (a repeated structure: the copy's candidates) at ratio 2, and a neighbour scale
     that agrees."""
     from scalematch.result import ScaleRow
-    from scalematch.search import ScaleOutcome
+    from scalematch.search.plan import ScaleOutcome
     from scalematch.stages.estimator import Estimate
 
     t = similarity_matrix(0.5, 15.0, 300.0, 200.0)
@@ -320,7 +320,7 @@ def test_a_refused_epipolar_geometry_says_the_figures_its_record_gives():
     chance in words, not as "log10 NFA inf" (null in the JSON)."""
     from scalematch.config import Config
     from scalematch.result import ScaleRow
-    from scalematch.search import ScaleOutcome
+    from scalematch.search.plan import ScaleOutcome
     from scalematch.stages.decision import decide
     from scalematch.stages.estimator import Estimate
 

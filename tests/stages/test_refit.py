@@ -12,7 +12,7 @@ import pytest
 from scalematch.config import Config
 from scalematch.geometry import apply
 from scalematch.result import ScaleRow
-from scalematch.search import ScaleOutcome
+from scalematch.search.plan import ScaleOutcome
 from scalematch.stages.descriptors import Described
 from scalematch.stages.estimator import Estimate, FitSpec, estimate
 from scalematch.stages.guided import GuidedParams

@@ -22,20 +22,18 @@ from typing import Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .result import Direction, ScaleRow, StepRecord
-from .stages.acontrario import Decision
-from .stages.descriptors import Described
-from .config import Config
-from .stages.estimator import Estimate, FitSpec, model_of
-from .stages.refit import ModelCheckParams
-from .stages.views import View, view_plan
+from ..result import Direction, ScaleRow, StepRecord
+from ..stages.acontrario import Decision
+from ..stages.descriptors import Described
+from ..config import Config
+from ..stages.estimator import Estimate, FitSpec, model_of
+from ..stages.refit import ModelCheckParams
+from ..stages.views import View, view_plan
+from ..working import WorkImages
 
 #: (tilt, longitude in degrees) of a view; (1, 0) is the image itself.
 ViewKey = Tuple[float, float]
 PLAIN: Tuple[ViewKey, ...] = ((1.0, 0.0),)
-#: Which image a step's views are of (``Step.side``): the plain steps view the finer image
-#: (itself), the step of views both images
-SIDES = ("finer", "both")
 
 #: Why a search stopped (``Evidence.stopped``).
 STOP_REASONS = {
@@ -55,7 +53,8 @@ class Step:
     views: Tuple[ViewKey, ...]  #: the views (of each image, for the step of views)
     scales: Tuple[float, ...]  #: the scales of the finer image searched (this direction's)
     full_searches: int  #: at most this many views (view pairs) are matched in full
-    #: "finer": the finer image itself; "both": the views of both images
+    #: whose views the step searches: "finer", the finer image itself (the plain steps);
+    #: "both", the views of both images (the step of views)
     side: str = "finer"
     #: the directions the step of views searches, each with its scales
     directions: Tuple[Tuple[Direction, Tuple[float, ...]], ...] = ()
@@ -271,7 +270,7 @@ def searched(records: Sequence[StepRecord]) -> str:
 
 @dataclass(frozen=True)
 class SearchRun:
-    """What running a search plan gave (``pipeline.run_plan``): every attempt, the steps' records,
+    """What running a search plan gave (``run.run_plan``): every attempt, the steps' records,
     the plan, why it stopped, and seconds per step by name (and "total")."""
 
     attempts: Tuple[Attempt, ...]
@@ -322,3 +321,8 @@ def fit_spec(config: Config) -> FitSpec:
     """How the search fits its transforms: the model searched (:func:`searched_model`), RANSAC
     and the seed."""
     return FitSpec(searched_model(config), config.ransac, config.seed)
+
+
+def finer_sides(work: WorkImages) -> Dict[Direction, int]:
+    """Each direction's finer image's longer side at working size, px (its reach)."""
+    return {d: max(d.coarser_finer(work.low, work.high)[1].shape) for d in Direction}

@@ -23,14 +23,14 @@ from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from .config import Config
+from ..config import Config
 from .modes import Mode
-from .result import Direction
-from .stages.descriptors import Described
-from .stages.detector import Contrast, Gradients, Keypoints, gradients, image_contrast
-from .stages.scalespace import Level
-from .stages.views import View
-from .working import WorkImages
+from ..result import Direction
+from ..stages.descriptors import Described
+from ..stages.detector import Contrast, Gradients, Keypoints, gradients, image_contrast
+from ..stages.scalespace import Level
+from ..stages.views import View
+from ..working import WorkImages
 
 class Measured(NamedTuple):
     """What :meth:`Memo.measured` gives of an image: its contrast (None: the detector does not
@@ -147,7 +147,7 @@ class Meter:
 @dataclass(frozen=True)
 class Search:
     """What every step of one search shares, built once by :func:`scalematch.pipeline.match`: the images at
-    their working size, the configuration, the mode's strategy (:func:`scalematch.modes.mode_of`),
+    their working size, the configuration, the mode's strategy (:func:`scalematch.search.modes.mode_of`),
     what the steps compute once (``memo``) and the progress meter.
 
     The scales a step searches are its own (``Step.scales``: its direction's, within reach);

@@ -20,15 +20,15 @@ whose detection this module takes as it is (:class:`Roles`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Callable, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .stages.descriptors import Described
-from .stages.detector import Contrast, HarrisParams, Keypoints, detect_on_level
-from .stages.scalespace import Level, scale_space
-from .stages.threads import thread_map
-from .stages.views import View, ViewParams, decimation_of, source_of, view_of, view_scales
+from ..stages.descriptors import Described
+from ..stages.detector import Contrast, HarrisParams, Keypoints, detect_on_level
+from ..stages.scalespace import Level, scale_space
+from ..stages.threads import thread_map
+from ..stages.views import View, ViewParams, decimation_of, source_of, view_of, view_scales
 
 #: Points of a view's first level described for the vote when the image is the coarser one,
 #: strongest first: the vote needs only enough of them to find the view pair (the pair matched
@@ -118,11 +118,11 @@ class ImageViews:
 class Describing:
     """How a search detects and describes a view (the same for every view of an image)."""
 
-    describe: object  #: ``Mode.describe(level, keypoints) -> Described``
+    describe: Callable[[Level, Keypoints], Described]  #: the mode's (``Mode.describe``)
     harris: HarrisParams  #: the finer image's detector (every level)
     harris_low: HarrisParams  #: the coarser image's detector (the first level)
     contrast: Optional[Contrast]  #: the image's own (:func:`stages.detector.image_contrast`)
-    space: dict  #: :func:`stages.scalespace.scale_space`'s parameters
+    space: Mapping[str, float]  #: :func:`stages.scalespace.scale_space`'s keyword parameters
     probe_points: int  #: the strongest points of a level described for the vote
     edge_margin_px: float  #: :attr:`ViewParams.edge_margin_px`
     every: int  #: a view's levels probed: every ``every``-th (``ViewParams.vote_every``)

@@ -10,7 +10,7 @@ import pytest
 
 from scalematch.config import MODELS, Config
 from scalematch.result import Direction, Evidence
-from scalematch.search import (Attempt, Step, fit_spec, search_plan, skips, stop_reason,
+from scalematch.search.plan import (Attempt, Step, fit_spec, search_plan, skips, stop_reason,
                                strongest)
 from scalematch.stages.acontrario import Decision
 from scalematch.stages.views import ViewParams, identity_view
@@ -59,7 +59,7 @@ def test_one_direction_views_the_smaller_coarser_image():
     """``coarser_directions="one"``: both directions' views of the coarser image reach the same
     pairs (docs/design/VIEWS.md, "Views of the coarser image"), so only the smaller coarser
     image, cheaper, is viewed."""
-    from scalematch.search import coarser_viewed
+    from scalematch.search.plan import coarser_viewed
 
     both = [GIVEN, SWAPPED]
     # the given direction's finer image is the small one (400 px): the swapped direction's
@@ -140,7 +140,7 @@ def test_an_affine_map_or_a_homography_asked_for_is_the_ceiling_of_a_similarity_
     """``--model affine`` and ``homography`` search the similarity and let the answer climb no
     further than the model named; the default climbs as far as the model check goes; with the
     check off, the model asked for is searched at every scale."""
-    from scalematch.search import climbs, searched_model
+    from scalematch.search.plan import climbs, searched_model
 
     assert [searched_model(Config(model=m)) for m in MODELS] == \
         ["similarity", "similarity", "similarity", "fundamental"]

@@ -15,16 +15,16 @@ from typing import Callable, Dict, List, Optional, Union
 
 import numpy as np
 
-from .config import Config
-from .stages.constraints import OrientationParams, SemiLocalParams, orientation_groups, \
+from ..config import Config
+from ..stages.constraints import OrientationParams, SemiLocalParams, orientation_groups, \
     semi_local_filter
-from .stages.descriptors import Described, GradientParams, JetParams, describe_gradients, \
+from ..stages.descriptors import Described, GradientParams, JetParams, describe_gradients, \
     describe_jets
-from .stages.detector import Keypoints
-from .stages.guided import GuidedParams
-from .stages.mahalanobis import load_covariance, whiten
-from .stages.matcher import Candidates
-from .stages.scalespace import Level
+from ..stages.detector import Keypoints
+from ..stages.guided import GuidedParams
+from ..stages.mahalanobis import load_covariance, whiten
+from ..stages.matcher import Candidates
+from ..stages.scalespace import Level
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from scalematch import Config
-from scalematch.features import (IDENTITY_COARSER_POINTS, VIEWS_COARSER_POINTS, Describing,
+from scalematch.search.features import (IDENTITY_COARSER_POINTS, VIEWS_COARSER_POINTS, Describing,
                                  Roles, Table, image_views)
-from scalematch.modes import mode_of
+from scalematch.search.modes import mode_of
 from scalematch.stages.descriptors import Described
 from scalematch.stages.detector import image_contrast
 from scalematch.stages.views import ViewParams, identity_view, view_plan
