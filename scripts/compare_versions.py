@@ -6,7 +6,8 @@ Usage: python scripts/compare_versions.py --old OLD_SOURCE_TREE [--new TREE] [--
 Each version runs in its own persistent worker process with its source tree first on
 ``sys.path``; the pairs (EVALUATION.md, ``scalematch.lab.synthetic.pairs_from_photos``) are made
 once and given to the two workers in turn, pair by pair, so both see the same machine load.
-Prints success per ratio, median error of the successes and the median in-process time of each.
+Prints success per ratio, median error of the successes and the median in-process time of each,
+and the median time of a "no" on the unrelated pairs.
 
     python scripts/compare_versions.py --old ../old-checkout --photos 38
     python scripts/compare_versions.py --old ../old-checkout --photos 13 --swapped --unrelated 50
@@ -121,6 +122,7 @@ def main() -> None:
     claims = {name: 0 for name in workers}
     null_secs = {name: [] for name in workers}
     null_claims = {name: 0 for name in workers}
+    no_secs = {name: [] for name in workers}  # the unrelated pairs' times: a "no"
     for k, (kind, p, swapped) in enumerate(jobs_list):
         order = ("old", "new") if k % 2 == 0 else ("new", "old")
         for name in order:
@@ -134,6 +136,7 @@ def main() -> None:
                 continue
             if kind == "unrelated":
                 claims[name] += t is not None
+                no_secs[name].append(secs)
                 continue
             err = reprojection_error(t, p.truth, p.high.shape, p.low.shape)
             rows[name].append((p.ratio, secs, err, is_success(err)))
@@ -171,6 +174,11 @@ def main() -> None:
     ratio = np.median([s for _, s, _, _ in rows["new"]]) / np.median(
         [s for _, s, _, _ in rows["old"]])
     print(f"median time new / old: {ratio:.2f}")
+    if no_secs["new"]:
+        old_no, new_no = (np.median(no_secs[n]) for n in ("old", "new"))
+        pair = np.median(np.asarray(no_secs["new"]) / np.asarray(no_secs["old"]))
+        print(f"unrelated pairs (a 'no'): median old {old_no:.3f} s, new {new_no:.3f} s; "
+              f"new / old {new_no / old_no:.3f}, pair by pair {pair:.3f}")
 
 
 if __name__ == "__main__":

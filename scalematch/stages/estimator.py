@@ -271,8 +271,8 @@ MIN_SAMPLE = {name: m.min_sample for name, m in MODELS.items()}
 def model_of(name: str) -> Model:
     """The :class:`Model` called ``name``; ``ValueError`` naming the known ones otherwise.
 
-    >>> model_of("homography").min_sample, model_of("fundamental").has_ratio
-    (4, False)
+    >>> model_of("homography").min_sample, model_of("fundamental").min_sample
+    (4, 8)
     """
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; one of {', '.join(MODELS)}")
