@@ -88,7 +88,7 @@ def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
                          spec, attempt.coarser_view)
     if not richer:
         return fit
-    coarse, fine = search.work.shown(attempt.step.direction)
+    coarse, fine = search.work.shown(attempt.direction)
     options = [fit] + [r.fit for r in richer]
     nccs = [overlap_ncc(coarse, fine, o.transform, config.pixel) for o in options]
     gain = check.min_ncc_gain
@@ -123,14 +123,14 @@ def grown_answer(attempt: Attempt, fit: Fit, search: Search) -> Fit:
     spec = fit_spec(config)
     asked = climbing(config) if spec.model == "similarity" else None  # as model_by_pixels
     return guided_refit(fit, attempt.view.source_shape, attempt.outcomes,
-                        search.memo.coarser[attempt.step.direction].described,
+                        search.memo.coarser[attempt.direction].described,
                         search.mode.guided, spec, asked)
 
 
 def pinned_answer(attempt: Attempt, fit: Fit, search: Search) -> Tuple[Fit, Pinned]:
     """(the fit, how firmly its inliers pin it): an accepted answer ``fit``, or the
     simpler model its inliers pin down (:func:`stages.refit.pinned_model`), at working size."""
-    coarser, finer = search.work.coarser_finer(attempt.step.direction)
+    coarser, finer = search.work.coarser_finer(attempt.direction)
     return pinned_model(fit, finer.shape, coarser.shape, search.config.pin,
                         fit_spec(search.config))
 
@@ -155,7 +155,7 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
         winner = strongest(attempts)
         return winner, (final_fit(winner, search) if winner is not None else None), None
     fits = [final_fit(a, search) for a in matched]
-    checks = [pixel_check(*work.shown(a.step.direction), fit.transform, config.pixel)
+    checks = [pixel_check(*work.shown(a.direction), fit.transform, config.pixel)
               for a, fit in zip(matched, fits)]
 
     def fitness(k: int) -> Tuple[float, float]:
@@ -200,14 +200,14 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     """
     records, plan, stopped = run.records, run.plan, run.stopped
     decided = shown.verdict.evidence
-    direction = shown.step.direction
+    direction = shown.direction
     g = shown_scale(work, direction) * shown.view.scale
     f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
     searched_ = dict(searches=sum(r.views for r in records), search_order=direction,
                      view_tilt=shown.shown_view.tilt,
                      view_longitude_deg=shown.shown_view.longitude_deg,
                      view_of="coarser" if shown.coarser_view is not None else "finer",
-                     probe_score=shown.probe,
+                     probe_score=shown.chosen_by,
                      probe_best=probe_best([r.probe_best for r in records]),
                      steps_run=len(records), steps_planned=len(plan), stopped=stopped)
     sized = dict(low_working_factor=work.f_low, high_working_factor=work.f_high,
@@ -320,7 +320,7 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
     has_candidate = shown.verdict.candidate is not None and shown.view.is_identity and \
         shown.coarser_view is None and not shown.matched
     rejected = None if not has_candidate else rejected_candidate(
-        verdict.candidate, verdict.candidate_inliers, fit_spec(config).model, shown.step.direction,
+        verdict.candidate, verdict.candidate_inliers, fit_spec(config).model, shown.direction,
         verdict.test, verdict.evidence.log10_nfa,
         figures(verdict.test, verdict.evidence, config.decision))
     return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
@@ -334,7 +334,7 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     (:func:`stages.finalchecks.final_checks`), or (figures, the "no" that refuses it)."""
     config, verdict = search.config, winner.verdict
     t, inliers, model = fit
-    coarse, fine = search.work.shown(winner.step.direction)
+    coarse, fine = search.work.shown(winner.direction)
     # a plain match of few inliers is confirmed by the first pass of views
     # (plan.stop_reason); without one (no views, or the time budget spent), the
     # pixels must show it more clearly unique
@@ -350,7 +350,7 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
                       min_unique_ratio=unique_threshold(config.decision, unconfirmed))
     return final, MatchResult(
         matched=False, reason=reason, rejected=rejected_candidate(
-            t, inliers, model, winner.step.direction, test, verdict.evidence.log10_nfa,
+            t, inliers, model, winner.direction, test, verdict.evidence.log10_nfa,
             figures(test, verdict.evidence, applied, final)),
         evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
 
@@ -367,9 +367,9 @@ def answered(search: Search, run: SearchRun, winner: Attempt, fit: Fit, seen: di
     if pinned is not None:
         work = search.work
         seen = dict(seen, **pinned.figures(
-            work.f_low if winner.step.direction is Direction.GIVEN else work.f_high))
+            work.f_low if winner.direction is Direction.GIVEN else work.f_high))
     t = kind.refined(t, inliers)  # a matrix: LM on the Sampson error
-    t, inliers, swapped = finer_to_coarser(t, inliers, winner.step.direction is Direction.SWAPPED,
+    t, inliers, swapped = finer_to_coarser(t, inliers, winner.direction is Direction.SWAPPED,
                                            kind.parts)
     ratio, angle, tr = kind.parts(t, inliers[:, :2])
     return MatchResult(**dict(_common(search, run, winner), model=model,

@@ -23,7 +23,7 @@ from ..stages.detector import Contrast, Gradients, Keypoints, detect_on_level
 from ..stages.nodata import distance_inside
 from ..stages.scalespace import Level, scale_space
 from ..stages.views import View, identity_view
-from .features import first_level, first_level_points
+from .features import first_level, first_level_points, level_points
 from .shared import Detected, LowFeatures, Measured, Probed, Search
 
 #: Largest view of the finer image, px, whose scale-space levels are kept from detection to the
@@ -53,13 +53,6 @@ def shares_first_level(config: Config) -> bool:
     high, low = config.harris, config.harris_low
     return replace(low, max_points=high.max_points) == high and high.max_points > 0 and (
         low.max_points == 0 or low.max_points >= high.max_points)
-
-
-def detect_level(view: View, level: Level, config: Config, contrast: Optional[Contrast],
-                 grads: Optional[Gradients] = None) -> Keypoints:
-    """The points of one level of a view, away from its empty corners and no-data regions."""
-    return detect_on_level(level, config.harris, contrast, grads, view.inside_distance,
-                           config.views.edge_margin_px)
 
 
 def space_of(config: Config) -> dict:
@@ -107,7 +100,8 @@ def detect_view(view: View, search: Search, scales: Sequence[float],
             detected.append(Detected(kp, part, level if keep else None, full))
         else:
             first = grads if view.is_identity and level.s == 1.0 else None
-            kp = detect_level(view, level, config, contrast, first)
+            kp = level_points(view, level, config.harris, contrast, config.views.edge_margin_px,
+                              first)
             part = kp.part(slice(config.probe.points)) if probing else kp
             detected.append(Detected(kp, search.mode.describe(level, part),
                                      level if keep else None))
@@ -164,7 +158,7 @@ def detect_chosen(view: View, scales: Sequence[float], wanted: Sequence[int], se
         if n not in wanted or min(level.image.shape) < config.harris.min_level_side_px:
             detected.append(Detected(Keypoints.empty(level.s), None, None))
             continue
-        kp = detect_level(view, level, config, contrast)
+        kp = level_points(view, level, config.harris, contrast, config.views.edge_margin_px)
         detected.append(Detected(kp, search.mode.describe(level, kp.part(
             slice(config.probe.points))), level))
     detected += [Detected(Keypoints.empty(s_), None, None) for s_ in scales[len(detected):]]

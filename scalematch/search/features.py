@@ -25,7 +25,7 @@ from typing import Callable, List, Mapping, NamedTuple, Optional, Sequence, Tupl
 import numpy as np
 
 from ..stages.descriptors import Described
-from ..stages.detector import Contrast, HarrisParams, Keypoints, detect_on_level
+from ..stages.detector import Contrast, Gradients, HarrisParams, Keypoints, detect_on_level
 from ..stages.scalespace import Level, scale_space
 from ..stages.threads import thread_map
 from ..stages.views import View, ViewParams, decimation_of, source_of, view_of, view_scales
@@ -155,12 +155,22 @@ def first_level(view: View) -> Level:
     return Level(s=1.0, d=1.0, blur=0.0, image=view.image)
 
 
+def level_points(view: View, level: Level, harris: HarrisParams, contrast: Optional[Contrast],
+                 edge_margin_px: float, grads: Optional[Gradients] = None) -> Keypoints:
+    """The points of one level of a view, found by ``harris`` away from the view's empty
+    corners and no-data regions (``edge_margin_px`` from them); ``contrast``: the image's own;
+    ``grads``: the level's gradients when measured already. Every view and level of the search
+    is detected here: the finer image's levels (:mod:`scalematch.search.detect`), the vote's
+    levels of each view (:func:`view_rows`) and a view's first level as the coarser image's
+    (:func:`first_level_points`)."""
+    return detect_on_level(level, harris, contrast, grads, view.inside_distance, edge_margin_px)
+
+
 def first_level_points(view: View, harris_low: HarrisParams, contrast: Optional[Contrast],
                        edge_margin_px: float) -> Keypoints:
     """The points of a view's first level as the coarser image's detector (``harris_low``)
     finds them, away from the view's empty corners; ``contrast``: the image's own."""
-    return detect_on_level(first_level(view), harris_low, contrast, None, view.inside_distance,
-                           edge_margin_px)
+    return level_points(view, first_level(view), harris_low, contrast, edge_margin_px)
 
 
 def view_rows(view: View, scales: Sequence[float], how: Describing) -> List[Described]:
@@ -171,8 +181,7 @@ def view_rows(view: View, scales: Sequence[float], how: Describing) -> List[Desc
     for level in view_levels(view, scales, how) if scales else []:
         if min(level.image.shape) < how.min_side:
             continue
-        kp = detect_on_level(level, how.harris, how.contrast, None, view.inside_distance,
-                             how.edge_margin_px)
+        kp = level_points(view, level, how.harris, how.contrast, how.edge_margin_px)
         if len(kp):
             probed.append(how.describe(level, kp.part(slice(how.probe_points))))
     return probed

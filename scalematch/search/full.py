@@ -9,7 +9,6 @@ scale, :func:`_full_scale`), and its outcomes are decided
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Callable, Iterator, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
@@ -131,7 +130,7 @@ class Candidate(NamedTuple):
     coarser_view: Optional[View]
     direction: Direction
     scales: Tuple[float, ...]  #: the finer view's scales, in its own pixels (sorted)
-    score: float  #: what chose it: the probe's best score, or the pair's votes
+    chosen_by: float  #: what chose it: the probe's best score, or the pair's votes
 
 
 def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
@@ -141,7 +140,7 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
     these included (the a-contrario test counts them all)."""
     work, cfg, mode = search.work, search.config, search.mode
     attempts: List[Attempt] = []
-    for p, low_feats, coarser_view, direction, scales, score in candidates:
+    for p, low_feats, coarser_view, direction, scales, chosen_by in candidates:
         outcomes = tuple(finish_view(p, low_feats, search, scales, search.meter.tick))
 
         coarser_shown = (valid_in(coarser_view) if coarser_view is not None
@@ -152,8 +151,8 @@ def match_chosen(search: Search, step: Step, candidates: Sequence[Candidate],
                                 shown_scale(work, direction) * p.view.scale)
         verdict = decide(outcomes, low_feats.image.shape, p.view.image.shape, cfg.decision,
                          context=context, sight=sight)
-        attempts.append(Attempt(replace(step, direction=direction), p.view, score,
-                                outcomes, verdict, coarser_view))
+        attempts.append(Attempt(step, direction, p.view, chosen_by, outcomes, verdict,
+                                coarser_view))
         if overwhelming(attempts[-1], cfg):
             break  # no other view of this step can do better
     return attempts

@@ -48,10 +48,13 @@ class Step:
     """One step of the plan: the finer image itself in one direction, or a pass of views of
     both images in every direction searched (``view_pass`` 1 and on)."""
 
-    direction: Direction  #: which image is taken as the coarser one (the views: the first)
+    #: which image is taken as the coarser one; None for a pass of views, which searches
+    #: every direction of ``directions``
+    direction: Optional[Direction]
     view_pass: int  #: 0: the finer image itself; k >= 1: the k-th pass of views, pooled
     views: Tuple[ViewKey, ...]  #: the views (of each image, for the step of views)
-    scales: Tuple[float, ...]  #: the scales of the finer image searched (this direction's)
+    #: the finer image's scales searched (a pass of views: those of its ``directions``)
+    scales: Tuple[float, ...]
     full_searches: int  #: at most this many views (view pairs) are matched in full
     #: whose views the step searches: "finer", the finer image itself (the plain steps);
     #: "both", the views of both images (the step of views)
@@ -96,10 +99,10 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
 
     >>> from scalematch.config import Config
     >>> plan = search_plan(Config(), {Direction.GIVEN: (1.0, 2.0), Direction.SWAPPED: (1.0,)})
-    >>> [(str(s.direction)[0], s.view_pass, s.side, len(s.views)) for s in plan]
+    >>> [(s.direction and str(s.direction)[0], s.view_pass, s.side, len(s.views)) for s in plan]
     ... # doctest: +NORMALIZE_WHITESPACE
-    [('g', 0, 'finer', 1), ('s', 0, 'finer', 1), ('g', 1, 'both', 5), ('g', 2, 'both', 10),
-     ('g', 3, 'both', 35)]
+    [('g', 0, 'finer', 1), ('s', 0, 'finer', 1), (None, 1, 'both', 5), (None, 2, 'both', 10),
+     (None, 3, 'both', 35)]
     >>> [(str(d)[0], sc) for d, sc in plan[-1].directions]
     [('g', (1.0, 2.0)), ('s', (1.0,))]
     """
@@ -111,8 +114,7 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
     plan = [Step(d, 0, PLAIN, tuple(scales[d]), 1) for d in directions]
     if directions and searched_as_a_map(config) and config.mode == "default":
         both = tuple((d, tuple(scales[d])) for d in directions)
-        plan += [Step(directions[0], k, tuple(keys), tuple(scales[directions[0]]),
-                      config.views.full_searches, "both", both)
+        plan += [Step(None, k, tuple(keys), (), config.views.full_searches, "both", both)
                  for k, keys in enumerate(view_plan(config.views), 1) if keys]
     return tuple(plan)
 
@@ -151,8 +153,11 @@ class Attempt:
     """One search matched in full: a view of the finer image, in one direction, and its verdict."""
 
     step: Step = field(repr=False)
+    direction: Direction  #: which image was taken as the coarser one
     view: View = field(repr=False)
-    probe: float  #: the probe's best score for this view (inf when the probe is off)
+    #: what chose this view pair for the full match: the probe's best score (the finer image
+    #: itself; inf when the probe is off), or the votes of its best cell (a pass of views)
+    chosen_by: float
     outcomes: Tuple[ScaleOutcome, ...] = field(repr=False)
     verdict: Decision = field(repr=False)
     #: the view of the coarser image matched against (None: the coarser image itself); the

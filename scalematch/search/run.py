@@ -62,7 +62,7 @@ def run_step(search: Search, step: Step,
     else:
         candidate = probe_plain(search, step)
         attempts = match_chosen(search, step, [candidate], searches + 1)
-        record = StepRecord(step.direction, 0, 1, len(attempts), candidate.score,
+        record = StepRecord(step.direction, 0, 1, len(attempts), candidate.chosen_by,
                             any(a.matched for a in attempts), step.side)
     meter.tick(start + step.cost - meter.done)  # what the step left out
     return attempts, record, time.perf_counter() - t0

@@ -61,7 +61,8 @@ def run_views(search: Search, step: Step, searches: int) -> Tuple[List[Attempt],
     chosen = [view_pair(search, sides[r.side][0], images, r, scales[sides[r.side][0]])
               for r in ranked]
     attempts = match_chosen(search, step, chosen, searches + pairs)
-    record = StepRecord(step.direction, step.view_pass, pairs, len(attempts),
+    # the record names the first direction searched; its side, "both", says both were
+    record = StepRecord(directions[0], step.view_pass, pairs, len(attempts),
                         max((r.votes for r in ranked), default=0),
                         any(a.matched for a in attempts), "both")
     return attempts, record

@@ -22,14 +22,15 @@ BOTH = {GIVEN: (1.0, 2.0, 4.0), SWAPPED: (1.0, 2.0)}
 def attempt(step: Step, matched: bool, inliers: int = 50, lnfa: float = -30.0) -> Attempt:
     verdict = Decision(matched, "" if matched else "too few inliers", 2.0, None,
                        np.zeros((0, 4)), Evidence(inliers=inliers, log10_nfa=lnfa))
-    return Attempt(step, identity_view(np.zeros((30, 30), np.float32)), 10.0, (), verdict)
+    return Attempt(step, step.direction or GIVEN, identity_view(np.zeros((30, 30), np.float32)),
+                   10.0, (), verdict)
 
 
 def test_the_plan_runs_the_images_themselves_given_first_then_passes_of_pooled_views():
     plan = search_plan(Config(), BOTH)
     assert [(s.direction, s.view_pass, s.side, len(s.views)) for s in plan] == [
-        (GIVEN, 0, "finer", 1), (SWAPPED, 0, "finer", 1), (GIVEN, 1, "both", 5),
-        (GIVEN, 2, "both", 10), (GIVEN, 3, "both", 35)]
+        (GIVEN, 0, "finer", 1), (SWAPPED, 0, "finer", 1), (None, 1, "both", 5),
+        (None, 2, "both", 10), (None, 3, "both", 35)]
     assert plan[1].scales == (1.0, 2.0) and plan[0].scales == (1.0, 2.0, 4.0)
     # a pass of views searches both directions, each at its own scales
     assert plan[2].directions == ((GIVEN, (1.0, 2.0, 4.0)), (SWAPPED, (1.0, 2.0)))
@@ -41,7 +42,7 @@ def test_the_plan_runs_the_images_themselves_given_first_then_passes_of_pooled_v
 
 def test_the_plan_follows_the_order_the_views_the_model_and_the_mode():
     given = search_plan(Config(order="given"), BOTH)
-    assert [(s.direction, s.view_pass) for s in given] == [(GIVEN, k) for k in range(4)]
+    assert [(s.direction, s.view_pass) for s in given] == [(GIVEN, 0)] + [(None, k) for k in range(1, 4)]
     assert given[1].directions == ((GIVEN, (1.0, 2.0, 4.0)),)
     no_views = Config(views=ViewParams(enabled=False))
     assert [s.view_pass for s in search_plan(no_views, BOTH)] == [0, 0]
