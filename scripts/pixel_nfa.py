@@ -126,11 +126,71 @@ def pixel_figures(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray,
     q_alt = max(q, 1.0 / m)
     tests = elsewhere_n + nearby_n
     tail, tail_alt = log10_tail(m, j, q_hat), log10_tail(m, j, q_alt)
+    out.update(disagreeing_blocks(tpl, pixel))
     out.update(pix_status="ok", j=j, share_claim=a.claimed, q_elsewhere=_plain(a.elsewhere),
                count_elsewhere=c_else, count_nearby=c_near, q=q, q_hat=q_hat, q_alt=q_alt,
                log10_tests_pix=math.log10(max(tests, 1)), log10_tail=tail,
                log10_tail_alt=tail_alt)
     return out
+
+
+def claim_windows(placed, pixel: PixelParams, min_std: float = 1.0) -> Dict[Tuple[int, int], bool]:
+    """{(row, col) of the template's window grid: whether it agrees} at the claimed placement:
+    the windows ``agreement_map`` counts (wholly in the mask, not flat), each agreeing when its
+    ZNCC reaches ``window_ncc`` at the placement within 1 px of the claim where most agree (as
+    ``uniqueness._at_claim`` takes the best share there)."""
+    import cv2
+
+    side, least = pixel.window_px, pixel.window_ncc
+    tpl, mask, low = placed.tpl, placed.mask, placed.low
+    h, w = tpl.shape
+    shifts = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)
+              if 0 <= placed.y0 + dy <= low.shape[0] - h and 0 <= placed.x0 + dx <= low.shape[1] - w]
+    agree: Dict[Tuple[int, int], list] = {}
+    for oy in range(0, h - side + 1, side):
+        for ox in range(0, w - side + 1, side):
+            patch = np.ascontiguousarray(tpl[oy:oy + side, ox:ox + side])
+            if not mask[oy:oy + side, ox:ox + side].all() or float(patch.std()) <= min_std:
+                continue
+            y, x = placed.y0 + oy, placed.x0 + ox
+            region = np.ascontiguousarray(low[max(y - 1, 0):y + side + 1, max(x - 1, 0):x + side + 1])
+            r = cv2.matchTemplate(region, patch, cv2.TM_CCOEFF_NORMED)
+            agree[(oy // side, ox // side)] = [
+                bool(r[dy + (1 if y >= 1 else 0), dx + (1 if x >= 1 else 0)] >= least)
+                if 0 <= dy + (1 if y >= 1 else 0) < r.shape[0]
+                and 0 <= dx + (1 if x >= 1 else 0) < r.shape[1] else False
+                for dy, dx in shifts]
+    if not agree:
+        return {}
+    best = max(range(len(shifts)), key=lambda k: sum(v[k] for v in agree.values()))
+    return {cell: v[best] for cell, v in agree.items()}
+
+
+def blocks(cells) -> list:
+    """Sizes of the 4-connected groups of grid ``cells`` ((row, col)), largest first."""
+    left, sizes = set(cells), []
+    while left:
+        stack, size = [left.pop()], 0
+        while stack:
+            r, c = stack.pop()
+            size += 1
+            for n in ((r + 1, c), (r - 1, c), (r, c + 1), (r, c - 1)):
+                if n in left:
+                    left.remove(n)
+                    stack.append(n)
+        sizes.append(size)
+    return sorted(sizes, reverse=True)
+
+
+def disagreeing_blocks(placed, pixel: PixelParams) -> Dict[str, Any]:
+    """Where the windows that disagree at the claim lie: their 4-connected blocks on the
+    window grid (an occluder or a missing part is one block; a copy's misfit is scattered)."""
+    grid = claim_windows(placed, pixel)
+    off = [cell for cell, ok in grid.items() if not ok]
+    sizes = blocks(off)
+    return {"grid_windows": len(grid), "grid_agreeing": len(grid) - len(off),
+            "disagree_blocks": sizes[:8],
+            "largest_block_of_disagreeing": (sizes[0] / len(off)) if off else None}
 
 
 def _q_hat(c_else: Optional[int], m: int, c_near: Optional[int], m_near: int) -> float:
