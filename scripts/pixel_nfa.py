@@ -537,6 +537,27 @@ def distribution_table(rows: Sequence[Dict[str, Any]]) -> str:
     return "\n".join(out)
 
 
+def blocks_table(rows: Sequence[Dict[str, Any]]) -> str:
+    """Where the windows that disagree at a map lie, per pooled group: the share agreeing at
+    the claim, and the largest 4-connected block's share of those that disagree (1: one block,
+    as an occluder or a missing part leaves; small: scattered)."""
+    out = ["| maps of | with a window off | agreeing share p50 [min, max] | largest block's share "
+           "p5 / p50 / p95 | one block |", "|---|---:|---|---|---:|"]
+    for pool, keep in POOLS:
+        rs = [r for r in rows if keep(r) and r.get("grid_windows")]
+        off = [r for r in rs if r.get("largest_block_of_disagreeing") is not None]
+        if not rs:
+            continue
+        agree = [r["grid_agreeing"] / r["grid_windows"] for r in rs]
+        big = [r["largest_block_of_disagreeing"] for r in off]
+        spread = " / ".join(f"{np.percentile(big, q, method='nearest'):.2f}" for q in (5, 50, 95)) \
+            if big else "-"
+        out.append(f"| {pool} | {len(off)} of {len(rs)} | {np.median(agree):.2f} "
+                   f"[{min(agree):.2f}, {max(agree):.2f}] | {spread} | "
+                   f"{sum(b == 1.0 for b in big)} |")
+    return "\n".join(out)
+
+
 def occluder_photo(r: Dict[str, Any], names: Sequence[str]) -> Optional[str]:
     """The photo an occluded pair's occluder is cut from, as the lab chose it (None: no
     occluder): ``realpairs.realistic_sets`` takes the photo after the coarser image's in the
@@ -666,6 +687,7 @@ def summary(rows: Sequence[Dict[str, Any]]) -> str:
     parts = [f"{len(rows)} runs; q_hat = (c + 1) / (n + 2) of the best wrong placement.", "",
              "### Groups", "", groups_table(rows), "", "### Per kind", "", kinds_table(rows), "",
              "### Each figure's distribution", "", distribution_table(rows), "",
+             "### Where the windows that disagree lie", "", blocks_table(rows), "",
              "### The most significant null map by each figure", "", nulls_table(rows), "",
              "Without the null runs whose occluder is cut from a photo of the coarser image's "
              f"scene ({sum(r['null'] and r.get('occluder_from_low_scene', False) for r in rows)}"
