@@ -32,7 +32,7 @@ import numpy as np
 
 from .config import Config
 from .geometry import finer_to_coarser
-from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence
+from .result import Direction, Evidence, MatchResult, Rejected, ScaleRow, build_evidence, figure
 from .search.plan import Attempt, SearchRun, climbing, fit_spec, probe_best, searched, strongest
 from .search.shared import Search
 from .stages.acontrario import FinalFigures, figures
@@ -161,7 +161,7 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     def fitness(k: int) -> Tuple[float, float]:
         ncc = checks[k].ncc
         return (ncc if math.isfinite(ncc) else -math.inf,
-                -matched[k].verdict.evidence.log10_nfa)
+                -matched[k].verdict.log10_nfa)
 
     k = max(range(len(matched)), key=fitness)
     return matched[k], fits[k], checks[k]
@@ -173,7 +173,7 @@ def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
     it (``MatchResult.rejected``); None when no search found a transform to refuse."""
     refused = [a for a in attempts if not a.matched and a.verdict.candidate is not None
                and a.view.is_identity and a.coarser_view is None]
-    return min(refused, key=lambda a: a.verdict.evidence.log10_nfa, default=None)
+    return min(refused, key=lambda a: a.verdict.log10_nfa, default=None)
 
 
 def rejected_candidate(t: np.ndarray, inliers: np.ndarray, model: str, direction: Direction,
@@ -199,7 +199,7 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
     firmly its inliers pin it (:func:`pinned_answer`).
     """
     records, plan, stopped = run.records, run.plan, run.stopped
-    decided = shown.verdict.evidence
+    decided = shown.verdict.figures
     direction = shown.direction
     g = shown_scale(work, direction) * shown.view.scale
     f_coarser = work.f_low if direction is Direction.GIVEN else work.f_high
@@ -211,9 +211,9 @@ def evidence_of(shown: Attempt, run: SearchRun, final: Optional[FinalFigures],
                      probe_best=probe_best([r.probe_best for r in records]),
                      steps_run=len(records), steps_planned=len(plan), stopped=stopped)
     sized = dict(low_working_factor=work.f_low, high_working_factor=work.f_high,
-                 implied_ratio=decided.implied_ratio * g,
-                 footprint_area_px=decided.footprint_area_px * f_coarser ** 2)
-    return build_evidence(asdict(decided), asdict(final) if final is not None else {},
+                 implied_ratio=figure(decided, "implied_ratio") * g,
+                 footprint_area_px=figure(decided, "footprint_area_px") * f_coarser ** 2)
+    return build_evidence(decided, asdict(final) if final is not None else {},
                           searched_, sized, seen or {})
 
 
@@ -275,7 +275,7 @@ def matrix_answer(search: Search, run: SearchRun) -> MatchResult:
     if winner is None:
         return refused(search, run, best_refused(run.attempts) or run.attempts[0])
     fit, config = in_images(winner, search), search.config
-    seen = plane_parallax(fit.inliers, winner.verdict.evidence, fit_spec(config), config.decision)
+    seen = plane_parallax(fit.inliers, winner.verdict.figures, fit_spec(config), config.decision)
     return answered(search, run, winner, fit, seen)
 
 
@@ -321,8 +321,8 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
         shown.coarser_view is None and not shown.matched
     rejected = None if not has_candidate else rejected_candidate(
         verdict.candidate, verdict.candidate_inliers, fit_spec(config).model, shown.direction,
-        verdict.test, verdict.evidence.log10_nfa,
-        figures(verdict.test, verdict.evidence, config.decision))
+        verdict.test, verdict.log10_nfa,
+        figures(verdict.test, verdict.figures, config.decision))
     return MatchResult(matched=False, reason=verdict.reason + more, rejected=rejected,
                        evidence=evidence_of(shown, run, None, search.work),
                        **_common(search, run, shown))
@@ -339,9 +339,9 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     # (plan.stop_reason); without one (no views, or the time budget spent), the
     # pixels must show it more clearly unique
     unconfirmed = winner.step.view_pass == 0 and \
-        verdict.evidence.inliers < config.views.confirm_below_inliers and \
+        verdict.counted < config.views.confirm_below_inliers and \
         not any(r.view_pass > 0 for r in run.records)
-    claim = Claim(t, verdict.evidence.log10_nfa, vouched=inliers[:, :2], unconfirmed=unconfirmed)
+    claim = Claim(t, verdict.log10_nfa, vouched=inliers[:, :2], unconfirmed=unconfirmed)
     final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                        pixel=config.pixel)
     if not reason:
@@ -350,8 +350,8 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
                       min_unique_ratio=unique_threshold(config.decision, unconfirmed))
     return final, MatchResult(
         matched=False, reason=reason, rejected=rejected_candidate(
-            t, inliers, model, winner.direction, test, verdict.evidence.log10_nfa,
-            figures(test, verdict.evidence, applied, final)),
+            t, inliers, model, winner.direction, test, verdict.log10_nfa,
+            figures(test, verdict.figures, applied, final)),
         evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
 
 
@@ -451,7 +451,7 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
               f"do not fix its epipole, and no plane map of the scene passes the decision "
               f"({plane.reason})")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
-                        figures("plane", evidence, config.decision), result.order)
+                        figures("plane", asdict(evidence), config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,
                    inliers=np.zeros((0, 4)), evidence=evidence, timings=timings,
                    order=Direction.GIVEN, rejected=rejected)

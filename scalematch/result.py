@@ -11,7 +11,7 @@ from __future__ import annotations
 import enum
 import json
 import math
-from dataclasses import asdict, dataclass, field, is_dataclass
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -56,10 +56,10 @@ class NoDataSeen:
 class Evidence:
     """The figures behind the decision (JSON ``evidence``); NaN where a figure was not reached.
 
-    Made only by :func:`build_evidence`, once per search decided
-    (:mod:`scalematch.stages.decision`) and once for the answer
-    (:func:`scalematch.answer.evidence_of`: the decision's figures, the final transform's
-    pixel tests, the search's own figures and the working size's).
+    Made only by :func:`build_evidence`, in the answer module alone
+    (:func:`scalematch.answer.evidence_of`: the figures the decision of the search shown
+    reached, ``Decision.figures``, the final transform's pixel tests, the search's own figures
+    and the working size's).
     """
 
     inliers: int = 0  #: distinct inliers of the best transform
@@ -148,6 +148,16 @@ class Evidence:
 
 
 
+def figure(figures: Mapping[str, Any], name: str) -> Any:
+    """The figure ``name`` of ``figures`` (by :class:`Evidence`'s names), or Evidence's default
+    where it was not reached (NaN, inf or 0).
+
+    >>> figure({"inliers": 12}, "inliers"), figure({}, "log10_nfa")
+    (12, inf)
+    """
+    return figures[name] if name in figures else _EVIDENCE_DEFAULTS[name]
+
+
 def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
     """The one way an :class:`Evidence` is made: the figures of ``parts``, in order, a later
     part's over an earlier one's; a figure no part gives keeps its default (NaN or 0: not
@@ -163,6 +173,10 @@ def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
     for part in parts:
         figures.update(part)
     return Evidence(**figures)
+
+
+#: Each figure's value where it was not reached (:func:`figure`)
+_EVIDENCE_DEFAULTS: Dict[str, Any] = {f.name: f.default for f in fields(Evidence)}
 
 @dataclass(frozen=True)
 class StepRecord:

@@ -175,28 +175,57 @@ def _calls(tree):
     yield from walk(tree, "")
 
 
-def test_evidence_is_made_only_by_its_builder():
-    """An ``Evidence`` comes from ``result.build_evidence`` alone, and none is changed after
-    (``replace`` on an evidence): the figures of a decision are assembled in one place."""
+def test_evidence_is_built_in_the_answer_module_alone():
+    """An ``Evidence`` comes from ``result.build_evidence`` alone, and only the answer module
+    calls it: the decision hands on the figures its tests reached, and the answer assembles
+    them once (``answer.evidence_of``)."""
     import ast
 
     def name(f):
         return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
 
-    def an_evidence(arg) -> bool:
-        return (isinstance(arg, ast.Name) and arg.id in ("evidence", "e", "decided")) or \
-            (isinstance(arg, ast.Attribute) and arg.attr == "evidence")
-
     offenders = []
     for path in sorted((ROOT / "scalematch").rglob("*.py")):
-        if "lab" in path.relative_to(ROOT / "scalematch").parts:
+        rel = path.relative_to(ROOT / "scalematch")
+        if "lab" in rel.parts:
             continue
         for call, owner in _calls(ast.parse(path.read_text())):
             made = name(call.func) == "Evidence" and owner != "build_evidence"
-            changed = name(call.func) == "replace" and call.args and an_evidence(call.args[0])
-            if made or changed:
-                offenders.append(f"{path.relative_to(ROOT)}:{call.lineno} in {owner}")
+            built = name(call.func) == "build_evidence" and rel.as_posix() != "answer.py"
+            if made or built:
+                offenders.append(f"{rel}:{call.lineno} in {owner}")
     assert not offenders, offenders
+
+
+def test_no_evidence_is_made_or_changed_but_by_the_answer(monkeypatch):
+    """While a match runs (a match, a "no", and a fundamental matrix answered by its plane
+    map), every ``Evidence`` made is one the answer module built: none comes from a
+    ``replace`` or a copy elsewhere."""
+    import numpy as np
+
+    import scalematch
+    from scalematch import answer, result
+
+    made, built = [], []
+    init, build = result.Evidence.__init__, answer.build_evidence
+
+    def counted_init(self, *args, **kwargs):
+        made.append(1)
+        init(self, *args, **kwargs)
+
+    def counted_build(*parts):
+        built.append(1)
+        return build(*parts)
+
+    monkeypatch.setattr(result.Evidence, "__init__", counted_init)
+    monkeypatch.setattr(answer, "build_evidence", counted_build)
+    low = scalematch.read_grey(ROOT / "data" / "demo_low.png")
+    high = scalematch.read_grey(ROOT / "data" / "demo_high.png")
+    noise = np.random.default_rng(0).uniform(0, 255, high.shape).astype(np.float32)
+    results = [scalematch.match(low, high), scalematch.match(low, noise),
+               scalematch.match(low, high, scalematch.Config(model="fundamental"))]
+    assert [r.matched for r in results] == [True, False, True]
+    assert len(built) >= len(results) and len(made) == len(built)
 
 
 def test_every_package_of_the_product_is_installed():

@@ -11,7 +11,7 @@ orientation, ``guided``: the second look's growth) instead of comparing the mode
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Union
+from typing import Callable, ClassVar, Dict, List, Optional, Union
 
 import numpy as np
 
@@ -36,6 +36,8 @@ class GradientMode:
     orientation: Optional[OrientationParams]
     guided: GuidedParams  #: the second look's guided growth, orientation used
     covariance_used: str = ""  #: no covariance: the histograms are compared as they are
+    #: its points carry an orientation, so the pooled vote over views can count rotations
+    votes_over_views: ClassVar[bool] = True
 
     @staticmethod
     def of(config: Config) -> "GradientMode":
@@ -64,6 +66,8 @@ class JetMode:
     guided: GuidedParams
     #: the jets carry no orientation: no rotation groups, none in the a-contrario count
     orientation: Optional[OrientationParams] = None
+    #: no orientation to vote with: the paper's search is the plain one
+    votes_over_views: ClassVar[bool] = False
 
     @staticmethod
     def of(config: Config) -> "JetMode":
@@ -87,9 +91,16 @@ class JetMode:
 
 Mode = Union[GradientMode, JetMode]
 
+#: Each name of ``config.MODES`` and its strategy
+KINDS: Dict[str, type] = {"default": GradientMode, "paper": JetMode}
 #: Each name of ``config.MODES`` and how its strategy is built from a ``Config``.
-STRATEGIES: Dict[str, Callable[[Config], Mode]] = {"default": GradientMode.of,
-                                                    "paper": JetMode.of}
+STRATEGIES: Dict[str, Callable[[Config], Mode]] = {name: kind.of for name, kind in KINDS.items()}
+
+
+def votes_over_views(config: Config) -> bool:
+    """Whether ``config.mode``'s points can be voted over views (:mod:`scalematch.search.viewpass`),
+    which needs their orientations."""
+    return KINDS[config.mode].votes_over_views
 
 
 def mode_of(config: Config) -> Mode:

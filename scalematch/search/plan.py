@@ -30,6 +30,7 @@ from ..stages.estimator import Estimate, FitSpec, model_of
 from ..stages.refit import ModelCheckParams
 from ..stages.views import View, view_plan
 from ..working import WorkImages
+from .modes import votes_over_views
 
 #: (tilt, longitude in degrees) of a view; (1, 0) is the image itself.
 ViewKey = Tuple[float, float]
@@ -112,7 +113,7 @@ def search_plan(config, scales: Mapping[Direction, Tuple[float, ...]],
               for d in order}
     directions = [d for d in order if scales[d]]
     plan = [Step(d, 0, PLAIN, tuple(scales[d]), 1) for d in directions]
-    if directions and searched_as_a_map(config) and config.mode == "default":
+    if directions and searched_as_a_map(config) and votes_over_views(config):
         both = tuple((d, tuple(scales[d])) for d in directions)
         plan += [Step(None, k, tuple(keys), (), config.views.full_searches, "both", both)
                  for k, keys in enumerate(view_plan(config.views), 1) if keys]
@@ -181,7 +182,7 @@ class Attempt:
 def strongest(attempts: Sequence[Attempt]) -> Optional[Attempt]:
     """The matched attempt with the strongest evidence (lowest log10 NFA; the first of ties)."""
     found = [a for a in attempts if a.matched]
-    return min(found, key=lambda a: a.verdict.evidence.log10_nfa) if found else None
+    return min(found, key=lambda a: a.verdict.log10_nfa) if found else None
 
 
 def skips(step: Step, attempts: Sequence[Attempt], config) -> bool:
@@ -208,7 +209,7 @@ def searched_as_a_map(config) -> bool:
 def overwhelming(attempt: Attempt, config) -> bool:
     """A match so far beyond chance that no other view of its step can do better."""
     return attempt.matched and \
-        attempt.verdict.evidence.log10_nfa <= config.decision.max_log_nfa_alone
+        attempt.verdict.log10_nfa <= config.decision.max_log_nfa_alone
 
 
 def stop_reason(step: Step, attempts: Sequence[Attempt], plan: Sequence[Step],
@@ -228,7 +229,7 @@ def stop_reason(step: Step, attempts: Sequence[Attempt], plan: Sequence[Step],
         step, attempts, config)
     if not pass_over:
         return None
-    weak = best.verdict.evidence.inliers < config.views.confirm_below_inliers
+    weak = best.verdict.counted < config.views.confirm_below_inliers
     confirm = weak and step.view_pass == 0 and any(s.view_pass > 0 for s in rest)
     if confirm:
         return None

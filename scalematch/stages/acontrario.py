@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar, Mapping, Optional
+from typing import Any, ClassVar, Mapping, Optional
 
 import numpy as np
 
 from ..checks import Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
-from ..result import Evidence, build_evidence
+from ..result import Evidence, figure
 from .estimator import model_of
 
 
@@ -238,12 +238,24 @@ class Decision:
     best_scale: float
     transform: Optional[np.ndarray] = field(repr=False)
     inliers: np.ndarray = field(repr=False)  #: (N, 4) x, y finer; x, y coarser
-    evidence: Evidence = field(default_factory=build_evidence)
+    #: the figures its tests reached, by :class:`~scalematch.result.Evidence`'s names (the
+    #: answer makes its one Evidence of them: ``answer.evidence_of``)
+    figures: Mapping[str, Any] = field(default_factory=dict)
     #: a "no": the test that refused (a key of ``TESTS``; "" when matched or nothing to refuse)
     test: str = ""
     #: a "no": the best transform and its inliers, as ``transform`` and ``inliers`` would be
     candidate: Optional[np.ndarray] = field(default=None, repr=False)
     candidate_inliers: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)), repr=False)
+
+    @property
+    def log10_nfa(self) -> float:
+        """The a-contrario figure of its best transform (inf where none was counted)."""
+        return float(figure(self.figures, "log10_nfa"))
+
+    @property
+    def counted(self) -> int:
+        """The inliers the a-contrario test counted (one to one for an epipolar geometry)."""
+        return int(figure(self.figures, "inliers"))
 
 
 #: The tests that refuse a best transform, and the figures each reports (from the evidence,
@@ -292,17 +304,25 @@ class FinalFigures:
     near_windows_nearby: float = math.nan  #: the highest share at a nearby placement
 
 
-def figures(test: str, evidence: Evidence, params: DecisionParams,
+def figures(test: str, reached: Mapping[str, Any], params: DecisionParams,
             final: Optional[FinalFigures] = None) -> dict:
     """The figures of ``test`` (:data:`TESTS`): name -> value, from the final transform's
-    pixel tests (``final``, when it faced them), the evidence or the params.
+    pixel tests (``final``, when it faced them), the figures ``reached`` (by
+    :class:`~scalematch.result.Evidence`'s names; its default where not reached) or the params.
 
-    >>> figures("chance", Evidence(inliers=5, candidates=40, log10_nfa=-1.0), DecisionParams())
+    >>> figures("chance", dict(inliers=5, candidates=40, log10_nfa=-1.0), DecisionParams())
     {'inliers': 5, 'candidates': 40, 'log10_nfa': -1.0, 'max_log_nfa': -2.0}
     """
-    sources = ((final,) if final is not None else ()) + (evidence, params)
-    return {name: getattr(next(s for s in sources if hasattr(s, name)), name)
-            for name in TESTS.get(test, ())}
+    def one(name: str):
+        if final is not None and hasattr(final, name):
+            return getattr(final, name)
+        return figure(reached, name) if name in EVIDENCE_NAMES else getattr(params, name)
+
+    return {name: one(name) for name in TESTS.get(test, ())}
+
+
+#: The figures an :class:`~scalematch.result.Evidence` holds
+EVIDENCE_NAMES = frozenset(Evidence.__dataclass_fields__)
 
 
 def log10_binom(n: int, k: int) -> float:

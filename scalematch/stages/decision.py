@@ -38,7 +38,6 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 import numpy as np
 
 from ..geometry import apply, footprint, grid
-from ..result import build_evidence
 from .acontrario import Decision, DecisionParams, Winner, chance_probability, log10_nfa
 from .constraints import OrientationParams
 from .estimator import FitSpec, model_of
@@ -191,7 +190,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
               and o.row.inliers > 0]
     if not with_t:
         return Decision(False, "no scale produced a transform (too few candidate matches)",
-                        math.nan, None, np.zeros((0, 4)), build_evidence())
+                        math.nan, None, np.zeros((0, 4)), {})
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
     plausible = [o for o in with_t if not disagrees(o.row, context.fit.model, params)]
     if not plausible:
@@ -210,7 +209,7 @@ def _implausible(with_t: Sequence, shown_scale: float) -> Decision:
     return Decision(False, f"no scale found a transform consistent with its own scale "
                     f"(the one with the most inliers, {best.row.inliers} at scale "
                     f"{best.row.s * shown_scale:.3g}, {implies})",
-                    best.row.s, None, np.zeros((0, 4)), build_evidence())
+                    best.row.s, None, np.zeros((0, 4)), {})
 
 
 def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext,
@@ -245,7 +244,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
 
     def no(reason: str, test: str) -> Decision:  # with the figures, t and pairs reached
         return Decision(False, reason, best.row.s, None, np.zeros((0, 4)),
-                        build_evidence(figs), test, t, pairs)
+                        dict(figs), test, t, pairs)
 
     # the second look decides only below min_inliers, or for a footprint mostly outside the
     # coarser image (the final map's pixel tests follow every match, final_checks): elsewhere
@@ -271,7 +270,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
                   f"scale {shown:.3g}) could arise by chance ({_count_said(lnfa, w.m, params)})",
                   "chance")
     if not placed:
-        return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
+        return Decision(True, "", best.row.s, t, pairs, dict(figs))
     figs, refusal = _footprint_tests(t, shapes, w, figs, params, second)
     if refusal is None:
         figs, refusal = _agreement_test(t, w, with_t, shapes[1], figs, params,
@@ -280,7 +279,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
         figs, refusal = _rival_test(w, shapes[1], figs, params, context.fit)
     if refusal is not None:
         return no(*refusal)
-    return Decision(True, "", best.row.s, t, pairs, build_evidence(figs))
+    return Decision(True, "", best.row.s, t, pairs, dict(figs))
 
 
 def _inliers_said(k: int, matches: int) -> str:

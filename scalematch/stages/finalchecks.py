@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Mapping, Optional
 
 import numpy as np
 
-from ..result import Evidence
+from ..result import figure
 from .acontrario import DecisionParams, FinalFigures, log10_nfa, windows_chance
 from .epipolar import one_to_one
 from .estimator import FitSpec, estimate, model_of
@@ -37,7 +37,7 @@ class Claim:
     unconfirmed: bool = False
 
 
-def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
+def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
                    params: DecisionParams) -> Dict[str, Any]:
     """Whether an epipolar geometry's inliers ``pairs`` ((N, 4) x, y finer; x, y coarser, the
     search's working px) show parallax by themselves: the figures ``parallax_points``,
@@ -59,8 +59,9 @@ def plane_parallax(pairs: np.ndarray, counted: Evidence, fit: FitSpec,
     unaffected by a dominant plane", CVPR 2005) made a-contrario.
     """
     m = model_of(fit.model).min_sample
-    n, k, p = int(counted.candidates), int(counted.inliers), float(counted.chance_p)
-    log10_tests = counted.log10_nfa - log10_nfa(n, k, m, p, 1.0)
+    n, k = int(figure(counted, "candidates")), int(figure(counted, "inliers"))
+    p = float(figure(counted, "chance_p"))
+    log10_tests = figure(counted, "log10_nfa") - log10_nfa(n, k, m, p, 1.0)
     pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
     pairs = pairs[one_to_one(pairs, params.same_point_px)]
     plane = estimate("homography", pairs[:, :2], pairs[:, 2:], fit.ransac, seed=fit.seed)

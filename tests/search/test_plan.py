@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scalematch.config import MODELS, Config
-from scalematch.result import Direction, Evidence
+from scalematch.result import Direction
 from scalematch.search.plan import (Attempt, Step, fit_spec, search_plan, skips, stop_reason,
                                strongest)
 from scalematch.stages.acontrario import Decision
@@ -21,7 +21,7 @@ BOTH = {GIVEN: (1.0, 2.0, 4.0), SWAPPED: (1.0, 2.0)}
 
 def attempt(step: Step, matched: bool, inliers: int = 50, lnfa: float = -30.0) -> Attempt:
     verdict = Decision(matched, "" if matched else "too few inliers", 2.0, None,
-                       np.zeros((0, 4)), Evidence(inliers=inliers, log10_nfa=lnfa))
+                       np.zeros((0, 4)), dict(inliers=inliers, log10_nfa=lnfa))
     return Attempt(step, step.direction or GIVEN, identity_view(np.zeros((30, 30), np.float32)),
                    10.0, (), verdict)
 
@@ -128,7 +128,7 @@ def test_strongest_is_none_without_a_match_and_prefers_the_lowest_nfa():
     plan = search_plan(Config(), BOTH)
     assert strongest([attempt(plan[0], False)]) is None
     a, b = attempt(plan[0], True, lnfa=-5.0), attempt(plan[1], True, lnfa=-50.0)
-    assert strongest([a, b]) is b and math.isfinite(b.verdict.evidence.log10_nfa)
+    assert strongest([a, b]) is b and math.isfinite(b.verdict.log10_nfa)
 
 
 @pytest.mark.parametrize("config", [Config(), Config(order="given"), Config.paper()])

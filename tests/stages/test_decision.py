@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from scalematch.geometry import similarity_matrix
+from scalematch.result import figure
 from scalematch.stages.decision import mean_transfer_gap
 
 
@@ -103,8 +104,8 @@ def test_five_inliers_are_refused_without_a_second_look_and_accepted_with_a_good
     assert not plain.matched and "too few inliers: 5" in plain.reason
     good = decide(outcomes, (768, 1024), (480, 640), **_params(config),
                    sight=_look(grown=25, margin=0.3))
-    assert good.matched and good.evidence.grown_inliers == 25
-    assert good.evidence.pixel_margin == 0.3 and good.inliers.shape == (25, 4)
+    assert good.matched and figure(good.figures, "grown_inliers") == 25
+    assert figure(good.figures, "pixel_margin") == 0.3 and good.inliers.shape == (25, 4)
 
 
 def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis():
@@ -120,7 +121,7 @@ def test_the_pixel_check_or_a_growth_that_fails_refuses_a_few_inlier_hypothesis(
     _, three = _outcomes(k=3, n=8)
     verdict = decide(three, (768, 1024), (480, 640), **_params(config),
                    sight=_look(grown=40, margin=0.6))
-    assert not verdict.matched and verdict.evidence.grown_inliers == 40
+    assert not verdict.matched and figure(verdict.figures, "grown_inliers") == 40
 
 
 def test_a_few_inlier_map_the_pixels_place_better_nearby_is_ambiguous():
@@ -150,7 +151,7 @@ def test_a_few_inlier_map_the_pixels_place_better_nearby_is_ambiguous():
             assert verdict.reason.startswith(f"ambiguous: a placement {moved:.0%} of the "
                                              f"footprint away fits the pixels better")
             assert verdict.test == "nearby placement"
-            shown = figures(verdict.test, verdict.evidence, config.decision)
+            shown = figures(verdict.test, verdict.figures, config.decision)
             assert shown["inliers"] == 5 and shown["pixel_margin"] == 0.3  # the record's
     _, many = _outcomes(k=12, n=20)
     sight = _Sight(_look(grown=25, margin=0.3).look, Nearby(0.5, 0.99, 0.3, np.eye(3)))
@@ -176,7 +177,8 @@ def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_on
     good = decide(strong, (768, 1024), (480, 640), **_params(Config()), sight=occluded)
     assert asked == [params.few_min_margin]
     assert good.matched, good.reason
-    assert good.evidence.pixel_windows == 37 and good.evidence.pixel_windows_agreeing == 0.35
+    assert figure(good.figures, "pixel_windows") == 37
+    assert figure(good.figures, "pixel_windows_agreeing") == 0.35
     few = decide(strong, (768, 1024), (480, 640), **_params(Config()),
                  sight=_look(grown=5, margin=0.09, windows=NearWindows(12, 7 / 12, 0.0)))
     assert few.matched, few.reason
@@ -190,8 +192,8 @@ def test_an_occluded_few_inlier_map_is_confirmed_by_its_windows_beyond_chance_on
     verdict = decide(weak, (768, 1024), (480, 640), **_params(Config()),
                      sight=_look(grown=5, margin=0.09, windows=NearWindows(37, 0.35, 0.03),
                                 asked=asked))
-    assert params.few_max_log_nfa < verdict.evidence.log10_nfa <= params.max_log_nfa
-    assert not verdict.matched and math.isnan(asked[0]) and verdict.evidence.pixel_windows == 0
+    assert params.few_max_log_nfa < verdict.log10_nfa <= params.max_log_nfa
+    assert not verdict.matched and math.isnan(asked[0]) and figure(verdict.figures, "pixel_windows") == 0
 
 
 def test_an_overhanging_footprint_needs_overwhelming_evidence_or_pixels_that_confirm_it():
@@ -205,11 +207,11 @@ def test_an_overhanging_footprint_needs_overwhelming_evidence_or_pixels_that_con
     # a margin no wrong placement reaches (few_clear_margin) confirms the part inside
     clear = decide(outcomes, coarser, (480, 640), **_params(config),
                    sight=_look(grown=5, margin=0.6))
-    assert clear.matched and clear.evidence.footprint_inside < 0.5
+    assert clear.matched and figure(clear.figures, "footprint_inside") < 0.5
     # many inliers but no second look: the footprint test refuses below max_log_nfa_alone
     t, outcomes = _outcomes(k=6, n=100)
     plain = decide(outcomes, coarser, (480, 640), **_params(config))
-    assert plain.evidence.log10_nfa > config.decision.max_log_nfa_alone
+    assert plain.log10_nfa > config.decision.max_log_nfa_alone
     assert not plain.matched and plain.test == "footprint inside"
 
 
@@ -280,14 +282,14 @@ def test_a_repeated_facade_shows_a_second_transform_and_is_refused_as_ambiguous(
     verdict = decide(_facade((260.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
     assert not verdict.matched and verdict.test == "repeated structure"
     assert "second transform" in verdict.reason and "repeated structure" in verdict.reason
-    assert verdict.evidence.second_inliers == 40 and verdict.candidate is not None
+    assert figure(verdict.figures, "second_inliers") == 40 and verdict.candidate is not None
     # the same support for a copy only a few px away is one scene fitted piecewise
     near = decide(_facade((6.0, 0.0)), (768, 1024), (480, 640), **_params(Config()))
-    assert near.matched and near.evidence.second_inliers == 40
+    assert near.matched and figure(near.figures, "second_inliers") == 40
     # a copy with a fifth of the support is not comparable: the winner stands
     weak = decide(_facade((260.0, 0.0), k2=12), (768, 1024), (480, 640),
                   **_params(Config()))
-    assert weak.matched and weak.evidence.second_inliers == 12
+    assert weak.matched and figure(weak.figures, "second_inliers") == 12
 
 
 def test_a_footprint_mostly_outside_is_confirmed_by_the_second_look_at_any_count():
@@ -306,10 +308,10 @@ def test_a_footprint_mostly_outside_is_confirmed_by_the_second_look_at_any_count
     shapes = ((340, 1024), (480, 640))  # the footprint overhangs the coarser image's bottom
     plain = decide(outcomes, *shapes, **_params(Config()))
     assert not plain.matched and plain.test == "footprint inside", plain.reason
-    assert -10 < plain.evidence.log10_nfa < -2 and plain.evidence.footprint_inside < 0.5
+    assert -10 < plain.log10_nfa < -2 and figure(plain.figures, "footprint_inside") < 0.5
     good = decide(outcomes, *shapes, **_params(Config()), sight=_look(grown=6, margin=0.3))
     assert good.matched, good.reason
-    assert good.evidence.pixel_margin == 0.3
+    assert figure(good.figures, "pixel_margin") == 0.3
     flat = decide(outcomes, *shapes, **_params(Config()), sight=_look(grown=6, margin=0.0))
     assert not flat.matched and flat.test == "footprint inside"
 
@@ -338,4 +340,4 @@ def test_a_refused_epipolar_geometry_says_the_figures_its_record_gives():
     assert not d.matched and d.test == "chance"
     assert "7 inliers counted one to one (9 matches) of 40 candidates" in d.reason
     assert "inf" not in d.reason and "none beyond chance" in d.reason
-    assert d.evidence.inliers == 7 and len(d.candidate_inliers) == 9
+    assert d.counted == 7 and len(d.candidate_inliers) == 9

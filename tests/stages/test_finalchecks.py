@@ -113,14 +113,12 @@ def _two_views(depths: np.ndarray, rng) -> np.ndarray:
 
 
 def _counted_f(pairs: np.ndarray, candidates: int):
-    """The evidence of an epipolar geometry with ``pairs`` as its inliers among
-    ``candidates``, counted as the decision counts it (one test per subset size)."""
-    from scalematch.result import Evidence
-
+    """The figures the decision reaches for an epipolar geometry with ``pairs`` as its
+    inliers among ``candidates``, counted as it counts them (one test per subset size)."""
     p = chance_probability(3.0, (480, 640), "fundamental", False, 0.0)
     k = len(pairs)
-    return Evidence(inliers=k, candidates=candidates, chance_p=p,
-                    log10_nfa=log10_nfa(candidates, k, 8, p, candidates - 8))
+    return dict(inliers=k, candidates=candidates, chance_p=p,
+                log10_nfa=log10_nfa(candidates, k, 8, p, candidates - 8))
 
 
 def test_a_3d_scene_shows_parallax_off_its_plane_and_a_flat_one_does_not():
