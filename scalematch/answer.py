@@ -443,7 +443,8 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
     if plane.matched:
         return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
                        timings=timings, config=result.config)
-    evidence = build_evidence(asdict(e), figs)
+    reached = dict(asdict(e), **figs)
+    evidence = build_evidence(reached)
     count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
              if math.isfinite(e.parallax_log10_nfa) else "too few to count")
     reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
@@ -451,7 +452,7 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
               f"do not fix its epipole, and no plane map of the scene passes the decision "
               f"({plane.reason})")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
-                        figures("plane", asdict(evidence), config.decision), result.order)
+                        figures("plane", reached, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,
                    inliers=np.zeros((0, 4)), evidence=evidence, timings=timings,
                    order=Direction.GIVEN, rejected=rejected)

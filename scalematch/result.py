@@ -147,7 +147,6 @@ class Evidence:
     high_working_factor: float = 1.0  #: the high image was matched shrunk by this factor
 
 
-
 def figure(figures: Mapping[str, Any], name: str) -> Any:
     """The figure ``name`` of ``figures`` (by :class:`Evidence`'s names), or Evidence's default
     where it was not reached (NaN, inf or 0).
@@ -155,7 +154,7 @@ def figure(figures: Mapping[str, Any], name: str) -> Any:
     >>> figure({"inliers": 12}, "inliers"), figure({}, "log10_nfa")
     (12, inf)
     """
-    return figures[name] if name in figures else _EVIDENCE_DEFAULTS[name]
+    return figures[name] if name in figures else EVIDENCE_DEFAULTS[name]
 
 
 def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
@@ -175,8 +174,9 @@ def build_evidence(*parts: Mapping[str, Any]) -> Evidence:
     return Evidence(**figures)
 
 
-#: Each figure's value where it was not reached (:func:`figure`)
-_EVIDENCE_DEFAULTS: Dict[str, Any] = {f.name: f.default for f in fields(Evidence)}
+#: Each figure of an :class:`Evidence` and its value where it was not reached (:func:`figure`)
+EVIDENCE_DEFAULTS: Dict[str, Any] = {f.name: f.default for f in fields(Evidence)}
+
 
 @dataclass(frozen=True)
 class StepRecord:

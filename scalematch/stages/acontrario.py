@@ -17,7 +17,7 @@ from typing import Any, ClassVar, Mapping, Optional
 import numpy as np
 
 from ..checks import Bounds, COUNT, FACTOR, FINITE, MARGIN, NON_NEGATIVE, POSITIVE, PROBABILITY, SHARE, check_bounds, one_of
-from ..result import Evidence, figure
+from ..result import EVIDENCE_DEFAULTS, figure
 from .estimator import model_of
 
 
@@ -316,13 +316,10 @@ def figures(test: str, reached: Mapping[str, Any], params: DecisionParams,
     def one(name: str):
         if final is not None and hasattr(final, name):
             return getattr(final, name)
-        return figure(reached, name) if name in EVIDENCE_NAMES else getattr(params, name)
+        return figure(reached, name) if name in EVIDENCE_DEFAULTS else getattr(params, name)
 
     return {name: one(name) for name in TESTS.get(test, ())}
 
-
-#: The figures an :class:`~scalematch.result.Evidence` holds
-EVIDENCE_NAMES = frozenset(Evidence.__dataclass_fields__)
 
 
 def log10_binom(n: int, k: int) -> float:
