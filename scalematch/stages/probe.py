@@ -20,7 +20,7 @@ from ..geometry import similarity_parts
 from .constraints import OrientationParams, orientation_groups
 from .descriptors import Described
 from .estimator import FitSpec, estimate
-from .matcher import Candidates, MatcherParams, match_descriptors
+from .matcher import Candidates, MatcherParams, distinct_pairs, match_descriptors
 
 
 @dataclass(frozen=True)
@@ -32,11 +32,12 @@ class ProbeParams:
     #: the 38 photos at ratios 8 and 10; 100 is 16 % faster)
     points: int = 100
     keep: int = 3  #: best-scoring scales kept, each with its two neighbours
-    #: a scale is among the best only with at least this score: its quick fit holds a point
-    #: beyond its minimal sample (a similarity is fixed by 2 points, so 2 inliers are no
-    #: evidence). A null pair's scales score 0 to 2 at nearly every scale, and were matched in
-    #: full for nothing; on the gate's pairs, no run was lost and 4 moved by under 0.2 px
-    #: (docs/design/SPEED.md, "The probe's floor"). 0 keeps the best scales whatever they score
+    #: a scale is among the best only with at least this score: its quick fit holds a distinct
+    #: point pair beyond its minimal sample (a similarity is fixed by 2 points, so 2 inliers
+    #: are no evidence). A null pair's scales score 0 to 2 at nearly every scale, and were
+    #: matched in full for nothing; on the gate's pairs, no run was lost and 4 moved by under
+    #: 0.2 px (docs/design/SPEED.md, "The probe's floor"). 0 keeps the best scales whatever
+    #: they score
     min_score: float = 3.0
     #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
     #: with 99.9 % confidence down to an inlier fraction of 12 %
@@ -61,9 +62,10 @@ def probe_scores(highs: Sequence[Described], low: Described, params: ProbeParams
 
     Each of ``highs`` holds the ``ProbeParams.points`` strongest points of one scale. In the
     paper mode (``orientation`` None: descriptors without an orientation) a scale's score is
-    their number of candidate matches. In the default mode it is the number of inliers of a
-    quick similarity fit to the candidates in the dominant rotation peak, counted only when the
-    fit's ratio agrees with the scale: rotation alone cannot rank scales where the scene's edges
+    their number of candidate matches. In the default mode it is the number of distinct inliers
+    (point pairs: a point described at two orientations counts once) of a quick similarity fit
+    to the candidates in the dominant rotation peak, counted only when the fit's ratio agrees
+    with the scale: rotation alone cannot rank scales where the scene's edges
     share a few directions (facades), geometry can. One nearest-neighbour search serves every
     scale (each candidate depends on its own row only; one large product is faster than many
     small ones).
@@ -96,8 +98,11 @@ def _score(high: Described, low: Described, cand: Candidates,
     groups = orientation_groups(low.angle[cand.j] - high.angle[cand.i], orientation)
     best = 0.0
     for mask in groups:
-        est = estimate(quick.model, high.xy[cand.i[mask]], low.xy[cand.j[mask]],
-                       quick.ransac, seed=quick.seed)
+        # distinct pairs, as the full match fits them (search.full): a point described at two
+        # orientations is matched twice, and a chance similarity through two points and such a
+        # copy would score 3, the floor
+        src, dst = distinct_pairs(high.xy[cand.i[mask]], low.xy[cand.j[mask]])
+        est = estimate(quick.model, src, dst, quick.ransac, seed=quick.seed)
         if est.transform is None:
             continue
         ratio = similarity_parts(est.transform)[0]
