@@ -171,8 +171,10 @@ def test_the_reason_names_a_scale_of_the_table_at_working_size(raccoon):
     low = raccoon[:600, :800]
     noise = np.random.default_rng(3).uniform(0, 255, (600, 800)).astype(np.float32)
     high = cv2.GaussianBlur(noise, (0, 0), 3.0) * 4.0  # a texture the raccoon does not hold
+    # every scale matched in full (no probe): the best of them is refused, named by its scale
     result = match(low, high, Config(low_max_side=300, high_max_side=500,
-                                     views=replace(Config().views, enabled=False)))
+                                     views=replace(Config().views, enabled=False),
+                                     probe=replace(Config().probe, enabled=False)))
     assert not result.matched
     found = re.findall(r"scale (\d+(?:\.\d+)?)", result.reason)
     assert found, result.reason

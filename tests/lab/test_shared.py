@@ -63,11 +63,12 @@ def test_a_repeated_facade_seen_obliquely_is_not_a_wrong_similarity(shared_dir):
     r = match(pair.low, pair.high)
     assert r.matched, r.reason
     assert reprojection_error(r.transform, pair.truth, pair.high.shape, pair.low.shape) < 3.0
-    # without views nothing confirms it: the pixels must show it unique by 2.5, and the facade
-    # (2.10) is refused rather than claimed 67 px off
+    # without views the plain search alone finds the right affine map too (measured 0.39 px,
+    # uniqueness ratio 76): its probe, counting distinct point pairs, no longer sends it to
+    # the facade's scale, and the facade's similarity is not what it answers
     plain = match(pair.low, pair.high, Config.preset("no-views"))
-    assert not plain.matched and plain.rejected.test == "uniqueness", plain.reason
-    assert plain.rejected.figures["min_unique_ratio"] == 2.5  # the threshold it faced
+    assert plain.matched, plain.reason
+    assert reprojection_error(plain.transform, pair.truth, pair.high.shape, pair.low.shape) < 3.0
 
 
 def test_a_smooth_crop_s_tilted_view_does_not_outvote_the_right_plain_match(shared_dir):
