@@ -37,8 +37,7 @@ from .search.plan import Attempt, SearchRun, climbing, fit_spec, probe_best, sea
 from .search.shared import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.estimator import model_of, residuals
-from .stages.finalchecks import (Claim, final_checks, plane_parallax, unique_threshold,
-                                 windows_agree)
+from .stages.finalchecks import Claim, final_checks, plane_parallax, windows_agree
 from .stages.matcher import distinct_pairs
 from .stages.pixelcheck import overlap_ncc, pixel_check
 from .stages.refit import (Fit, Pinned, allowed_maps, by_counts, by_pixels, candidates_in_images,
@@ -335,23 +334,15 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     config, verdict = search.config, winner.verdict
     t, inliers, model = fit
     coarse, fine = search.work.shown(winner.direction)
-    # a plain match of few inliers is confirmed by the first pass of views
-    # (plan.stop_reason); without one (no views, or the time budget spent), the
-    # pixels must show it more clearly unique
-    unconfirmed = winner.step.view_pass == 0 and \
-        verdict.counted < config.views.confirm_below_inliers and \
-        not any(r.view_pass > 0 for r in run.records)
-    claim = Claim(t, verdict.log10_nfa, vouched=inliers[:, :2], unconfirmed=unconfirmed)
+    claim = Claim(t, verdict.log10_nfa, vouched=inliers[:, :2])
     final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                        pixel=config.pixel)
     if not reason:
         return final, None
-    applied = replace(config.decision,  # the uniqueness ratio it faced
-                      min_unique_ratio=unique_threshold(config.decision, unconfirmed))
     return final, MatchResult(
         matched=False, reason=reason, rejected=rejected_candidate(
             t, inliers, model, winner.direction, test, verdict.log10_nfa,
-            figures(test, verdict.figures, applied, final)),
+            figures(test, verdict.figures, config.decision, final)),
         evidence=evidence_of(winner, run, final, search.work), **_common(search, run, winner))
 
 

@@ -79,14 +79,6 @@ class DecisionParams:
     #: (600 null runs, docs/design/DECISION.md, "Why the geometry can outweigh the pixels")
     #: nan (the finer image covers the coarser one: no room elsewhere) passes.
     min_unique_ratio: float = 2.0
-    #: ... and at least this for a plain match of fewer than ``views.confirm_below_inliers``
-    #: that no pass of views confirmed (``--no-views``, or a time budget spent first): the
-    #: views' pass is what catches a repeated facade seen obliquely, which the plain search
-    #: matches with a few inliers (a t = 2.83 tilted pair: 6 inliers at log10 NFA -12.5,
-    #: 67 px off, ratio 2.10, claimed with ``--no-views``). The lowest true weak plain match
-    #: measured with ``--no-views`` had 2.88 (an occluded pair at ratio 8, 5 inliers; the
-    #: realistic and tilted sets, both orders); true zoom pairs 3.75 and more
-    unconfirmed_min_unique_ratio: float = 2.5
     #: ... or, compared window by window (``stages.uniqueness.window_agreement``), windows
     #: agreeing at the claim beyond chance (:func:`windows_chance` at most ``max_log_nfa``), of
     #: which this share ...
@@ -198,7 +190,6 @@ class DecisionParams:
         "min_final_margin": MARGIN,
         "min_near_windows": SHARE,
         "max_log_nfa_geometry": FINITE,
-        "unconfirmed_min_unique_ratio": NON_NEGATIVE,
         "second_share": NON_NEGATIVE,
         "second_scale_factor": FACTOR,
         "second_angle_deg": NON_NEGATIVE,

@@ -32,9 +32,6 @@ class Claim:
     log10_nfa: float  #: the decision's a-contrario figure for it
     #: the finer px (N, 2) of the inliers that vouch for it; None: the whole footprint
     vouched: Optional[np.ndarray] = field(default=None, repr=False)
-    #: a plain match of few inliers that no pass of views confirmed: its pixels must show it
-    #: unique by ``DecisionParams.unconfirmed_min_unique_ratio``
-    unconfirmed: bool = False
 
 
 def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
@@ -92,13 +89,6 @@ def windows_agree(a: Agreement, params: DecisionParams) -> bool:
                             params)
 
 
-def unique_threshold(params: DecisionParams, unconfirmed: bool) -> float:
-    """The uniqueness ratio a claim needs (:func:`final_checks`): ``min_unique_ratio``, or for
-    a weak plain match no view confirmed, ``unconfirmed_min_unique_ratio`` if higher."""
-    return max(params.min_unique_ratio, params.unconfirmed_min_unique_ratio) if unconfirmed \
-        else params.min_unique_ratio
-
-
 def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
                  near=None, pixel: PixelParams = PixelParams()):
     """(figures, reason, test): the pixel tests of a match's final transform ``claim.transform``
@@ -143,7 +133,7 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
                          judged_by="geometry" if geometric else "pixels")
     if geometric:
         return final, "", ""
-    if u.ratio < unique_threshold(params, claim.unconfirmed):  # nan: no room elsewhere, passes
+    if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, passes
         a = agreement_of(placed, pixel)
         final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
                         windows_elsewhere=a.elsewhere)

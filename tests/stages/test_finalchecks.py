@@ -34,29 +34,6 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     assert reason.startswith("ambiguous") and final.unique_ratio < params.min_unique_ratio
 
 
-def test_a_plain_match_no_view_confirmed_must_be_more_clearly_unique(raccoon):
-    """A weak plain match that no pass of views confirmed (``Claim.unconfirmed``) needs the
-    uniqueness ratio ``unconfirmed_min_unique_ratio``; a confirmed one ``min_unique_ratio``."""
-    from dataclasses import replace
-
-    import cv2
-
-    from scalematch.config import Config
-    from scalematch.stages.finalchecks import Claim, final_checks
-
-    base = raccoon[200:260, 300:380]
-    high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
-    t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
-    scene = raccoon[170:350, 260:500]
-    ratio = final_checks(scene, high, Claim(t, math.inf), Config().decision)[0].unique_ratio
-    # between the two thresholds, the windows' rescue (for occluders) out of reach
-    params = replace(Config().decision, min_unique_ratio=ratio / 2,
-                     unconfirmed_min_unique_ratio=ratio * 2, min_window_ratio=10.0 ** 6)
-    assert final_checks(scene, high, Claim(t, math.inf), params)[1] == ""
-    _, reason, test = final_checks(scene, high, Claim(t, math.inf, unconfirmed=True), params)
-    assert reason.startswith("ambiguous") and test == "uniqueness"
-
-
 def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
     """The final pixel test (min_final_margin): the right map passes with a wide margin; the
     same map turned by 10 degrees about its footprint's centre (one of the pixel check's
