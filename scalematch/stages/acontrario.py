@@ -37,13 +37,19 @@ class DecisionParams:
     #: docs/DESIGN.md, "What real pairs need"), or when the second look's pixels confirm it
     #: (:func:`scalematch.stages.secondlook.look_confirms`; taken for this at any count of inliers)
     min_inside: float = 0.5
-    #: evidence this far beyond chance (log10 NFA) stands alone: a footprint mostly outside the
-    #: coarser image needs no pixels to confirm it, and a view's match ends its step of views
-    #: (``search.plan.overwhelming``: no other view can do better). The best
-    #: transforms of 39 unrelated pairs measured during development never went below -1.05,
-    #: true ones at ratio 10 with 7 or 8 inliers reach -17 to -25 (docs/results/BENCHMARKS.md)
+    #: another scale agrees when its transform maps the finer image within this many coarser
+    #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
+    agreement_px: float = 4.0
+    min_agreeing_scales: int = 1  #: other scales that must agree with the winner ...
+    #: ... unless the winner alone is this far beyond chance (log10 NFA): the best transforms of
+    #: 39 unrelated pairs measured during development never went below -1.05, true ones at
+    #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/results/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the coarser image, px^2 (8x8)
+    #: a best transform with at least this many distinct inliers, and fewer than
+    #: ``min_inliers``, gets a second look (guided growth and the pixel check,
+    #: :func:`scalematch.stages.secondlook.look_again`), recorded in the evidence
+    look_min_inliers: int = 3
     #: the second look may accept a transform with fewer than ``min_inliers`` (the right answer
     #: at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13; docs/design/DECISION.md, "The
     #: ground for each threshold"), down to this many ...
@@ -51,6 +57,11 @@ class DecisionParams:
     #: ... when its log10 NFA is at most this (null runs' best transforms: median +4, none
     #: below -6 but the repeated structures, docs/results/NULLS.md) ...
     few_max_log_nfa: float = -6.0
+    #: ... its guided growth keeps at least this many inliers (0: growth is recorded, not
+    #: required: at the coarse scales where few points remain there is nothing to grow into;
+    #: measured 5 -> 5 on the true 5-inlier answers at ratio 10-16, docs/design/DECISION.md,
+    #: "The ground for each threshold") ...
+    few_min_grown: int = 0
     #: ... and its pixel check beats every nearby wrong placement by this much ZNCC (true
     #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
     #: docs/design/DECISION.md, "The ground for each threshold" and "Guided growth and the
@@ -174,13 +185,17 @@ class DecisionParams:
     #: each number's range, checked when the parameters are made (``checks.check_bounds``)
     BOUNDS: ClassVar[Mapping[str, Bounds]] = {
         "min_inliers": COUNT,
+        "min_agreeing_scales": COUNT,
         "max_log_nfa": FINITE,
         "same_point_px": NON_NEGATIVE,
         "max_log_nfa_alone": FINITE,
         "scale_agreement": FACTOR,
         "min_inside": SHARE,
+        "agreement_px": POSITIVE,
         "min_area_px": NON_NEGATIVE,
+        "look_min_inliers": COUNT,
         "few_min_inliers": COUNT,
+        "few_min_grown": COUNT,
         "few_max_log_nfa": FINITE,
         "few_min_margin": MARGIN,
         "few_clear_margin": MARGIN,
@@ -243,6 +258,8 @@ TESTS = {
     "footprint area": ("footprint_area_px", "min_area_px"),
     "footprint inside": ("footprint_inside", "min_inside", "log10_nfa", "max_log_nfa_alone",
                          "pixel_margin"),
+    "agreeing scales": ("agreeing_scales", "min_agreeing_scales", "log10_nfa",
+                        "max_log_nfa_alone"),
     "repeated structure": ("inliers", "second_inliers", "second_gap_px", "second_share"),
     "nearby placement": ("inliers", "log10_nfa", "pixel_ncc", "pixel_margin"),
     "uniqueness": ("unique_ratio", "min_unique_ratio", "unique_claimed", "unique_elsewhere",

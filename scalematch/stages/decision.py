@@ -24,13 +24,8 @@ show evidence that an unrelated pair cannot produce:
    when the evidence is overwhelming (``max_log_nfa_alone``) or when the pixels of the part
    inside confirm a few-inlier map (:func:`scalematch.stages.secondlook.look_confirms`); with weaker
    evidence at least ``min_inside`` of it must lie inside.
-4. *No repeated structure*: no second transform of the same scale and angle stands elsewhere
-   among the candidates the winner leaves over (:func:`repeats`).
-
-How many other scales found (nearly) the same transform, as the paper's Table 1 shows for a
-true match, is recorded (``agreeing_scales``), not decisive: the pixel tests that follow every
-match (:func:`scalematch.stages.finalchecks.final_checks`) decide what it used to
-(docs/design/DECISION.md, "Agreeing scales: recorded, not decisive").
+4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
+   (nearly) the same transform, as the paper's Table 1 shows for a true match.
 """
 
 
@@ -186,8 +181,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     ``look(t, outcome, windows_below)`` takes the second look
     (:func:`scalematch.stages.secondlook.look_again`, with
     :func:`scalematch.stages.secondlook.look_windows_below`) at a best transform of
-    more inliers than its minimal sample and fewer than ``min_inliers`` (a sample alone is no
-    evidence: its NFA is infinite): its figures go in the evidence, and it may
+    ``look_min_inliers`` to ``min_inliers - 1`` inliers: its figures go in the evidence, and it may
     accept a transform of ``few_min_inliers`` or more
     (:func:`scalematch.stages.secondlook.look_confirms`). The accepted transform faces more tests
     once refit (:func:`scalematch.stages.finalchecks.final_checks`).
@@ -240,8 +234,8 @@ def _counted(best, outcomes: Sequence, coarser_shape, context: SearchContext,
 def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
             context: SearchContext, sight: Optional[Sight]) -> Decision:
     """The winner ``w`` through the tests, in order (the module's docstring): enough inliers
-    (or few, confirmed by the second look), beyond chance, a plausible footprint, no repeated
-    structure. ``shapes``: (coarser, finer) (H, W)."""
+    (or few, confirmed by the second look), beyond chance, a plausible footprint, agreeing
+    scales, no repeated structure. ``shapes``: (coarser, finer) (H, W)."""
     best, k, lnfa = w.outcome, w.k, w.log10_nfa
     shown = best.row.s * context.shown_scale
     t = best.estimate.transform
@@ -258,7 +252,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     placed = maps_points(context.fit.model)  # a footprint and pixels to test
     second = sight.look(t, best, look_windows_below(lnfa, params)) \
         if sight is not None and placed and (
-            w.m < k < params.min_inliers
+            params.look_min_inliers <= k < params.min_inliers
             or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)
     if k < params.min_inliers:
@@ -278,7 +272,9 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     if not placed:
         return Decision(True, "", best.row.s, t, pairs, dict(figs))
     figs, refusal = _footprint_tests(t, shapes, w, figs, params, second)
-    figs = {**figs, "agreeing_scales": _agreeing_scales(t, w, with_t, shapes[1])}
+    if refusal is None:
+        figs, refusal = _agreement_test(t, w, with_t, shapes[1], figs, params,
+                                        context.shown_scale)
     if refusal is None:
         figs, refusal = _rival_test(w, shapes[1], figs, params, context.fit)
     if refusal is not None:
@@ -365,17 +361,27 @@ def _footprint_tests(t: np.ndarray, shapes, w: Winner, figs: Figures, params: De
     return figs, None
 
 
-#: another scale agrees with the winner when its transform maps the finer image within this
-#: many coarser px of the winner's (the mean over a grid, as EVALUATION.md measures an error):
-#: the figure ``agreeing_scales``, recorded, not decisive
-AGREEMENT_PX = 4.0
-
-
-def _agreeing_scales(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape) -> int:
-    """How many scales other than the winner's found (nearly) ``t``, each with more inliers than
-    its minimal sample (the paper's Table 1)."""
-    return sum(1 for o in with_t if o is not w.outcome and o.row.inliers >= w.m + 1
-               and mean_transfer_gap(o.estimate.transform, t, finer_shape) <= AGREEMENT_PX)
+def _agreement_test(t: np.ndarray, w: Winner, with_t: Sequence, finer_shape,
+                    figs: Figures, params: DecisionParams,
+                    shown_scale: float) -> Tuple[Figures, Refusal]:
+    """Test 4, consistent neighbouring scales: how many other scales found (nearly) ``t``;
+    enough of them unless the winner is overwhelming alone or has fewer than ``min_inliers``
+    (the second look confirmed it). ``shown_scale``: :attr:`SearchContext.shown_scale`."""
+    best = w.outcome
+    few = w.k < params.min_inliers
+    agreeing = 0
+    for o in with_t:
+        if o is best or o.row.inliers < w.m + 1:
+            continue
+        if mean_transfer_gap(o.estimate.transform, t, finer_shape) <= params.agreement_px:
+            agreeing += 1
+    figs = {**figs, "agreeing_scales": agreeing}
+    if agreeing < params.min_agreeing_scales and w.log10_nfa > params.max_log_nfa_alone \
+            and not few:
+        return figs, (f"no other scale agrees with the best one "
+                      f"(scale {best.row.s * shown_scale:.3g}, "
+                      f"{w.k} inliers)", "agreeing scales")
+    return figs, None
 
 
 def _rival_test(w: Winner, finer_shape, figs: Figures, params: DecisionParams,

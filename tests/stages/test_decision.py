@@ -341,35 +341,3 @@ def test_a_refused_epipolar_geometry_says_the_figures_its_record_gives():
     assert "7 inliers counted one to one (9 matches) of 40 candidates" in d.reason
     assert "inf" not in d.reason and "none beyond chance" in d.reason
     assert d.counted == 7 and len(d.candidate_inliers) == 9
-
-
-def test_agreeing_scales_are_recorded_and_a_lone_scale_is_left_to_the_pixels():
-    """How many other scales found the winner's map (the paper's Table 1) is evidence, not a
-    test: a 7-inlier map beyond chance but not overwhelming (log10 NFA between -10 and -2)
-    found at one scale alone passes the decision (the final map's pixel tests follow), and a
-    neighbouring scale that found the same map within ``AGREEMENT_PX`` counts, one 10 px off
-    does not."""
-    from dataclasses import replace
-
-    from scalematch.config import Config
-    from scalematch.stages.decision import AGREEMENT_PX, decide
-    from scalematch.stages.estimator import Estimate
-
-    t, (best, _) = _outcomes(k=7, n=400)
-    shapes = ((768, 1024), (480, 640))
-    alone = decide((best,), *shapes, **_params(Config()))
-    assert alone.matched, alone.reason
-    assert -10 < alone.log10_nfa < -2 and figure(alone.figures, "agreeing_scales") == 0
-
-    def neighbour(shift_px: float):
-        u = t.copy()
-        u[0, 2] += shift_px
-        est = Estimate("similarity", u, best.estimate.inliers, best.estimate.residuals)
-        return replace(best, row=replace(best.row, s=best.row.s * 1.26, inliers=5),
-                       estimate=est)
-
-    near, far = neighbour(0.5 * AGREEMENT_PX), neighbour(10.0)
-    assert figure(decide((best, near), *shapes, **_params(Config())).figures,
-                  "agreeing_scales") == 1
-    assert figure(decide((best, far), *shapes, **_params(Config())).figures,
-                  "agreeing_scales") == 0
