@@ -11,7 +11,7 @@ orientation, ``guided``: the second look's growth) instead of comparing the mode
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Dict, List, Optional, Union
+from typing import ClassVar, Dict, List, Optional, Union
 
 import numpy as np
 
@@ -91,10 +91,8 @@ class JetMode:
 
 Mode = Union[GradientMode, JetMode]
 
-#: Each name of ``config.MODES`` and its strategy
+#: Each name of ``config.MODES`` and its strategy (built from a ``Config`` by its ``of``)
 KINDS: Dict[str, type] = {"default": GradientMode, "paper": JetMode}
-#: Each name of ``config.MODES`` and how its strategy is built from a ``Config``.
-STRATEGIES: Dict[str, Callable[[Config], Mode]] = {name: kind.of for name, kind in KINDS.items()}
 
 
 def votes_over_views(config: Config) -> bool:
@@ -105,4 +103,4 @@ def votes_over_views(config: Config) -> bool:
 
 def mode_of(config: Config) -> Mode:
     """The strategy of ``config.mode``, built once for a search (the paper's reads Lambda)."""
-    return STRATEGIES[config.mode](config)
+    return KINDS[config.mode].of(config)
