@@ -46,10 +46,6 @@ class DecisionParams:
     #: ratio 10 with 7 or 8 inliers reach -17 to -25 (false claims: docs/results/BENCHMARKS.md)
     max_log_nfa_alone: float = -10.0
     min_area_px: float = 64.0  #: smallest footprint area in the coarser image, px^2 (8x8)
-    #: a best transform with at least this many distinct inliers, and fewer than
-    #: ``min_inliers``, gets a second look (guided growth and the pixel check,
-    #: :func:`scalematch.stages.secondlook.look_again`), recorded in the evidence
-    look_min_inliers: int = 3
     #: the second look may accept a transform with fewer than ``min_inliers`` (the right answer
     #: at ratio 8-10 had 4-5 inliers at log10 NFA -7 to -13; docs/design/DECISION.md, "The
     #: ground for each threshold"), down to this many ...
@@ -57,11 +53,6 @@ class DecisionParams:
     #: ... when its log10 NFA is at most this (null runs' best transforms: median +4, none
     #: below -6 but the repeated structures, docs/results/NULLS.md) ...
     few_max_log_nfa: float = -6.0
-    #: ... its guided growth keeps at least this many inliers (0: growth is recorded, not
-    #: required: at the coarse scales where few points remain there is nothing to grow into;
-    #: measured 5 -> 5 on the true 5-inlier answers at ratio 10-16, docs/design/DECISION.md,
-    #: "The ground for each threshold") ...
-    few_min_grown: int = 0
     #: ... and its pixel check beats every nearby wrong placement by this much ZNCC (true
     #: few-inlier answers measured 0.05 to 0.43; random wrong placements at most 0.04,
     #: docs/design/DECISION.md, "The ground for each threshold" and "Guided growth and the
@@ -193,9 +184,7 @@ class DecisionParams:
         "min_inside": SHARE,
         "agreement_px": POSITIVE,
         "min_area_px": NON_NEGATIVE,
-        "look_min_inliers": COUNT,
         "few_min_inliers": COUNT,
-        "few_min_grown": COUNT,
         "few_max_log_nfa": FINITE,
         "few_min_margin": MARGIN,
         "few_clear_margin": MARGIN,

@@ -181,7 +181,8 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     ``look(t, outcome, windows_below)`` takes the second look
     (:func:`scalematch.stages.secondlook.look_again`, with
     :func:`scalematch.stages.secondlook.look_windows_below`) at a best transform of
-    ``look_min_inliers`` to ``min_inliers - 1`` inliers: its figures go in the evidence, and it may
+    more inliers than its minimal sample and fewer than ``min_inliers`` (a sample alone is no
+    evidence: its NFA is infinite): its figures go in the evidence, and it may
     accept a transform of ``few_min_inliers`` or more
     (:func:`scalematch.stages.secondlook.look_confirms`). The accepted transform faces more tests
     once refit (:func:`scalematch.stages.finalchecks.final_checks`).
@@ -252,7 +253,7 @@ def _tested(w: Winner, with_t: Sequence, shapes, params: DecisionParams,
     placed = maps_points(context.fit.model)  # a footprint and pixels to test
     second = sight.look(t, best, look_windows_below(lnfa, params)) \
         if sight is not None and placed and (
-            params.look_min_inliers <= k < params.min_inliers
+            w.m < k < params.min_inliers
             or _outside_unproven(t, shapes, lnfa, params)) else None
     figs = _with_look(figs, second)
     if k < params.min_inliers:

@@ -1,10 +1,11 @@
 """The second look at a few-inlier hypothesis (docs/design/DECISION.md, test 3).
 
-A best transform of ``look_min_inliers`` to ``min_inliers - 1`` inliers, or one whose footprint
-lies mostly outside the coarser image, is looked at again: grown by guided matching and checked
-with the pixels (:func:`look_again`, :class:`Look`, from what a search sees: :class:`Sight`,
-:class:`Seen`); :func:`look_confirms` and :func:`few_confirmed` say whether its pixels confirm
-it, :func:`placed_better_nearby` whether a placement nearby fits them better.
+A best transform of more inliers than its minimal sample and fewer than ``min_inliers``, or
+one whose footprint lies mostly outside the coarser image, is looked at again: grown by guided
+matching and checked with the pixels (:func:`look_again`, :class:`Look`, from what a search
+sees: :class:`Sight`, :class:`Seen`); :func:`look_confirms` and :func:`few_confirmed` say
+whether its pixels confirm it, :func:`placed_better_nearby` whether a placement nearby fits
+them better.
 """
 
 from __future__ import annotations
@@ -143,10 +144,12 @@ def look_confirms(log10_nfa: float, second: Optional[Look], params: DecisionPara
 
 def few_confirmed(w: Winner, second: Optional[Look], params: DecisionParams) -> bool:
     """Whether the second look accepts a winner of fewer than ``min_inliers``: enough inliers,
-    far enough beyond chance for its pixels (:func:`look_confirms`), grown enough."""
+    far enough beyond chance for its pixels (:func:`look_confirms`). Its growth is recorded,
+    not asked for: at the coarse scales where few points remain there is nothing to grow into
+    (the true 5-inlier answers at ratios 10-16 grew 5 -> 5; docs/design/DECISION.md, "The
+    ground for each threshold")."""
     return second is not None and w.k >= params.few_min_inliers and \
-        look_confirms(w.log10_nfa, second, params) and \
-        len(second.inliers) >= params.few_min_grown
+        look_confirms(w.log10_nfa, second, params)
 
 
 def placed_better_nearby(t: np.ndarray, k: int, sight: Sight) -> Optional[str]:
