@@ -32,10 +32,12 @@ class DecisionParams:
     max_log_nfa: float = -2.0
     scale_agreement: float = 1.6  #: implied ratio within this factor of the winning scale
     #: fraction of the finer image's footprint inside the coarser one, required only when the
-    #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``): partial overlap is
-    #: normal for real pairs (912 inliers at log10 NFA -4681 were refused at 50 %;
-    #: docs/DESIGN.md, "What real pairs need"), or when the second look's pixels confirm it
-    #: (:func:`scalematch.stages.secondlook.look_confirms`; taken for this at any count of inliers)
+    #: evidence is not overwhelming (log10 NFA above ``max_log_nfa_alone``) and the second
+    #: look's pixels do not confirm the part inside
+    #: (:func:`scalematch.stages.secondlook.look_confirms`; taken for this at any count of
+    #: inliers): partial overlap is normal for real pairs, where it is proven by the points or the
+    #: pixels; what is left is a chance transform hung mostly off the coarser image, whose pixels
+    #: cannot be checked (docs/DESIGN.md, "What real pairs need")
     min_inside: float = 0.5
     #: another scale agrees when its transform maps the finer image within this many coarser
     #: px of the winner's (mean over a grid, as EVALUATION.md measures error)
@@ -64,9 +66,9 @@ class DecisionParams:
     #: ... or, with a pixel margin of at least this, the plain a-contrario bound
     #: (``max_log_nfa``): the pixels then decide. The NFA counts every search made (202 for a
     #: "no" that reaches every view), and few points remain where the footprint is small or
-    #: overhangs the coarser image: true 4-5 inlier answers reach only -2.5 to -4.5 (hard set,
-    #: cathedral x16: margin 0.47; realistic partial pairs at ratios 6-8: 0.53 to 0.87; Oxford
-    #: boat 1->5 shrunk by 8, at scale 16: 0.27). No null run's best transform of 3 or more
+    #: overhangs the coarser image: true 4-5 inlier answers there reach only -2.5 to -4.5, with
+    #: pixel margins of 0.27 to 0.87 (zoom pairs at ratio 16, partial pairs at ratios 6-8, the
+    #: Oxford pairs zoomed by 8). No null run's best transform of 3 or more
     #: inliers reached half of it: 0.127 at the most in 1216 runs, 0.043 in the 600 runs of
     #: the rule with windows (docs/design/DECISION.md, "The ground for each threshold")
     few_clear_margin: float = 0.25
@@ -97,8 +99,8 @@ class DecisionParams:
     #: Measured (scripts/margin_study.py; docs/design/DECISION.md, "The final map: fitting
     #: best, and better than its neighbours") on the 686 right claims
     #: of true pairs (zoom, hard set, Oxford, tilted to t = 8): 0.035 at the least (p5 0.07 to
-    #: 0.22 per set); the one wrong claim there that the NFA passed (a t = 4 view of a t = 5.66
-    #: pair, 9 inliers at log10 NFA -19, 47 px off): -0.015. 0 means "a peak of the fit".
+    #: 0.22 per set); a wrong claim the NFA passes (a tilted view fitted to the wrong tilt) sits
+    #: at or below 0 (-0.015 measured). 0 means "a peak of the fit".
     min_final_margin: float = 0.0
     #: ... or, where that one ZNCC refuses, compared window by window over the whole
     #: footprint (``stages.pixelcheck.near_windows``): windows agreeing at the claim beyond
@@ -142,8 +144,9 @@ class DecisionParams:
     #: outliers among its scale's candidates (``stages.rivals.off_plane``, counted for the
     #: answer by ``answer.answer_parallax``; recorded, never decisive) ...
     parallax_min_points: int = 10
-    #: ... and this share of its inliers: measured 0 to 2 off-plane points on 15 zoom pairs of
-    #: real photos, 118 beside 42 inliers on the desk scene of ../shared/data/ef/zoom
+    #: ... and this share of its inliers: a flat scene leaves a few off-plane points that chance
+    #: lines up (0 to 2 measured on 15 zoom pairs of real photos), a 3-D scene a share of its
+    #: inliers or more (nearly 3 times them on the desk scene of ../shared/data/ef/zoom)
     parallax_share: float = 0.25
     #: distance to the epipolar line within which a candidate fits it, px
     parallax_threshold_px: float = 1.5
@@ -164,8 +167,8 @@ class DecisionParams:
     #: points, or their coarser points, lie within this many px of each other. Many finer points
     #: matched to one coarser point lie on every epipolar line through it, so with the epipole there
     #: they all fit: on the null set, the 7 pairs whose matrix reached the plane test had 19 to 46
-    #: inliers, 3 to 25 of them such copies; counted once, a bus's panels fell from 29 to 7 inliers,
-    #: a snowfield from 19 to 4, and a facade's log10 NFA from -56 to -2.3 (docs/design/DECISION.md)
+    #: inliers, 3 to 25 of them such copies; counted once, the strongest fell from log10 NFA -56
+    #: to -2.3 (docs/design/DECISION.md). 1 px: a point's position as the detector gives it
     same_point_px: float = 1.0
     #: a fundamental matrix whose inliers show no parallax
     #: (:func:`scalematch.stages.finalchecks.plane_parallax`) gives way to the plane map of the same
