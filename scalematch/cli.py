@@ -14,13 +14,11 @@ the ``Config`` they give (:mod:`scalematch.options`), the files written and chec
 from __future__ import annotations
 
 import contextlib
-import difflib
 import importlib
 import importlib.machinery
 import importlib.util
 import os
 import sys
-import traceback
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -105,6 +103,8 @@ class ScalematchGroup(click.Group):
                 sys.exit(EXIT_INTERRUPTED)
             given = sys.argv[1:] if args is None else list(args)
             if "-v" in given or "--verbose" in given:
+                import traceback
+
                 traceback.print_exc(file=sys.stderr)
                 hint = ""
             else:
@@ -185,6 +185,8 @@ def mistyped_command(word: str, commands: Sequence[str]) -> Optional[str]:
     """
     if word.startswith("-") or os.path.exists(word) or any(c in word for c in "./\\"):
         return None
+    import difflib
+
     near = difflib.get_close_matches(word, sorted(commands), n=1, cutoff=0.6)
     return near[0] if near else None
 

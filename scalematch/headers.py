@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import contextlib
 import io
-import logging
 import re
 import struct
 import threading
 import warnings
-from typing import Dict, Iterator, NamedTuple, Optional, Tuple
+from typing import Any, Dict, Iterator, NamedTuple, Optional, Tuple
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 JPEG_SOI = b"\xff\xd8"
@@ -114,10 +113,12 @@ def _pillow_unguarded() -> Iterator[None]:
             Image.MAX_IMAGE_PIXELS = saved
 
 
-class _NotWhileReading(logging.Filter):
-    """Drops Pillow's log records in a thread that is reading a header here (``_READING``)."""
+class _NotWhileReading:
+    """Drops Pillow's log records in a thread that is reading a header here (``_READING``): a
+    logging filter (any object with this method is one), not a ``logging.Filter``, so that
+    ``logging`` loads only when Pillow does."""
 
-    def filter(self, record: logging.LogRecord) -> bool:
+    def filter(self, record: Any) -> bool:
         return not (getattr(_READING, "header", False) and record.name.split(".")[0] == "PIL")
 
 
@@ -134,6 +135,8 @@ def _pillow_unlogged() -> Iterator[None]:
     no logging (``logging.lastResort``): here, that Pillow cannot read a header only means the
     readers of this module are tried next. The records still reach the handlers a program set
     up; only the last resort drops them, and only those of the thread reading."""
+    import logging
+
     if logging.lastResort is not None:
         logging.lastResort.addFilter(_QUIET_PILLOW)  # once: a filter is added only once
     _READING.header = True

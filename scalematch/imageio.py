@@ -70,7 +70,7 @@ def catch_decoder_stderr(on: bool = True) -> bool:
     """Whether each decode in this process, from now on, catches what the native decoders write
     on file descriptor 2 and says it in this module's words (``on``); the setting it replaces.
 
-    Off by default. While a decode catches them, descriptor 2 points at a temporary file
+    Off by default. While a decode catches them, descriptor 2 points at a file of no name
     (:func:`scalematch.decoderwords.native_stderr`) and OpenCV's own log is silenced, for the
     whole process: whatever another thread writes to stderr meanwhile is lost (caught, and
     quoted as the decoder's). Turn it on only in a process whose stderr is its own and quiet

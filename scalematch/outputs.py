@@ -132,12 +132,12 @@ def check_not_inputs(out_dir: Optional[Path], json_file: Optional[Path],
     """Refuse (exit 2) an output file of ``-o`` or ``--json`` that is one of ``inputs`` or
     one of the other's files, and ``-o -`` (standard output is for ``--json -`` only: the
     pictures are files)."""
-    from .render import OUTPUT_FILES
-
     if out_dir is not None and str(out_dir) == "-":
         raise InputError("--out-dir - : the pictures and matches.csv are files, not a stream; "
                          "give a folder (--json - writes the JSON to standard output)")
     if out_dir is not None:
+        from .render import OUTPUT_FILES  # the pictures' modules: loaded for -o only
+
         for name in OUTPUT_FILES:
             check_not_an_input(out_dir / name, inputs, "--out-dir", "folder")
     if json_file is not None:

@@ -9,7 +9,6 @@ integer coordinates); ``transform`` maps a *high-resolution* pixel to a *low-res
 from __future__ import annotations
 
 import enum
-import json
 import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
@@ -441,4 +440,6 @@ def to_jsonable(obj: Any) -> Any:
 
 def dumps(obj: Dict[str, Any], indent: Optional[int] = None) -> str:
     """JSON text; objects json cannot write (paths, numpy scalars left over) become strings."""
+    import json  # for --json and the batch only
+
     return json.dumps(to_jsonable(obj), indent=indent, default=str, allow_nan=False)

@@ -22,7 +22,6 @@ from ..stages.descriptors import Described, GradientParams, JetParams, describe_
     describe_jets
 from ..stages.detector import Keypoints
 from ..stages.guided import GuidedParams
-from ..stages.mahalanobis import load_covariance, whiten
 from ..stages.matcher import Candidates
 from ..stages.scalespace import Level
 
@@ -71,11 +70,15 @@ class JetMode:
 
     @staticmethod
     def of(config: Config) -> "JetMode":
+        from ..stages.mahalanobis import load_covariance  # the paper mode only
+
         cov = load_covariance(config.covariance_path)
         return JetMode(config.harris.sigma_tilde, config.jets, config.semi_local,
                        cov.whitening(), cov.source, config.guided)
 
     def describe(self, level: Level, kp: Keypoints) -> Described:
+        from ..stages.mahalanobis import whiten
+
         desc = describe_jets(level, kp.xy, self.sigma_tilde, self.jets)
         ok = np.all(np.isfinite(desc), axis=1)
         rows = np.nonzero(ok)[0]

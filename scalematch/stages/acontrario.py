@@ -23,6 +23,8 @@ from .estimator import model_of
 
 @dataclass(frozen=True)
 class DecisionParams:
+    """The thresholds of every test of the decision (``Config.decision``)."""
+
     #: fewest inliers ever accepted; the a-contrario test below is the real criterion (true
     #: matches at ratio 10 measured with 7 inliers at log10 NFA -17, unrelated pairs never above
     #: 4 inliers)
@@ -216,6 +218,8 @@ class DecisionParams:
 
 @dataclass(frozen=True)
 class Decision:
+    """The verdict of :func:`scalematch.stages.decision.decide`: a match, or a "no" and why."""
+
     matched: bool
     reason: str
     best_scale: float

@@ -30,6 +30,9 @@ from .scalespace import Level
 
 @dataclass(frozen=True)
 class OrientationParams:
+    """The rotation-consistency groups (``Config.orientation``): the histogram of the rotations
+    the candidates imply, and the peaks whose candidates are fitted."""
+
     bins: int = 36  #: histogram bins over 360 degrees (10 degrees each, as Lowe's pose bins: 30)
     tolerance_deg: float = 20.0  #: kept around a peak (orientation error of true matches ~5-10)
     second_peak: float = 0.5  #: a second peak at least this fraction of the first is also tried
@@ -86,6 +89,10 @@ def orientation_groups(dtheta: np.ndarray, params: OrientationParams = Orientati
 
 @dataclass(frozen=True)
 class SemiLocalParams:
+    """The paper's semi-local constraints (``Config.semi_local``): a candidate is kept when
+    enough of its neighbours agree with a local similarity through it and its patches
+    correlate (eq. 5)."""
+
     #: neighbourhood radius in the low image, px; in the high image it is ``radius_px * s``
     #: (the high image at scale s is the low one zoomed in by about s). The paper leaves it open;
     #: 30 px holds some tens of Harris points at the default threshold.

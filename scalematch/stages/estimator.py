@@ -33,6 +33,8 @@ MAX_RANSAC_ITERS = 100_000
 
 @dataclass(frozen=True)
 class RansacParams:
+    """The robust fit of every scale (``Config.ransac``)."""
+
     #: inlier threshold in low-resolution px at the matching scale. The paper lets it depend on s
     #: (section 4.2); here positions are compared on the level where the high image is zoomed
     #: out by s, where localisation error is about 1 px in both images, so the threshold in low

@@ -35,6 +35,8 @@ _THREADED_MIN = 2_000_000
 
 @dataclass(frozen=True)
 class MatcherParams:
+    """Which descriptor matches become candidates (``Config.matcher``)."""
+
     selection: str = "ratio"  #: one of SELECTIONS
     k: int = 2  #: neighbours for "knn" / "threshold"
     ratio: float = 0.9  #: nearest / second-nearest distance for "ratio" (Lowe 2004: 0.8)
