@@ -93,7 +93,7 @@ def main() -> None:
         for rows in pool.map(run, jobs):
             for row in rows:
                 f.write(json.dumps(row) + "\n")
-            runs += len(rows) // 2
+            runs += 2  # both orders, in each rendering
             by = {(r["rendering"], r["order"]): r for r in rows}
             for order in ("given", "swapped"):
                 lab, cv = by[("lab", order)], by[("opencv", order)]

@@ -25,7 +25,10 @@ show evidence that an unrelated pair cannot produce:
    inside confirm a few-inlier map (:func:`scalematch.stages.secondlook.look_confirms`); with weaker
    evidence at least ``min_inside`` of it must lie inside.
 4. *Consistent neighbouring scales*: at least ``min_agreeing_scales`` other scales found
-   (nearly) the same transform, as the paper's Table 1 shows for a true match.
+   (nearly) the same transform, as the paper's Table 1 shows for a true match, unless the
+   winner alone is overwhelming (``max_log_nfa_alone``).
+5. *No repeated structure*: no second transform of the same scale and angle stands elsewhere
+   among the candidates the winner leaves over (:func:`repeats`).
 """
 
 
