@@ -37,7 +37,8 @@ from .search.plan import Attempt, SearchRun, climbing, fit_spec, probe_best, sea
 from .search.shared import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.estimator import model_of, residuals
-from .stages.finalchecks import Claim, final_checks, plane_parallax, windows_agree
+from .stages.finalchecks import (Claim, final_checks, plane_parallax, searched_unique,
+                                 windows_agree)
 from .stages.matcher import distinct_pairs
 from .stages.pixelcheck import overlap_ncc, pixel_check
 from .stages.refit import (Fit, Pinned, allowed_maps, by_counts, by_pixels, candidates_in_images,
@@ -57,12 +58,13 @@ def in_images(attempt: Attempt, search: Search) -> Fit:
                          fit_spec(search.config), attempt.coarser_view)
 
 
-def final_fit(attempt: Attempt, search: Search) -> Fit:
-    """A matched attempt's map refit in the images' own pixels (:func:`in_images`), refined on
-    every scale matched in full, and the model the pixels choose (:func:`model_by_pixels`)."""
+def final_fit(attempt: Attempt, search: Search) -> Tuple[Fit, Fit]:
+    """(as searched, final): a matched attempt's map refit in the images' own pixels
+    (:func:`in_images`) and refined on every scale matched in full, in the model searched; and
+    the same as the model the pixels choose (:func:`model_by_pixels`)."""
     fit = pooled_refit(in_images(attempt, search), attempt.view, attempt.outcomes,
                        fit_spec(search.config).ransac, attempt.coarser_view)
-    return model_by_pixels(fit, attempt, search)
+    return fit, model_by_pixels(fit, attempt, search)
 
 
 def model_by_pixels(fit: Fit, attempt: Attempt, search: Search) -> Fit:
@@ -135,8 +137,9 @@ def pinned_answer(attempt: Attempt, fit: Fit, search: Search) -> Tuple[Fit, Pinn
 
 
 def best_fitting(search: Search, attempts: Sequence[Attempt]):
-    """(winner, its final fit, its pixel check): the matched attempt to report, or
-    (None, None, None); the pixel check is None unless several were compared.
+    """(winner, its final fit, its pixel check, its fit as searched): the matched attempt to
+    report, or (None, None, None, None); the pixel check is None unless several were compared
+    (:func:`final_fit` gives the two fits).
 
     One matched attempt is the answer. When several matched (a weak plain match and a view
     of the pass that confirms it), each is refit and the one whose final transform lines the
@@ -152,8 +155,12 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
     matched = [a for a in attempts if a.matched]
     if len(matched) <= 1:
         winner = strongest(attempts)
-        return winner, (final_fit(winner, search) if winner is not None else None), None
-    fits = [final_fit(a, search) for a in matched]
+        if winner is None:
+            return None, None, None, None
+        searched_fit, fit = final_fit(winner, search)
+        return winner, fit, None, searched_fit
+    both = [final_fit(a, search) for a in matched]
+    fits = [fit for _, fit in both]
     checks = [pixel_check(*work.shown(a.direction), fit.transform, config.pixel)
               for a, fit in zip(matched, fits)]
 
@@ -163,7 +170,7 @@ def best_fitting(search: Search, attempts: Sequence[Attempt]):
                 -matched[k].verdict.log10_nfa)
 
     k = max(range(len(matched)), key=fitness)
-    return matched[k], fits[k], checks[k]
+    return matched[k], fits[k], checks[k], both[k][0]
 
 
 def best_refused(attempts: Sequence[Attempt]) -> Optional[Attempt]:
@@ -245,10 +252,10 @@ def build_result(search: Search, run: SearchRun) -> MatchResult:
         return unreachable(search, run)
     if answered_by_a_matrix(search.config):
         return matrix_answer(search, run)
-    winner, fit, near = best_fitting(search, run.attempts)
+    winner, fit, near, searched_fit = best_fitting(search, run.attempts)
     if winner is None:
         return refused(search, run, best_refused(run.attempts) or run.attempts[0])
-    final, refusal = judged_by_pixels(search, run, winner, fit, near)
+    final, refusal = judged_by_pixels(search, run, winner, fit, near, searched_fit)
     if refusal is not None:
         return refusal
     fit = grown_answer(winner, fit, search)
@@ -328,15 +335,31 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
 
 
 def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
-                     near) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
+                     near, searched_fit: Optional[Fit] = None
+                     ) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
     """(the pixel tests' figures, None) for a winner's refit ``fit`` that passes them
-    (:func:`stages.finalchecks.final_checks`), or (figures, the "no" that refuses it)."""
+    (:func:`stages.finalchecks.final_checks`), or (figures, the "no" that refuses it).
+
+    A map climbed to a richer model (``searched_fit``: the same map in the model searched,
+    :func:`final_fit`) that only its windows find unique (its uniqueness ratio refused it) is
+    unique only if the map found is unique as well
+    (:func:`stages.finalchecks.searched_unique`): the richer model's freedom was fitted to the
+    pixels the windows compare, and on a repeated facade it bends the map onto a copy's
+    windows. A climbed map unique by its ratio stands on its own."""
     config, verdict = search.config, winner.verdict
     t, inliers, model = fit
     coarse, fine = search.work.shown(winner.direction)
     claim = Claim(t, verdict.log10_nfa, vouched=inliers[:, :2])
     final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                        pixel=config.pixel)
+    if not reason and final.unique_windows and searched_fit is not None \
+            and searched_fit.model != model:
+        t, inliers, model = searched_fit
+        as_found, reason = searched_unique(
+            coarse, fine, Claim(t, verdict.log10_nfa, vouched=inliers[:, :2]), config.decision,
+            config.pixel)
+        if reason:
+            final, test = as_found, "uniqueness"
     if not reason:
         return final, None
     return final, MatchResult(

@@ -2,7 +2,9 @@
 
 :func:`final_checks` judges a :class:`Claim` by its pixels: unique in the coarser image (one
 ZNCC, or window by window: :func:`windows_agree`, :func:`unique_threshold`) and better than its
-nearby placements (the margin, or window by window: :func:`near_windows_agree`).
+nearby placements (the margin, or window by window: :func:`near_windows_agree`);
+:func:`searched_unique` asks the same uniqueness of the map as the search found it, for a map
+climbed to a richer model that only its windows find unique.
 :func:`plane_parallax` says whether an epipolar geometry's inliers show parallax off their
 dominant plane, counted one to one (:func:`one_to_one`).
 """
@@ -133,20 +135,55 @@ def final_checks(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: D
                          judged_by="geometry" if geometric else "pixels")
     if geometric:
         return final, "", ""
-    if u.ratio < params.min_unique_ratio:  # nan: no room elsewhere, passes
-        a = agreement_of(placed, pixel)
-        final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
-                        windows_elsewhere=a.elsewhere)
-        if not windows_agree(a, params):
-            windows = (f"; {a.claimed:.0%} of its windows agree at the transform found, "
-                       f"{a.elsewhere:.0%} elsewhere" if a.windows else "")
-            return final, (f"ambiguous: the high image's pixels fit elsewhere in the low "
-                           f"image nearly as well (ZNCC {u.elsewhere:.2f} there, "
-                           f"{u.claimed:.2f} at the transform found{windows}; log10 NFA "
-                           f"{log10_nfa:.1f})"), "uniqueness"
+    final, reason = _unique(final, placed, log10_nfa, params, pixel)
+    if reason:
+        return final, reason, "uniqueness"
     if near.margin <= params.min_final_margin:  # nan: no check possible, passes
         return _nearby_windows(coarser, finer, t, final, params, pixel)
     return final, "", ""
+
+
+def searched_unique(coarser: np.ndarray, finer: np.ndarray, claim: Claim, params: DecisionParams,
+                    pixel: PixelParams = PixelParams()):
+    """(figures, reason): the uniqueness test of :func:`final_checks` on the map as the search
+    found it (``claim``: its model, refit), for an answer climbed to a richer model
+    (``answer.model_by_pixels``); reason "" when it passes.
+
+    The claim's log10 NFA is the searched map's, so its pixels must be unique as well: a
+    richer model's freedom is fitted to the pixels it is then judged by, and on a repeated
+    facade it bends the map onto a copy's windows (an affine or homography of half a facade
+    agreeing at 65 % of its windows with the other half, where the similarity found agrees
+    at 25 % to 45 %: docs/design/DECISION.md, "A 'no' on a knife's edge"). A map beyond chance
+    by its geometry (``max_log_nfa_geometry``) is unique by it, as in :func:`final_checks`.
+    """
+    t, log10_nfa = claim.transform, claim.log10_nfa
+    if log10_nfa <= params.max_log_nfa_geometry:
+        return None, ""
+    placed = unique_template(coarser, finer, t, pixel, claim.vouched)
+    u = uniqueness_of(placed, pixel)
+    final = FinalFigures(unique_claimed=u.claimed, unique_elsewhere=u.elsewhere,
+                         unique_ratio=u.ratio, final_ncc=math.nan, final_margin=math.nan,
+                         judged_by="pixels")
+    return _unique(final, placed, log10_nfa, params, pixel, " (as searched)")
+
+
+def _unique(final: FinalFigures, placed, log10_nfa: float, params: DecisionParams,
+            pixel: PixelParams, which: str = ""):
+    """(figures, reason): the uniqueness ratio of ``final``, or where it refuses, the windows
+    of the template ``placed`` (:func:`windows_agree`); reason "" when the map is unique."""
+    if not final.unique_ratio < params.min_unique_ratio:  # nan: no room elsewhere, passes
+        return final, ""
+    a = agreement_of(placed, pixel)
+    final = replace(final, unique_windows=a.windows, windows_agreeing=a.claimed,
+                    windows_elsewhere=a.elsewhere)
+    if windows_agree(a, params):
+        return final, ""
+    windows = (f"; {a.claimed:.0%} of its windows agree at the transform found, "
+               f"{a.elsewhere:.0%} elsewhere" if a.windows else "")
+    return final, (f"ambiguous: the high image's pixels fit elsewhere in the low "
+                   f"image nearly as well (ZNCC {final.unique_elsewhere:.2f} there, "
+                   f"{final.unique_claimed:.2f} at the transform found{which}{windows}; "
+                   f"log10 NFA {log10_nfa:.1f})")
 
 
 def _nearby_windows(coarser: np.ndarray, finer: np.ndarray, t: np.ndarray, final: FinalFigures,

@@ -34,6 +34,31 @@ def test_a_structure_that_fits_elsewhere_as_well_is_ambiguous(raccoon):
     assert reason.startswith("ambiguous") and final.unique_ratio < params.min_unique_ratio
 
 
+def test_a_map_found_on_a_copy_is_ambiguous_as_searched(raccoon):
+    """searched_unique judges the map the search found (the model searched) by the uniqueness
+    test of final_checks: the centre copy of a structure tiled nine times is ambiguous, its
+    own place is not, and a map its geometry proves (log10 NFA at most max_log_nfa_geometry)
+    is not measured at all."""
+    import cv2
+
+    from scalematch.config import Config
+    from scalematch.stages.finalchecks import Claim, searched_unique
+
+    params = Config().decision
+    base = raccoon[200:260, 300:380]
+    high = cv2.resize(base, (320, 240), interpolation=cv2.INTER_CUBIC)
+    t = similarity_matrix(0.25, 0.0, 40 - 0.375, 30 - 0.375)
+    final, reason = searched_unique(raccoon[170:350, 260:500], high, Claim(t, -20.0), params)
+    assert reason == "" and final.unique_ratio > 3 * params.min_unique_ratio
+    tiled = np.tile(base, (3, 3))
+    t_tiled = similarity_matrix(0.25, 0.0, 80 - 0.375, 60 - 0.375)
+    final, reason = searched_unique(tiled, high, Claim(t_tiled, -20.0), params)
+    assert reason.startswith("ambiguous") and "(as searched)" in reason
+    assert final.unique_ratio < params.min_unique_ratio
+    proved = Claim(t_tiled, params.max_log_nfa_geometry - 1.0)
+    assert searched_unique(tiled, high, proved, params) == (None, "")
+
+
 def test_a_final_map_its_neighbours_fit_better_is_refused(raccoon):
     """The final pixel test (min_final_margin): the right map passes with a wide margin; the
     same map turned by 10 degrees about its footprint's centre (one of the pixel check's
