@@ -235,6 +235,10 @@ def run_one(job: Tuple[str, np.ndarray, np.ndarray, str]) -> Dict[str, Any]:
     row: Dict[str, Any] = {"id": run_id, "claimed": bool(r.matched),
                            "seconds": round(time.perf_counter() - t0, 3),
                            "reason": r.reason or "", "judged_by": r.evidence.judged_by}
+    e = r.evidence  # the final check's own figures: windows near the inliers (when consulted)
+    row.update(unique_ratio=_plain(e.unique_ratio), near_inlier_windows=int(e.unique_windows),
+               near_inlier_claim=_plain(e.windows_agreeing),
+               near_inlier_elsewhere=_plain(e.windows_elsewhere))
     if r.matched:
         t, order, lnfa, kept, test = (r.transform, r.order, r.evidence.log10_nfa, r.n_inliers,
                                       "")
