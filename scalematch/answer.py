@@ -335,7 +335,7 @@ def refused(search: Search, run: SearchRun, shown: Attempt) -> MatchResult:
 
 
 def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
-                     near, searched_fit: Optional[Fit] = None
+                     near, searched_fit: Fit
                      ) -> Tuple[Optional[FinalFigures], Optional[MatchResult]]:
     """(the pixel tests' figures, None) for a winner's refit ``fit`` that passes them
     (:func:`stages.finalchecks.final_checks`), or (figures, the "no" that refuses it).
@@ -352,8 +352,7 @@ def judged_by_pixels(search: Search, run: SearchRun, winner: Attempt, fit: Fit,
     claim = Claim(t, verdict.log10_nfa, vouched=inliers[:, :2])
     final, reason, test = final_checks(coarse, fine, claim, config.decision, near,
                                        pixel=config.pixel)
-    if not reason and final.unique_windows and searched_fit is not None \
-            and searched_fit.model != model:
+    if not reason and final.unique_windows and searched_fit.model != model:
         t, inliers, model = searched_fit
         as_found, reason = searched_unique(
             coarse, fine, Claim(t, verdict.log10_nfa, vouched=inliers[:, :2]), config.decision,
