@@ -24,6 +24,7 @@ images' own pixels.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, replace
 from typing import Optional, Sequence, Tuple
@@ -40,7 +41,7 @@ from .stages.estimator import model_of, residuals
 from .stages.finalchecks import (Claim, final_checks, plane_parallax, searched_unique,
                                  windows_agree)
 from .stages.matcher import distinct_pairs
-from .stages.pixelcheck import overlap_ncc, pixel_check
+from .stages.pixelcheck import matches_beat_plane, overlap_ncc, pixel_check
 from .stages.refit import (Fit, Pinned, allowed_maps, by_counts, by_pixels, candidates_in_images,
                            chosen_model, guided_refit, pinned_model, pooled_refit, refit_in_high,
                            richer_fits)
@@ -281,7 +282,10 @@ def matrix_answer(search: Search, run: SearchRun) -> MatchResult:
     if winner is None:
         return refused(search, run, best_refused(run.attempts) or run.attempts[0])
     fit, config = in_images(winner, search), search.config
-    seen = plane_parallax(fit.inliers, winner.verdict.figures, fit_spec(config), config.decision)
+    coarser, finer = search.work.shown(winner.direction)
+    seen = plane_parallax(fit.inliers, winner.verdict.figures, fit_spec(config), config.decision,
+                          functools.partial(matches_beat_plane, coarser, finer,
+                                            params=config.pixel))
     return answered(search, run, winner, fit, seen)
 
 
@@ -448,11 +452,22 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
     determine. It is searched as the default would search it (``config`` with
     ``decision.plane_model``, which the model check may turn into an affine map or a
     homography: ``pipeline.match``); ``model`` then says which it is.
+
+    Where that plane map passes, the plane is established by more than the matrix's inliers,
+    and the inliers off it need only fix the epipole: where those whose own match fits the
+    pixels better than the plane's prediction do so beyond chance
+    (``Evidence.epipole_log10_nfa`` at most ``max_log_nfa``), the matrix answers, its parallax
+    seen through the plane.
     """
     e = result.evidence
     figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
-                parallax_log10_nfa=e.parallax_log10_nfa)
+                parallax_log10_nfa=e.parallax_log10_nfa,
+                parallax_vouched_points=e.parallax_vouched_points,
+                epipole_log10_nfa=e.epipole_log10_nfa)
     timings = _both_timings(result, plane)
+    if plane.matched and e.epipole_log10_nfa <= config.decision.max_log_nfa:
+        return replace(result, evidence=build_evidence(asdict(e), figs, {"parallax": True}),
+                       timings=timings)
     if plane.matched:
         return replace(plane, evidence=build_evidence(asdict(plane.evidence), figs),
                        timings=timings, config=result.config)

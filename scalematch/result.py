@@ -120,6 +120,14 @@ class Evidence:
     #: dominant plane among the candidates off it (``stages.finalchecks.plane_parallax``); at
     #: most ``max_log_nfa``, the geometry shows parallax by itself (nan: not measured)
     parallax_log10_nfa: float = math.nan
+    #: ``--model fundamental``: of those inliers off the plane, the ones whose own match fits
+    #: the pixels better than the plane's prediction (``stages.pixelcheck.matches_beat_plane``),
+    #: and their log10 NFA with the plane given, the epipole alone to fix
+    #: (``stages.finalchecks.plane_parallax``); where the plane map of the pair passes the
+    #: decision and this is at most ``max_log_nfa``, the epipolar geometry answers
+    #: (``answer.without_parallax``; nan: not measured)
+    parallax_vouched_points: int = 0
+    epipole_log10_nfa: float = math.nan
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
     #: answers instead (``answer.without_parallax``; 0: no plane map passed)
     plane_inliers: int = 0

@@ -117,7 +117,11 @@ def evidence_line(result: MatchResult) -> str:
                      f"place, {e.windows_elsewhere:.0%} elsewhere")
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
-    if result.matched and e.parallax and said_as_matrix(result.model):
+    if result.matched and e.parallax and said_as_matrix(result.model) and e.plane_inliers:
+        parts.append(f"parallax: {e.parallax_vouched_points} inliers off the plane map "
+                     f"({e.plane_inliers} inliers) that fit better off it, log10 NFA "
+                     f"{e.epipole_log10_nfa:.1f} for the epipole")
+    elif result.matched and e.parallax and said_as_matrix(result.model):
         parts.append(f"parallax: {e.parallax_points} inliers off the dominant plane, log10 "
                      f"NFA {e.parallax_log10_nfa:.1f}")
     elif result.matched and e.parallax:

@@ -73,3 +73,25 @@ def test_a_matrix_not_found_gives_way_to_a_plane_map_without_parallax_only():
     unmatched = MatchResult(matched=False, model="similarity", reason="too few inliers",
                             timings={"total": 1.5})
     assert not plane_instead(no, unmatched).matched
+
+
+def test_a_matrix_whose_plane_map_passes_answers_where_the_points_off_it_fix_the_epipole():
+    """A matrix without parallax of its own, and a plane map of the pair that passed: the
+    matrix answers where its inliers off the plane, vouched by the pixels, fix the epipole
+    beyond chance (``epipole_log10_nfa`` at most ``max_log_nfa``); otherwise the plane map."""
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
+    config = Config(model="fundamental")
+    plane = MatchResult(matched=True, model="homography", transform=np.eye(3),
+                        inliers=np.zeros((40, 4)), timings={"total": 0.2},
+                        evidence=Evidence(inliers=40, log10_nfa=-40.0))
+    bound = config.decision.max_log_nfa
+    seen = replace(_claimed_f(f), evidence=replace(_claimed_f(f).evidence,
+                                                   parallax_vouched_points=15,
+                                                   epipole_log10_nfa=bound - 0.5))
+    r = without_parallax(seen, plane, config)
+    assert r.matched and r.model == "fundamental" and np.array_equal(r.transform, f)
+    assert r.evidence.parallax and r.evidence.plane_inliers == 40
+    assert r.timings["total"] == 0.1 + 0.2
+    weak = replace(seen, evidence=replace(seen.evidence, epipole_log10_nfa=bound + 0.5))
+    r = without_parallax(weak, plane, config)
+    assert r.matched and r.model == "homography" and r.evidence.epipole_log10_nfa == bound + 0.5

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Callable, Dict, Mapping, Optional
 
 import numpy as np
 
@@ -36,11 +36,22 @@ class Claim:
     vouched: Optional[np.ndarray] = field(default=None, repr=False)
 
 
+#: the points that fix an epipolar geometry once its plane's map is given: F = [e']x H leaves
+#: the epipole e', 2 degrees of freedom, and each point off the plane puts e' on one line
+#: (Hartley & Zisserman, "Multiple View Geometry", 2nd ed., 13.3; DEGENSAC's plane and
+#: parallax)
+EPIPOLE_SAMPLE = 2
+
+
 def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
-                   params: DecisionParams) -> Dict[str, Any]:
+                   params: DecisionParams,
+                   beat_plane: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None
+                   ) -> Dict[str, Any]:
     """Whether an epipolar geometry's inliers ``pairs`` ((N, 4) x, y finer; x, y coarser, the
     search's working px) show parallax by themselves: the figures ``parallax_points``,
-    ``parallax_log10_nfa`` and ``parallax`` of the evidence.
+    ``parallax_log10_nfa`` and ``parallax`` of the evidence, and, given ``beat_plane``, the
+    count of the points off the plane with the plane given (``parallax_vouched_points``,
+    ``epipole_log10_nfa``).
 
     The inliers a homography explains (RANSAC at the inlier threshold of ``fit``) are the
     scene's dominant plane; the rest are off it. A scene with no depth, or a repeated structure
@@ -56,6 +67,14 @@ def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
     and parallax is seen when it is at most ``params.max_log_nfa``, the bound of any claim.
     This is the test of DEGENSAC (Chum, Werner & Matas, "Two-view geometry estimation
     unaffected by a dominant plane", CVPR 2005) made a-contrario.
+
+    Where the plane's map is established otherwise (the plane map of the pair passes the
+    decision: ``answer.without_parallax``), the points off it need only fix the epipole,
+    m = :data:`EPIPOLE_SAMPLE`. They count there only where their own match fits the pixels
+    better than the plane's prediction (``beat_plane(h, off_pairs)``, a boolean per pair:
+    :func:`scalematch.stages.pixelcheck.matches_beat_plane`): a flat scene's look-alikes (a
+    repeated window matched to its neighbour, points along an edge) line up with an epipole as
+    a scene with depth does, but the plane fits them better where they stand.
     """
     m = model_of(fit.model).min_sample
     n, k = int(figure(counted, "candidates")), int(figure(counted, "inliers"))
@@ -66,11 +85,21 @@ def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
     plane = estimate("homography", pairs[:, :2], pairs[:, 2:], fit.ransac, seed=fit.seed)
     on_plane = int(plane.n_inliers)
     k_off = len(pairs) - on_plane
-    lnfa = log10_nfa(max(n - on_plane, k_off), k_off, m, p, 1.0)
-    if math.isfinite(lnfa) and math.isfinite(log10_tests):
-        lnfa += max(log10_tests, 0.0)
-    return {"parallax_points": k_off, "parallax_log10_nfa": lnfa,
+
+    def off_plane_nfa(k_counted: int, sample: int) -> float:
+        lnfa = log10_nfa(max(n - on_plane, k_counted), k_counted, sample, p, 1.0)
+        if math.isfinite(lnfa) and math.isfinite(log10_tests):
+            lnfa += max(log10_tests, 0.0)
+        return lnfa
+
+    lnfa = off_plane_nfa(k_off, m)
+    seen = {"parallax_points": k_off, "parallax_log10_nfa": lnfa,
             "parallax": bool(lnfa <= params.max_log_nfa)}
+    if beat_plane is not None and plane.transform is not None and k_off:
+        held = int(np.count_nonzero(beat_plane(plane.transform, pairs[~plane.inliers])))
+        seen.update(parallax_vouched_points=held,
+                    epipole_log10_nfa=off_plane_nfa(held, EPIPOLE_SAMPLE))
+    return seen
 
 
 def windows_agree(a: Agreement, params: DecisionParams) -> bool:

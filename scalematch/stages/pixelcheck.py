@@ -403,3 +403,72 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     nearby = [score(m, side)[0] for m in others]
     good = [v for v in nearby if math.isfinite(v)]
     return NearWindows(n, claimed, max(good) if good else nan)
+
+
+def local_affine(h: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The 2x2 Jacobian of the 3x3 map ``h`` at the point ``x`` (finer px -> coarser px): the
+    affine map that ``h`` is near ``x``.
+
+    >>> local_affine(np.diag([2.0, 3.0, 1.0]), np.array([5.0, 7.0]))
+    array([[2., 0.],
+           [0., 3.]])
+    """
+    u, v, w = h @ np.array([x[0], x[1], 1.0])
+    return (h[:2, :2] * w - np.outer([u, v], h[2, :2])) / (w * w)
+
+
+def matches_beat_plane(coarser: np.ndarray, finer: np.ndarray, h: np.ndarray,
+                       pairs: np.ndarray, params: PixelParams = PixelParams()) -> np.ndarray:
+    """For each pair of ``pairs`` ((N, 4) x, y finer; x, y coarser) off the plane whose map is
+    ``h`` (3x3, finer px -> coarser px): whether its own match fits the pixels better than the
+    plane's prediction. The finer image around the finer point, blurred for the plane's ratio
+    and placed by the plane's local affine map (:func:`local_affine`), is compared by ZNCC with
+    the coarser image at the match and at ``h``'s prediction, over a window of twice
+    ``params.window_px`` (the descriptor's 16 px window). Where the scene is flat, the plane's
+    prediction is the scene's own place, and a match off it is a look-alike (a repeated
+    window, an edge) that fits no better; where the scene has depth, the plane's prediction
+    lands on another part of the scene. False where either place cannot be compared (the
+    window leaves an image, or is flat)."""
+    h = as_matrix3(np.asarray(h, np.float64))
+    pairs = np.asarray(pairs, np.float64).reshape(-1, 4)
+    out = np.zeros(len(pairs), bool)
+    if not len(pairs):
+        return out
+    ratio = 1.0 / math.sqrt(max(abs(float(np.linalg.det(local_affine(h, pairs[0, :2])))), 1e-12))
+    small, k = blurred_for_ratio(finer, ratio, params.camera_blur_px)
+    to_small = small_to_high(k)
+    coarser = np.asarray(coarser, np.float32)
+    for i, (x, y, xc, yc) in enumerate(pairs):
+        a, at = local_affine(h, np.array([x, y])), np.array([x, y])
+        match, plane = (_local_zncc(coarser, small, _placed(a, at, target) @ to_small, target,
+                                    params)
+                        for target in (np.array([xc, yc]), apply(h, at[None])[0]))
+        out[i] = bool(match > plane)  # nan on either side: False
+    return out
+
+
+def _placed(a: np.ndarray, x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The 3x3 affine map with linear part ``a`` that sends the point ``x`` to ``target``."""
+    m = np.eye(3)
+    m[:2, :2] = a
+    m[:2, 2] = target - a @ x
+    return m
+
+
+def _local_zncc(coarser: np.ndarray, small: np.ndarray, m3: np.ndarray, target: np.ndarray,
+                params: PixelParams) -> float:
+    """ZNCC of the coarser image's window of side ``2 params.window_px + 1`` around ``target``
+    with the image ``small`` placed by ``m3`` (small px -> coarser px); nan where the window
+    leaves the coarser image or too little of it is covered."""
+    half = params.window_px
+    side = 2 * half + 1
+    x0, y0 = int(round(target[0])) - half, int(round(target[1])) - half
+    if x0 < 0 or y0 < 0 or x0 + side > coarser.shape[1] or y0 + side > coarser.shape[0]:
+        return float("nan")
+    shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
+    img, mask = warp_into(small, shift @ m3, (side, side), params.edge_px)
+    crop = coarser[y0:y0 + side, x0:x0 + side]
+    mask &= np.isfinite(crop) & np.isfinite(img)
+    if mask.sum() < side * side // 2:
+        return float("nan")
+    return zncc(img[mask], crop[mask], params.min_std)

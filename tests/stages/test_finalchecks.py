@@ -182,3 +182,28 @@ def test_an_occluded_map_the_margin_refuses_is_confirmed_by_its_windows(raccoon)
     away = similarity_matrix(0.25, 0.0, 150 - 0.375, 110 - 0.375)
     final, reason, test = final_checks(low, high, Claim(away, math.inf), params)
     assert test == "pixels", reason
+
+
+def test_the_plane_given_the_points_off_it_need_only_fix_the_epipole():
+    """With the plane's map given, the points off it fix only the epipole (2 points, not 8):
+    the 20 points of a second depth (5 m; the wall at 10 m) among 150 candidates, too few
+    for the matrix by themselves, are beyond chance for the epipole where their matches beat
+    the plane (``beat_plane`` all True); where the plane fits them better (all False), nothing
+    counts."""
+    from scalematch.stages.acontrario import DecisionParams
+    from scalematch.stages.estimator import FitSpec
+    from scalematch.stages.finalchecks import plane_parallax
+
+    rng = np.random.default_rng(2)
+    fit, params = FitSpec("fundamental"), DecisionParams()
+    scene = np.vstack([_two_views(np.full(60, 10.0), rng), _two_views(np.full(20, 5.0), rng)])
+    counted = _counted_f(scene, 150)
+    alone = plane_parallax(scene, counted, fit, params)
+    off = alone["parallax_points"]
+    assert 17 <= off <= 20 and not alone["parallax"]  # a point near the wall's map stays on it
+    assert "epipole_log10_nfa" not in alone  # measured only where the pixels can vouch
+    vouched = plane_parallax(scene, counted, fit, params, lambda h, off: np.ones(len(off), bool))
+    assert vouched["parallax_vouched_points"] == off
+    assert vouched["epipole_log10_nfa"] <= params.max_log_nfa < alone["parallax_log10_nfa"]
+    none = plane_parallax(scene, counted, fit, params, lambda h, off: np.zeros(len(off), bool))
+    assert none["parallax_vouched_points"] == 0 and math.isinf(none["epipole_log10_nfa"])

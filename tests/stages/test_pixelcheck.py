@@ -135,3 +135,26 @@ def test_windows_of_a_wrong_placement_do_not_agree(zoom):
     for turn, at in ((90.0, (0.3, 0.3)), (180.0, (0.7, 0.6)), (35.0, (0.25, 0.75))):
         w = near_windows(zoom.low, zoom.high, _elsewhere(zoom, turn, at))
         assert not w.claimed > 0.1, (turn, at, w)
+
+
+def test_a_match_off_the_plane_beats_it_only_where_the_scene_moved(raccoon):
+    """The plane map of a zoom by 2 (finer px -> coarser px, x / 2 - 0.25); in the coarser
+    image one block of the scene stands 6 px further right, as a nearer object would.
+    ``matches_beat_plane``: a point in that block matched to where it moved fits the pixels
+    better than the plane's prediction; a point of the plane matched 6 px off (a look-alike
+    along a row), or at its own place, does not."""
+    import cv2
+
+    from scalematch.stages.pixelcheck import matches_beat_plane
+
+    finer = raccoon[100:500, 200:700].astype(np.float32)
+    coarser = cv2.resize(finer, (250, 200), interpolation=cv2.INTER_AREA)
+    moved = coarser.copy()
+    moved[60:140, 106:186] = coarser[60:140, 100:180]  # the block 6 px to the right
+    h = np.array([[0.5, 0, -0.25], [0, 0.5, -0.25], [0, 0, 1.0]])
+    inside = np.array([[2 * x + 0.5, 2 * y + 0.5] for x in (125, 140, 155) for y in (80, 100, 120)])
+    outside = np.array([[2 * x + 0.5, 2 * y + 0.5] for x in (40, 60, 200) for y in (30, 170)])
+    to = lambda pts, dx: np.hstack([pts, apply(h, pts) + (dx, 0.0)])  # noqa: E731
+    assert matches_beat_plane(moved, finer, h, to(inside, 6.0)).all()
+    assert not matches_beat_plane(moved, finer, h, to(outside, 6.0)).any()
+    assert not matches_beat_plane(moved, finer, h, to(outside, 0.0)).any()  # a tie is no win
