@@ -5,9 +5,10 @@ Usage: python scripts/no_price.py --old OLD_SOURCE_TREE [--nulls FOLDER] [--ever
        [--zoom 12] [--big 4] [--rounds 1]
 
 Each run is one process, timed with its peak memory (``/usr/bin/time`` when it exists):
-``scalematch LOW HIGH -q`` of this tree (also with ``--no-views``, and with the passes of
-the preset ``tilt-4``) and of ``--old`` (its ``scalematch.cli.main`` with the
-tree first on ``sys.path``), and ``python scripts/sift_reference.py LOW HIGH`` (OpenCV SIFT,
+``scalematch LOW HIGH -q`` of this tree (also with ``--no-views``, with the passes of
+the preset ``tilt-4``, and with ``--model fundamental``) and of ``--old`` (its
+``scalematch.cli.main`` with the tree first on ``sys.path``; also with ``--model
+fundamental``), and ``python scripts/sift_reference.py LOW HIGH`` (OpenCV SIFT,
 ratio test, RANSAC: what a user would write instead), in turn for each pair, the order of the
 ways turned each pair, so that all see the same machine load. The pairs:
 
@@ -57,7 +58,10 @@ def commands(old: str) -> dict:
     return {"new": (new, ["-q"]),
             "new --no-views": (new, ["-q", "--no-views"]),
             "new tilt-4": (new, ["-q", "--set", "views.passes=2;4"]),
+            "new fundamental": (new, ["-q", "--model", "fundamental"]),
             "old": ([python, "-c", TREE_MAIN.format(tree=old)], ["-q"]),
+            "old fundamental": ([python, "-c", TREE_MAIN.format(tree=old)],
+                                ["-q", "--model", "fundamental"]),
             "sift": ([python, str(ROOT / "scripts" / "sift_reference.py")], [])}
 
 
