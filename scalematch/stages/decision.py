@@ -170,6 +170,28 @@ def maps_points(model: str) -> bool:
     return model_of(model).has_ratio
 
 
+def nothing_matched(outcomes: Sequence) -> str:
+    """Why no scale of ``outcomes`` produced a transform: the probe judged every scale with
+    points hopeless (``ScaleRow.skipped``: no quick similarity held a point beyond its
+    sample), so none was matched in full; or the scales matched had too few candidates.
+
+    >>> from scalematch.result import ScaleRow
+    >>> from scalematch.search.plan import ScaleOutcome
+    >>> none = np.zeros((0, 2))
+    >>> row = ScaleRow(s=2.0, ratio=math.nan, points=30, initial=0, kept=0, inliers=0,
+    ...                outlier_pct=100.0, skipped=True)
+    >>> nothing_matched([ScaleOutcome(row, None, none, none, 0)])
+    'the probe found no scale worth matching in full'
+    >>> from dataclasses import replace
+    >>> nothing_matched([ScaleOutcome(replace(row, skipped=False), None, none, none, 0)])
+    'too few candidate matches'
+    """
+    with_points = [o for o in outcomes if o.row.points > 0]
+    if with_points and all(o.row.skipped for o in with_points):
+        return "the probe found no scale worth matching in full"
+    return "too few candidate matches"
+
+
 def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParams, *,
            context: SearchContext,
            sight: Optional[Sight] = None) -> Decision:
@@ -193,7 +215,7 @@ def decide(outcomes: Sequence, coarser_shape, finer_shape, params: DecisionParam
     with_t = [o for o in outcomes if o.estimate is not None and o.estimate.transform is not None
               and o.row.inliers > 0]
     if not with_t:
-        return Decision(False, "no scale produced a transform (too few candidate matches)",
+        return Decision(False, f"no scale produced a transform ({nothing_matched(outcomes)})",
                         math.nan, None, np.zeros((0, 4)), {})
     # a transform whose ratio contradicts the scale it was found at is not that scale's answer
     plausible = [o for o in with_t if not disagrees(o.row, context.fit.model, params)]
