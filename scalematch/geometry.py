@@ -92,6 +92,18 @@ def similarity_parts(t: np.ndarray) -> Tuple[float, float, Tuple[float, float]]:
     return ratio, angle, (float(tr[0]), float(tr[1]))
 
 
+def local_affine(h: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The 2x2 Jacobian of the 3x3 map ``h`` at the point ``x`` (finer px -> coarser px): the
+    affine map that ``h`` is near ``x``.
+
+    >>> local_affine(np.diag([2.0, 3.0, 1.0]), np.array([5.0, 7.0]))
+    array([[2., 0.],
+           [0., 3.]])
+    """
+    u, v, w = h @ np.array([x[0], x[1], 1.0])
+    return (h[:2, :2] * w - np.outer([u, v], h[2, :2])) / (w * w)
+
+
 def ratio_at(t: np.ndarray, xy) -> float:
     """Resolution ratio (high px per low px) of ``t`` at the high-image point ``xy`` (x, y).
 

@@ -125,7 +125,8 @@ class Evidence:
     #: and their log10 NFA with the plane given, the epipole alone to fix
     #: (``stages.finalchecks.plane_parallax``); where the plane map of the pair passes the
     #: decision and this is at most ``max_log_nfa``, the epipolar geometry answers
-    #: (``answer.without_parallax``; nan: not measured)
+    #: (``answer.without_parallax``; nan: not measured, as for a matrix with parallax of its
+    #: own)
     parallax_vouched_points: int = 0
     epipole_log10_nfa: float = math.nan
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that

@@ -49,9 +49,10 @@ def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
                    ) -> Dict[str, Any]:
     """Whether an epipolar geometry's inliers ``pairs`` ((N, 4) x, y finer; x, y coarser, the
     search's working px) show parallax by themselves: the figures ``parallax_points``,
-    ``parallax_log10_nfa`` and ``parallax`` of the evidence, and, given ``beat_plane``, the
-    count of the points off the plane with the plane given (``parallax_vouched_points``,
-    ``epipole_log10_nfa``).
+    ``parallax_log10_nfa`` and ``parallax`` of the evidence, and, given ``beat_plane`` and no
+    parallax seen so, the count of the points off the plane with the plane given
+    (``parallax_vouched_points``, ``epipole_log10_nfa``: only a matrix without parallax of its
+    own needs it, and it compares the pixels at every point off the plane).
 
     The inliers a homography explains (RANSAC at the inlier threshold of ``fit``) are the
     scene's dominant plane; the rest are off it. A scene with no depth, or a repeated structure
@@ -95,7 +96,7 @@ def plane_parallax(pairs: np.ndarray, counted: Mapping[str, Any], fit: FitSpec,
     lnfa = off_plane_nfa(k_off, m)
     seen = {"parallax_points": k_off, "parallax_log10_nfa": lnfa,
             "parallax": bool(lnfa <= params.max_log_nfa)}
-    if beat_plane is not None and plane.transform is not None and k_off:
+    if beat_plane is not None and not seen["parallax"] and plane.transform is not None and k_off:
         held = int(np.count_nonzero(beat_plane(plane.transform, pairs[~plane.inliers])))
         seen.update(parallax_vouched_points=held,
                     epipole_log10_nfa=off_plane_nfa(held, EPIPOLE_SAMPLE))

@@ -39,7 +39,7 @@ from typing import ClassVar, Mapping, NamedTuple, Optional, Tuple
 import numpy as np
 
 from ..checks import ANGLE, AT_LEAST_ONE, Bounds, CORRELATION, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds
-from ..geometry import apply, as_matrix3, footprint, similarity_matrix
+from ..geometry import apply, as_matrix3, footprint, local_affine, ratio_at, similarity_matrix
 from .placing import blurred_for_ratio, place, quad_area, small_to_high, warp_into
 
 
@@ -405,24 +405,12 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     return NearWindows(n, claimed, max(good) if good else nan)
 
 
-def local_affine(h: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The 2x2 Jacobian of the 3x3 map ``h`` at the point ``x`` (finer px -> coarser px): the
-    affine map that ``h`` is near ``x``.
-
-    >>> local_affine(np.diag([2.0, 3.0, 1.0]), np.array([5.0, 7.0]))
-    array([[2., 0.],
-           [0., 3.]])
-    """
-    u, v, w = h @ np.array([x[0], x[1], 1.0])
-    return (h[:2, :2] * w - np.outer([u, v], h[2, :2])) / (w * w)
-
-
 def matches_beat_plane(coarser: np.ndarray, finer: np.ndarray, h: np.ndarray,
                        pairs: np.ndarray, params: PixelParams = PixelParams()) -> np.ndarray:
     """For each pair of ``pairs`` ((N, 4) x, y finer; x, y coarser) off the plane whose map is
     ``h`` (3x3, finer px -> coarser px): whether its own match fits the pixels better than the
     plane's prediction. The finer image around the finer point, blurred for the plane's ratio
-    and placed by the plane's local affine map (:func:`local_affine`), is compared by ZNCC with
+    and placed by the plane's local affine map (:func:`scalematch.geometry.local_affine`), is compared by ZNCC with
     the coarser image at the match and at ``h``'s prediction, over a window of twice
     ``params.window_px`` (the descriptor's 16 px window). Where the scene is flat, the plane's
     prediction is the scene's own place, and a match off it is a look-alike (a repeated
@@ -434,8 +422,7 @@ def matches_beat_plane(coarser: np.ndarray, finer: np.ndarray, h: np.ndarray,
     out = np.zeros(len(pairs), bool)
     if not len(pairs):
         return out
-    ratio = 1.0 / math.sqrt(max(abs(float(np.linalg.det(local_affine(h, pairs[0, :2])))), 1e-12))
-    small, k = blurred_for_ratio(finer, ratio, params.camera_blur_px)
+    small, k = blurred_for_ratio(finer, ratio_at(h, pairs[0, :2]), params.camera_blur_px)
     to_small = small_to_high(k)
     coarser = np.asarray(coarser, np.float32)
     for i, (x, y, xc, yc) in enumerate(pairs):
