@@ -38,16 +38,16 @@ from .search.plan import Attempt, SearchRun, climbing, fit_spec, probe_best, sea
 from .search.shared import Search
 from .stages.acontrario import FinalFigures, figures
 from .stages.estimator import model_of, residuals
-from .stages.finalchecks import (Claim, final_checks, plane_parallax, searched_unique,
-                                 windows_agree)
+from .stages.finalchecks import (Claim, final_checks, near_windows_agree, plane_parallax,
+                                 searched_unique, windows_agree)
 from .stages.matcher import distinct_pairs
-from .stages.pixelcheck import matches_beat_plane, overlap_ncc, pixel_check
+from .stages.pixelcheck import NearWindows, matches_beat_plane, near_windows, overlap_ncc, pixel_check
 from .stages.refit import (Fit, Pinned, allowed_maps, by_counts, by_pixels, candidates_in_images,
                            chosen_model, guided_refit, pinned_model, pooled_refit, refit_in_high,
                            richer_fits)
 from .stages.rivals import EpipolarFit, off_plane
 from .stages.uniqueness import window_agreement
-from .working import WorkImages, shown_scale
+from .working import WorkImages, at_working_size_of, shown_scale
 
 __all__ = ["answered_by_a_matrix", "build_result", "plane_instead", "without_parallax"]
 
@@ -438,7 +438,26 @@ def _both_timings(result: MatchResult, plane: MatchResult) -> dict:
     return dict(plane.timings, epipolar=result.seconds, total=result.seconds + plane.seconds)
 
 
-def without_parallax(result: MatchResult, plane: MatchResult, config: Config) -> MatchResult:
+def plane_near_its_inliers(plane: MatchResult, work: WorkImages,
+                           config: Config) -> Optional[NearWindows]:
+    """The windows of a plane map that only the pixels refused (``plane``: a "no" whose
+    ``rejected`` map failed the test "pixels", the last of the decision), compared near its own
+    inliers (:func:`scalematch.stages.pixelcheck.near_windows` with ``vouched``) at the images'
+    working sizes ``work``; None for any other plane result.
+
+    Over the whole footprint, a scene with depth puts its other planes among the windows
+    compared, which the plane's map does not fit; near the plane's inliers it fits, where the
+    plane is. The uniqueness test compares there already (``PixelParams.vouch_radius``)."""
+    rej = plane.rejected
+    if plane.matched or rej is None or rej.test != "pixels":
+        return None
+    t, inliers = at_working_size_of(rej, work)
+    coarser, finer = work.shown(rej.order)
+    return near_windows(coarser, finer, t, config.pixel, inliers[:, :2])
+
+
+def without_parallax(result: MatchResult, plane: MatchResult, config: Config,
+                     near: Optional[NearWindows] = None) -> MatchResult:
     """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
     of their own (``stages.finalchecks.plane_parallax``): the plane map of the same pair,
     ``plane``, where it passed the decision, with the matrix's figures in its evidence;
@@ -457,15 +476,26 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config) ->
     and the inliers off it need only fix the epipole: where those whose own match fits the
     pixels better than the plane's prediction do so beyond chance
     (``Evidence.epipole_log10_nfa`` at most ``max_log_nfa``), the matrix answers, its parallax
-    seen through the plane.
+    seen through the plane. A plane map that passed every test but the last, the pixels over its
+    whole footprint, establishes the plane as well where its windows near its own inliers
+    agree (``near``: :func:`plane_near_its_inliers`, judged as the whole footprint's are,
+    ``stages.finalchecks.near_windows_agree``): a scene with depth puts its other planes in
+    the footprint. It establishes the plane for the matrix only; it does not answer itself.
     """
     e = result.evidence
-    figs = dict(plane_inliers=plane.n_inliers if plane.matched else 0,
+    held_near = (not plane.matched and near is not None
+                 and near_windows_agree(near, config.decision))
+    planar = plane.n_inliers if plane.matched else \
+        plane.rejected.n_inliers if held_near else 0
+    figs = dict(plane_inliers=planar,
                 parallax_log10_nfa=e.parallax_log10_nfa,
                 parallax_vouched_points=e.parallax_vouched_points,
                 epipole_log10_nfa=e.epipole_log10_nfa)
+    if near is not None:
+        figs.update(plane_windows=near.windows, plane_windows_agreeing=near.claimed,
+                    plane_windows_nearby=near.nearby)
     timings = _both_timings(result, plane)
-    if plane.matched and e.epipole_log10_nfa <= config.decision.max_log_nfa:
+    if (plane.matched or held_near) and e.epipole_log10_nfa <= config.decision.max_log_nfa:
         return replace(result, evidence=build_evidence(asdict(e), figs, {"parallax": True}),
                        timings=timings)
     if plane.matched:

@@ -22,7 +22,8 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from .answer import answered_by_a_matrix, build_result, plane_instead, without_parallax
+from .answer import (answered_by_a_matrix, build_result, plane_instead, plane_near_its_inliers,
+                     without_parallax)
 from .config import Config
 from .greylevels import grey_levels
 from .result import MatchResult, NoDataSeen
@@ -65,8 +66,9 @@ def match(low: np.ndarray, high: np.ndarray, config: Config = Config(),
     if answered_by_a_matrix(config) and not (result.matched and result.evidence.parallax):
         plane = searched_answer(work, replace(config, model=config.decision.plane_model),
                                 None, time.perf_counter())
-        result = without_parallax(result, plane, config) if result.matched else \
-            plane_instead(result, plane)
+        result = without_parallax(result, plane, config,
+                                  plane_near_its_inliers(plane, work, config)) \
+            if result.matched else plane_instead(result, plane)
     return result
 
 

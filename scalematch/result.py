@@ -130,8 +130,17 @@ class Evidence:
     parallax_vouched_points: int = 0
     epipole_log10_nfa: float = math.nan
     #: ``--model fundamental`` with no parallax: the distinct inliers of the plane map that
-    #: answers instead (``answer.without_parallax``; 0: no plane map passed)
+    #: answers instead, or establishes the plane for the matrix (``answer.without_parallax``;
+    #: 0: no plane map passed)
     plane_inliers: int = 0
+    #: ``--model fundamental`` with no parallax, where the pixels over the plane map's whole
+    #: footprint alone refused it: its windows near its own inliers
+    #: (``answer.plane_near_its_inliers``): windows compared, the share that agrees at the
+    #: map, the highest share at a nearby placement; where they agree, the plane is established
+    #: for the matrix (``plane_inliers`` then counts its inliers) but does not answer itself
+    plane_windows: int = 0
+    plane_windows_agreeing: float = math.nan
+    plane_windows_nearby: float = math.nan
     #: how firmly the answer's inliers pin its map (``stages.pinning.expected_error``): the
     #: error they leave it free to make, the mean over the finer image's 21x21 grid of each
     #: point's RMS position error, coarser px

@@ -118,8 +118,11 @@ def evidence_line(result: MatchResult) -> str:
     if result.matched and e.judged_by == "geometry":
         parts.append("unique by its geometry")
     if result.matched and e.parallax and said_as_matrix(result.model) and e.plane_inliers:
+        near = (f", its pixels agreeing near them: {e.plane_windows_agreeing:.0%} of "
+                f"{e.plane_windows} windows, {e.plane_windows_nearby:.0%} nearby"
+                if e.plane_windows else "")
         parts.append(f"parallax: {e.parallax_vouched_points} inliers off the plane map "
-                     f"({e.plane_inliers} inliers) that fit better off it, log10 NFA "
+                     f"({e.plane_inliers} inliers{near}) that fit better off it, log10 NFA "
                      f"{e.epipole_log10_nfa:.1f} for the epipole")
     elif result.matched and e.parallax and said_as_matrix(result.model):
         parts.append(f"parallax: {e.parallax_points} inliers off the dominant plane, log10 "

@@ -171,6 +171,12 @@ def _mapped(result, s_low: np.ndarray, s_high: np.ndarray) -> Tuple[np.ndarray, 
     return t, np.hstack([apply(s_fine, pts[:, :2]), apply(s_coarse, pts[:, 2:4])])
 
 
+def at_working_size_of(candidate, work: WorkImages) -> Tuple[np.ndarray, np.ndarray]:
+    """(transform, inliers) of a candidate in the images' own pixels (a matched result or a
+    ``Rejected``) at the working sizes of ``work``: :func:`in_original` undone."""
+    return _mapped(candidate, resize_map(1.0 / work.f_low), resize_map(1.0 / work.f_high))
+
+
 def _rejected_mapped(result: MatchResult, s_low: np.ndarray, s_high: np.ndarray,
                      turn: bool) -> MatchResult:
     """``result`` with its ``rejected`` candidate mapped as :func:`_mapped` maps a match (and,

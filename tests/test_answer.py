@@ -95,3 +95,41 @@ def test_a_matrix_whose_plane_map_passes_answers_where_the_points_off_it_fix_the
     weak = replace(seen, evidence=replace(seen.evidence, epipole_log10_nfa=bound + 0.5))
     r = without_parallax(weak, plane, config)
     assert r.matched and r.model == "homography" and r.evidence.epipole_log10_nfa == bound + 0.5
+
+
+def test_a_plane_map_refused_by_its_whole_footprint_establishes_the_plane_near_its_inliers():
+    """A plane map that only the pixels over its whole footprint refused (test "pixels": a 3-D
+    scene's other planes are in it): where its windows near its own inliers agree, the plane is
+    established for the matrix, which answers where its points off the plane fix the epipole;
+    the plane map never answers itself, and windows that do not agree leave the "no"."""
+    from scalematch.answer import plane_near_its_inliers
+    from scalematch.result import Rejected
+    from scalematch.stages.pixelcheck import NearWindows
+
+    f = np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]], float)
+    config = Config(model="fundamental")
+    bound = config.decision.max_log_nfa
+    refused = MatchResult(matched=False, model="homography", reason="the pixels do not confirm it",
+                          timings={"total": 0.2},
+                          rejected=Rejected(np.eye(3), "homography", np.zeros((30, 4)), -12.0,
+                                            "pixels"))
+    seen = replace(_claimed_f(f), evidence=replace(_claimed_f(f).evidence,
+                                                   parallax_vouched_points=12,
+                                                   epipole_log10_nfa=bound - 2.0))
+    agree, few = NearWindows(37, 0.4, 0.0), NearWindows(22, 0.2, 0.0)
+    r = without_parallax(seen, refused, config, agree)
+    assert r.matched and r.model == "fundamental" and np.array_equal(r.transform, f)
+    assert r.evidence.plane_inliers == 30 and r.evidence.plane_windows == 37
+    assert r.evidence.plane_windows_agreeing == 0.4
+    r = without_parallax(seen, refused, config, few)
+    assert not r.matched and r.rejected.test == "plane" and r.evidence.plane_inliers == 0
+    assert r.evidence.plane_windows == 22
+    weak = replace(seen, evidence=replace(seen.evidence, epipole_log10_nfa=bound + 0.5))
+    r = without_parallax(weak, refused, config, agree)
+    assert not r.matched and r.rejected.test == "plane"
+    assert not without_parallax(seen, refused, config).matched  # no windows measured
+    # only a map refused by the pixels alone is looked at again
+    by_chance = replace(refused, rejected=replace(refused.rejected, test="chance"))
+    passed = replace(refused, matched=True, rejected=None)
+    assert plane_near_its_inliers(by_chance, None, config) is None
+    assert plane_near_its_inliers(passed, None, config) is None

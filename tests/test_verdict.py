@@ -77,3 +77,22 @@ def test_the_verdict_says_when_a_plane_map_answers_for_a_matrix_not_found():
     assert verdict(plane(Config(model="fundamental"))).endswith(
         "no epipolar geometry found: the plane map of a flat scene answers")
     assert "epipolar" not in verdict(plane(Config()))
+
+
+def test_the_evidence_line_says_how_the_plane_of_a_matrix_was_established():
+    """A matrix answered with its parallax seen through the plane says how many points fixed the
+    epipole; where the plane map was established near its own inliers, that too."""
+    from scalematch.result import build_evidence
+    from scalematch.verdict import evidence_line
+
+    through = dict(log10_nfa=-20.0, parallax=True, parallax_vouched_points=12, plane_inliers=29,
+                   epipole_log10_nfa=-4.8)
+    line = evidence_line(MatchResult(matched=True, model="fundamental",
+                                     evidence=build_evidence(through)))
+    assert "parallax: 12 inliers off the plane map (29 inliers) that fit better off it, " \
+           "log10 NFA -4.8 for the epipole" in line
+    near = dict(through, plane_windows=37, plane_windows_agreeing=0.4, plane_windows_nearby=0.0)
+    line = evidence_line(MatchResult(matched=True, model="fundamental",
+                                     evidence=build_evidence(near)))
+    assert "(29 inliers, its pixels agreeing near them: 40% of 37 windows, 0% nearby)" \
+        in line

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..checks import ANGLE, AT_LEAST_ONE, Bounds, CORRELATION, COUNT, FACTOR, NON_NEGATIVE, POSITIVE, check_bounds
 from ..geometry import apply, as_matrix3, footprint, local_affine, ratio_at, similarity_matrix
-from .placing import blurred_for_ratio, place, quad_area, small_to_high, warp_into
+from .placing import blurred_for_ratio, place, quad_area, small_to_high, vouched_mask, warp_into
 
 
 @dataclass(frozen=True)
@@ -293,10 +293,11 @@ def _common_box(low_shape: Tuple[int, int],
 
 
 def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int, int, int],
-            params: PixelParams):
+            params: PixelParams, region: Optional[np.ndarray] = None):
     """``score(m3) -> (zncc, overlap px)``: the high image, blurred for ``ratio``, warped by the
     3x3 map ``m3`` (high px -> low px) onto ``box`` of ``low`` and compared where both show
-    the scene (zncc nan under ``min_overlap_px``)."""
+    the scene (zncc nan under ``min_overlap_px``), and within ``region`` (bool, the box's
+    shape; None: everywhere)."""
     x0, y0, x1, y1 = box
     crop = low[y0:y1 + 1, x0:x1 + 1]
     size = (x1 - x0 + 1, y1 - y0 + 1)
@@ -304,6 +305,8 @@ def _scorer(low: np.ndarray, high: np.ndarray, ratio: float, box: Tuple[int, int
     shift = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
     from_small = small_to_high(k)
     crop_shown = np.isfinite(crop)
+    if region is not None:
+        crop_shown &= region
 
     def score(m3: np.ndarray, windows: int = 0) -> Tuple[float, int]:
         img, mask = warp_into(small, shift @ m3 @ from_small, size, params.edge_px)
@@ -365,11 +368,15 @@ class NearWindows(NamedTuple):
 
 
 def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
-                 params: PixelParams = PixelParams()) -> NearWindows:
+                 params: PixelParams = PixelParams(),
+                 vouched: Optional[np.ndarray] = None) -> NearWindows:
     """:func:`pixel_check` window by window: the high image placed by ``t`` and by its nearby
     wrong placements (:func:`perturbations`), cut into windows of the same share of the
     footprint as the uniqueness test's (``window_px`` of ``unique_side_px``), each compared
-    with the low image on its own (ZNCC at least ``window_ncc``).
+    with the low image on its own (ZNCC at least ``window_ncc``). With ``vouched`` (high px,
+    (N, 2): the map's inliers), only the low image's pixels within ``vouch_radius`` of the
+    footprint's size of them are compared, at the claim and at its neighbours alike, as the
+    uniqueness test compares them: a 3-D scene's other planes hold no inlier of a plane's map.
 
     One ZNCC over the footprint counts an occluder (another object in front of the scene in
     the finer image) against the map over all of its area, at the claim as at its neighbours;
@@ -396,7 +403,13 @@ def near_windows(low: np.ndarray, high: np.ndarray, t: np.ndarray,
     if box is None:
         return NearWindows(0, nan, nan)
     side = max(int(round(math.sqrt(area) * params.window_px / params.unique_side_px)), 2)
-    score = _scorer(low, high, ratio, box, params)
+    region = None
+    if vouched is not None and len(vouched):
+        x0, y0, x1, y1 = box
+        region = vouched_mask((y1 - y0 + 1, x1 - x0 + 1),
+                              apply(t3, np.asarray(vouched, np.float64)) - [x0, y0],
+                              params.vouch_radius * math.sqrt(area))
+    score = _scorer(low, high, ratio, box, params, region)
     claimed, n = score(t3, side)
     if n == 0:
         return NearWindows(0, nan, nan)

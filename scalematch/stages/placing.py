@@ -143,3 +143,17 @@ def place(low: np.ndarray, high_shape: Tuple[int, int], t: np.ndarray,
         ratio, corners, area = (ratio / shrink[0, 0], footprint(t3, high_shape),
                                 area * shrink[0, 0] ** 2)
     return Placed(low, t3, ratio, corners, area)
+
+
+def vouched_mask(shape: Tuple[int, int], xy: np.ndarray, radius: float) -> np.ndarray:
+    """(H, W) bool: the discs of ``radius`` px around the points ``xy`` (N, 2), (x, y) px.
+
+    >>> m = vouched_mask((20, 30), np.array([[5.0, 5.0], [25.0, 15.0]]), 3)
+    >>> bool(m[5, 5]), bool(m[15, 25]), bool(m[10, 15]), int(m.sum())
+    (True, True, False, 58)
+    """
+    out = np.zeros(shape, np.uint8)
+    r = max(int(round(radius)), 1)
+    for x, y in np.rint(np.asarray(xy, np.float64)).astype(int):
+        cv2.circle(out, (int(x), int(y)), r, 1, thickness=-1)
+    return out.astype(bool)

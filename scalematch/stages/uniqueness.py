@@ -33,7 +33,7 @@ import numpy as np
 
 from ..geometry import apply
 from .pixelcheck import PixelParams
-from .placing import blurred_for_ratio, place, small_to_high, warp_into
+from .placing import blurred_for_ratio, place, small_to_high, vouched_mask, warp_into
 
 #: shifts where the footprint overlaps less than this share of its valid pixels with the
 #: coarser image's scene are not compared: a partial overlap leaves 30 to 70 % inside
@@ -125,20 +125,6 @@ def masked_zncc(image: np.ndarray, image_valid: np.ndarray, tpl: np.ndarray,
         (var_i > nn * min_std ** 2)
     out = (s_ti - s_t * s_i / nn) / np.sqrt(np.where(ok, var_t * var_i, 1.0))
     return np.where(ok, np.clip(out, -1.0, 1.0), -1.0).astype(np.float32)
-
-
-def vouched_mask(shape: Tuple[int, int], xy: np.ndarray, radius: float) -> np.ndarray:
-    """(H, W) bool: the discs of ``radius`` px around the points ``xy`` (N, 2), (x, y) px.
-
-    >>> m = vouched_mask((20, 30), np.array([[5.0, 5.0], [25.0, 15.0]]), 3)
-    >>> bool(m[5, 5]), bool(m[15, 25]), bool(m[10, 15]), int(m.sum())
-    (True, True, False, 58)
-    """
-    out = np.zeros(shape, np.uint8)
-    r = max(int(round(radius)), 1)
-    for x, y in np.rint(np.asarray(xy, np.float64)).astype(int):
-        cv2.circle(out, (int(x), int(y)), r, 1, thickness=-1)
-    return out.astype(bool)
 
 
 def uniqueness(low: np.ndarray, high: np.ndarray, t: np.ndarray,

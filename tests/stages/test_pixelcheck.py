@@ -129,6 +129,30 @@ def test_windows_tell_an_occluded_truth_from_its_neighbours(zoom, raccoon):
     assert 0.3 < occluded.claimed < whole.claimed and occluded.nearby < occluded.claimed / 2
 
 
+def test_windows_near_the_inliers_leave_out_the_rest_of_the_footprint(zoom, raccoon):
+    """Two thirds of the finer image replaced by other texture (another plane of a 3-D scene,
+    which the map does not fit): over the whole footprint few windows agree; compared near
+    inliers on the third the map fits (``vouched``), most do, and nearby placements still do
+    not."""
+    from scalematch.stages.pixelcheck import near_windows
+
+    high = zoom.high.copy()
+    h, w = high.shape
+    other = np.asarray(raccoon, np.float32)[-h:, :w]
+    high[:, w // 3:] = other[:, w // 3:] * 1.5
+    # inliers on the third the map fits, a disc's radius (a quarter of the footprint's size)
+    # from the rest
+    inliers = np.array([[x, y] for x in np.linspace(0.03, 0.1, 2) * w
+                        for y in np.linspace(0.05, 0.95, 6) * h])
+    whole = near_windows(zoom.low, high, zoom.truth)
+    near = near_windows(zoom.low, high, zoom.truth, vouched=inliers)
+    # measured (ratio 4 / 8): whole 0.22 / 0.23 of 45 / 44 windows; near the inliers 1.0 of 10,
+    # nearby 0.0 / 0.1
+    assert whole.claimed < 0.3 and near.windows >= 8
+    assert near.claimed > 0.8 and near.nearby < near.claimed / 2
+    assert near.windows < whole.windows
+
+
 def test_windows_of_a_wrong_placement_do_not_agree(zoom):
     from scalematch.stages.pixelcheck import near_windows
 
