@@ -505,10 +505,18 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config,
     evidence = build_evidence(reached)
     count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
              if math.isfinite(e.parallax_log10_nfa) else "too few to count")
+    where = ""
+    if near is not None and near.windows:
+        where = (f"; near its own inliers {near.claimed:.0%} of its {near.windows} windows "
+                 f"agree, {near.nearby:.0%} nearby")
+        if held_near:
+            where += (f", which establishes the plane, but the {e.parallax_vouched_points} "
+                      f"inliers off it that fit better there fix the epipole at log10 NFA "
+                      f"{e.epipole_log10_nfa:.1f}")
     reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
               f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
               f"do not fix its epipole, and no plane map of the scene passes the decision "
-              f"({plane.reason})")
+              f"({plane.reason}{where})")
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
                         figures("plane", reached, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,

@@ -123,10 +123,13 @@ def test_a_plane_map_refused_by_its_whole_footprint_establishes_the_plane_near_i
     assert r.evidence.plane_windows_agreeing == 0.4
     r = without_parallax(seen, refused, config, few)
     assert not r.matched and r.rejected.test == "plane" and r.evidence.plane_inliers == 0
-    assert r.evidence.plane_windows == 22
+    assert r.evidence.plane_windows == 22 and r.rejected.figures["plane_windows"] == 22
+    assert "near its own inliers 20% of its 22 windows agree, 0% nearby)" in r.reason
     weak = replace(seen, evidence=replace(seen.evidence, epipole_log10_nfa=bound + 0.5))
     r = without_parallax(weak, refused, config, agree)
     assert not r.matched and r.rejected.test == "plane"
+    assert "which establishes the plane, but the 12 inliers off it that fit better there " \
+        f"fix the epipole at log10 NFA {bound + 0.5:.1f})" in r.reason
     assert not without_parallax(seen, refused, config).matched  # no windows measured
     # only a map refused by the pixels alone is looked at again
     by_chance = replace(refused, rejected=replace(refused.rejected, test="chance"))

@@ -264,7 +264,8 @@ TESTS = {
     "pixels": ("final_margin", "min_final_margin", "near_windows", "near_windows_agreeing",
                "near_windows_nearby", "min_near_windows", "log10_nfa", "max_log_nfa_geometry"),
     "plane": ("inliers", "log10_nfa", "parallax_points", "parallax_log10_nfa", "max_log_nfa",
-              "plane_inliers"),
+              "plane_inliers", "parallax_vouched_points", "epipole_log10_nfa", "plane_windows",
+              "plane_windows_agreeing", "plane_windows_nearby"),
 }
 
 
