@@ -456,6 +456,27 @@ def plane_near_its_inliers(plane: MatchResult, work: WorkImages,
     return near_windows(coarser, finer, t, config.pixel, inliers[:, :2])
 
 
+def _no_plane_reason(result: MatchResult, plane: MatchResult, config: Config,
+                     near: Optional[NearWindows], held_near: bool) -> str:
+    """Why a matched matrix without parallax is refused (:func:`without_parallax`): its count
+    off the plane, the plane map's refusal, and what its windows near its own inliers showed."""
+    e = result.evidence
+    count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
+             if math.isfinite(e.parallax_log10_nfa) else "too few to count")
+    where = ""
+    if near is not None and near.windows:
+        where = (f"; near its own inliers {near.claimed:.0%} of its {near.windows} windows "
+                 f"agree, {near.nearby:.0%} nearby")
+        if held_near:
+            where += (f", which establishes the plane, but the {e.parallax_vouched_points} "
+                      f"inliers off it that fit better there fix the epipole at log10 NFA "
+                      f"{e.epipole_log10_nfa:.1f}")
+    return (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
+            f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
+            f"do not fix its epipole, and no plane map of the scene passes the decision "
+            f"({plane.reason}{where})")
+
+
 def without_parallax(result: MatchResult, plane: MatchResult, config: Config,
                      near: Optional[NearWindows] = None) -> MatchResult:
     """The answer for a matched fundamental matrix ``result`` whose inliers show no parallax
@@ -503,20 +524,7 @@ def without_parallax(result: MatchResult, plane: MatchResult, config: Config,
                        timings=timings, config=result.config)
     reached = dict(asdict(e), **figs)
     evidence = build_evidence(reached)
-    count = (f"log10 NFA {e.parallax_log10_nfa:.1f} > {config.decision.max_log_nfa:g}"
-             if math.isfinite(e.parallax_log10_nfa) else "too few to count")
-    where = ""
-    if near is not None and near.windows:
-        where = (f"; near its own inliers {near.claimed:.0%} of its {near.windows} windows "
-                 f"agree, {near.nearby:.0%} nearby")
-        if held_near:
-            where += (f", which establishes the plane, but the {e.parallax_vouched_points} "
-                      f"inliers off it that fit better there fix the epipole at log10 NFA "
-                      f"{e.epipole_log10_nfa:.1f}")
-    reason = (f"an epipolar geometry fits {result.n_inliers} inliers but shows no parallax "
-              f"beyond chance ({e.parallax_points} off its dominant plane, {count}), so they "
-              f"do not fix its epipole, and no plane map of the scene passes the decision "
-              f"({plane.reason}{where})")
+    reason = _no_plane_reason(result, plane, config, near, held_near)
     rejected = Rejected(result.transform, result.model, result.inliers, e.log10_nfa, "plane",
                         figures("plane", reached, config.decision), result.order)
     return replace(result, matched=False, reason=reason, transform=None,
