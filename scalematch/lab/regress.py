@@ -61,8 +61,8 @@ BASELINE = Path("tests") / "regress" / "baseline.json"
 SEED = 0
 #: Kinds of run, in the order of the table
 KINDS = ("zoom", "flat", "padded", "occluded", "partial", "relit", "tilted", "steep", "oblique",
-         "perspective", "oxford", "oxford-zoom", "ef", "null-unrelated", "null-same-photo",
-         "null-padded", "null-occluded")
+         "perspective", "oxford", "oxford-zoom", "ef", "3d-pairs", "null-unrelated",
+         "null-same-photo", "null-padded", "null-occluded")
 #: An answer whose error differs from its baseline's by more than this (px) has moved
 MOVED_PX = 1e-3
 #: Kinds whose every run is a null (any claim is wrong)
@@ -111,10 +111,11 @@ class Case:
     order: str  #: "given" (the coarser image first) or "swapped"
     low: np.ndarray = field(repr=False)  #: the image given first
     high: np.ndarray = field(repr=False)  #: the image given second
-    #: finer px -> coarser px (3x3); None for a null pair or an ef pair
+    #: finer px -> coarser px (3x3); None for a null pair or a 3-D pair
     truth: Optional[np.ndarray] = field(repr=False, default=None)
     model: str = "similarity"  #: the configuration's model
-    #: ef pairs: the clicked points x_A, y_A, x_B, y_B (N, 4), A the coarser-given image
+    #: ef and 3-D pairs: the clicked points or the reference's sample, x_A, y_A, x_B, y_B
+    #: (N, 4), A the image given first in the order "given"
     points: Optional[np.ndarray] = field(repr=False, default=None)
 
     @property
@@ -291,6 +292,22 @@ def ef_cases(photos: Photos, shared: Path, want: Set[str]) -> Iterator[Case]:
         yield Case("ef", name, "swapped", _u8(p.b), _u8(p.a), None, "fundamental", pts)
 
 
+def threed_cases(photos: Photos, shared: Path, want: Set[str]) -> Iterator[Case]:
+    """The 3-D pairs of the multi-view photos with the fundamental matrix (``lab 3d-pairs``:
+    each accepted reference pair with B and with A shrunk by 4), A given first and B given
+    first, judged on the reference's sample of inliers as ef is on its clicked points."""
+    from .threed import PHOTOS_SUBDIR, benchmark_pairs, load_images, read_references
+
+    if "3d-pairs" not in want:
+        return
+    for pair in benchmark_pairs(read_references()):
+        p = load_images(shared / PHOTOS_SUBDIR, pair)
+        pts = np.asarray(p.points, np.float64)
+        name = pair.name  # the label and the kind
+        yield Case("3d-pairs", name, "given", _u8(p.a), _u8(p.b), None, "fundamental", pts)
+        yield Case("3d-pairs", name, "swapped", _u8(p.b), _u8(p.a), None, "fundamental", pts)
+
+
 def null_cases(photos: Photos, shared: Path, want: Set[str]) -> Iterator[Case]:
     """Null pairs: unrelated and same-photo (``lab.nulls``), then unrelated pairs on
     black-cornered canvases and with an occluder (``lab.realistic``)."""
@@ -328,7 +345,7 @@ def cases(shared: Path, kinds: Sequence[str] = KINDS) -> Iterator[Case]:
     photos = Photos(list_photos(shared))
     want = set(kinds)
     for make in (null_cases, zoom_cases, flat_cases, realistic_cases, view_cases, oxford_cases,
-                 ef_cases):
+                 ef_cases, threed_cases):
         yield from make(photos, shared, want)
 
 

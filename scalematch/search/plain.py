@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Tuple
 
-from ..stages.estimator import FitSpec, model_of
+from ..stages.estimator import FitSpec
 from ..stages.nodata import distance_inside
 from ..stages.probe import probe_scores, select_scales
 from ..stages.threads import thread_map
@@ -34,27 +34,11 @@ def score_view(view: View, detected: Tuple, probing: bool, low: LowFeatures,
                               matcher=config.matcher, orientation=search.mode.orientation,
                               fit=quick, scale_agreement=config.decision.scale_agreement)
         run = sorted(usable[j] for j in select_scales(scores, config.probe.keep,
-                                                      probe_floor(config)))
+                                                               config.probe.min_score))
         best = max(scores, default=0.0)
     else:
         run, best = usable, math.inf
     return Probed(view, detected, tuple(usable), tuple(run), best, probing)
-
-
-def probe_floor(config) -> float:
-    """The least probe score of a scale matched in full (``ProbeParams.min_score``) for a search
-    for a map; none for an epipolar geometry. The floor asks the quick similarity for a point
-    beyond its 2-point sample, which a map's true scale gives; two views of a scene with depth
-    fit no one similarity beyond a few points at any scale (the 3-D pairs sceaux 100_7102 ~
-    100_7110 and snowpeak IMG_2280 ~ IMG_2282 shrunk by 4 score 2 at best, in both orders),
-    while their matrix is found there. So a search for a matrix keeps the best scales whatever
-    they score, as the probe did before it had a floor.
-
-    >>> from scalematch import Config
-    >>> probe_floor(Config()), probe_floor(Config(model="fundamental"))
-    (3.0, 0.0)
-    """
-    return config.probe.min_score if model_of(config.model).has_ratio else 0.0
 
 
 def probe_plain(search: Search, step: Step) -> Candidate:

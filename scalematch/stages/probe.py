@@ -37,7 +37,7 @@ class ProbeParams:
     #: are no evidence). A null pair's scales score 0 to 2 at nearly every scale, and were
     #: matched in full for nothing; on the gate's pairs, no run was lost and 4 moved by under
     #: 0.2 px (docs/design/SPEED.md, "The probe's floor"). 0 keeps the best scales whatever
-    #: they score, as a search for an epipolar geometry does (``search.plain.probe_floor``)
+    #: they score
     min_score: float = 3.0
     #: RANSAC iterations of the probe's quick fit: 500 draws find a 2-point sample of inliers
     #: with 99.9 % confidence down to an inlier fraction of 12 %
