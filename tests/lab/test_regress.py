@@ -129,7 +129,7 @@ def test_the_command_needs_the_shared_folder_unless_told_to_skip(tmp_path):
 
 def test_every_kind_is_made_in_both_orders_with_unique_ids(shared_dir):
     """The first cases of each kind (the generators are lazy): both orders, the truth where
-    there is one, the ef pairs with their points, the nulls with none."""
+    there is one, the 3-D pairs with their points, the nulls with none."""
     for kind in regress.KINDS:
         first = []
         for case in regress.cases(shared_dir, [kind]):
@@ -140,7 +140,7 @@ def test_every_kind_is_made_in_both_orders_with_unique_ids(shared_dir):
         assert first[0].kind == kind and len({c.id for c in first}) == 2
         if kind in regress.NULL_KINDS:
             assert first[0].truth is None and first[0].points is None
-        elif kind == "ef":
+        elif kind in ("ef", "3d-pairs"):
             assert first[0].points.shape[1] == 4 and first[0].model == "fundamental"
         else:
             assert first[0].truth.shape == (3, 3)
