@@ -80,6 +80,17 @@ def transfer_error(h_ab: np.ndarray, points: np.ndarray) -> float:
     return float(np.mean((fwd + back) / 2.0))
 
 
+def answer_error(transform, model: str, order, a_first: bool, points: np.ndarray) -> float:
+    """The error, px, of an answer of scalematch (``transform`` in a match's conventions,
+    ``order`` its order, A given first when ``a_first``) against the labelled matches
+    ``points``: an F's mean symmetric epipolar distance, a plane map's transfer error."""
+    if model == "fundamental":
+        return symmetric_epipolar_error(a_to_b(transform, order, a_first), points)
+    t = np.asarray(transform, np.float64)  # finer -> coarser; coarser B: the map is A -> B
+    t = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
+    return transfer_error(t if coarser_of(order, a_first) == "B" else np.linalg.inv(t), points)
+
+
 def run_scalematch(pair: EfPair, a_first: bool, seed: int = 0) -> dict:
     """``--model fundamental``: an F scored by epipolar distance, a plane map by transfer."""
     from scalematch import Config, match
@@ -88,14 +99,8 @@ def run_scalematch(pair: EfPair, a_first: bool, seed: int = 0) -> dict:
     t0 = time.perf_counter()
     r = match(first, second, Config(model="fundamental", seed=seed))
     seconds = time.perf_counter() - t0
-    err = math.inf
-    if r.matched and r.model == "fundamental":
-        err = symmetric_epipolar_error(a_to_b(r.transform, r.order, a_first), pair.points)
-    elif r.matched:  # finer -> coarser; coarser B: the map is A -> B
-        t = np.asarray(r.transform, np.float64)
-        t = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-        err = transfer_error(t if coarser_of(r.order, a_first) == "B" else np.linalg.inv(t),
-                             pair.points)
+    err = answer_error(r.transform, r.model, r.order, a_first, pair.points) if r.matched \
+        else math.inf
     return dict(method="scalematch", claimed=bool(r.matched), answer=r.model if r.matched else "",
                 inliers=r.n_inliers, error_px=err, seconds=seconds, reason=r.reason[:120])
 

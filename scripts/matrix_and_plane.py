@@ -30,8 +30,7 @@ sys.path.insert(0, str(ROOT / "scripts"))
 import adelaide_pairs  # noqa: E402
 from scalematch import Config, pipeline  # noqa: E402
 from scalematch.answer import plane_near_its_inliers  # noqa: E402
-from scalematch.lab.efpairs import (a_to_b, coarser_of, ef_folder, load_pair,  # noqa: E402
-                                    pair_names, symmetric_epipolar_error)
+from scalematch.lab.efpairs import ef_folder, load_pair, pair_names  # noqa: E402
 from scalematch.stages.finalchecks import near_windows_agree  # noqa: E402
 
 
@@ -63,12 +62,7 @@ def error_of(transform, model: str, order, a_first: bool, points: np.ndarray) ->
     """The error of an answer against the marked matches, px (inf: none)."""
     if transform is None:
         return math.inf
-    if model == "fundamental":
-        return symmetric_epipolar_error(a_to_b(transform, order, a_first), points)
-    t = np.asarray(transform, np.float64)
-    t = np.vstack([t, [0.0, 0.0, 1.0]]) if t.shape == (2, 3) else t
-    return adelaide_pairs.transfer_error(
-        t if coarser_of(order, a_first) == "B" else np.linalg.inv(t), points)
+    return adelaide_pairs.answer_error(transform, model, order, a_first, points)
 
 
 def run(pair, a_first: bool) -> dict:
